@@ -1,0 +1,50 @@
+"""Command-line interface: ``python -m material_structures SUBCOMMAND ...``.
+
+Each subcommand lives in ``cli/<name>.py`` and exposes ``add_parser(subparsers)``, which registers
+its parser and sets ``func(args) -> int``. Heavy imports (bpy, scipy) happen inside ``func`` so
+``--help`` stays fast. The same entry point runs under ``blender -b --python scripts/ms.py -- ARGS``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+SUBCOMMANDS = ("render", "build", "bench", "demo", "fabric", "scratch", "teeth")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m material_structures",
+        description="Material Structures: pile fabric, scratched metal and teeth for Blender/Cycles.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(f".{name}", __name__)
+        except ModuleNotFoundError as exc:
+            if exc.name == f"{__name__}.{name}":
+                continue  # feature not installed in this build
+            raise
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    if argv is None:
+        argv = sys.argv[1:]
+        if "--" in sys.argv:  # blender -b --python script.py -- ARGS
+            argv = sys.argv[sys.argv.index("--") + 1 :]
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        if getattr(args, "debug", False):
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        return 2

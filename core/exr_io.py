@@ -1,0 +1,99 @@
+"""Float OpenEXR read/write for parameter maps, BTF images and renders.
+
+Arrays are ``(H, W, C)`` float32, row 0 = top row of the file (the file's first scanline).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+DEFAULT_CHANNELS = {1: ("Y",), 2: ("R", "G"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
+
+
+class ExrError(ValueError):
+    """An EXR file is missing, unreadable or does not hold what the caller needs."""
+
+
+def _import_openexr():
+    try:
+        import OpenEXR
+    except ImportError as exc:  # pragma: no cover - the venv always has it
+        raise ExrError("the 'OpenEXR' package is required to read/write EXR files") from exc
+    return OpenEXR
+
+
+def write_exr(path: str | os.PathLike, array: np.ndarray, channels: Sequence[str] | None = None) -> None:
+    """Write ``array`` (H, W) or (H, W, C) as a 32-bit float EXR with one channel per last axis entry.
+
+    The file is written to a temporary name and renamed, so an interrupted write never leaves a
+    truncated file under ``path``.
+    """
+    OpenEXR = _import_openexr()
+    a = np.asarray(array, dtype=np.float32)
+    if a.ndim == 2:
+        a = a[:, :, None]
+    if a.ndim != 3 or a.shape[0] < 1 or a.shape[1] < 1:
+        raise ExrError(f"write_exr expects an (H, W) or (H, W, C) array, got shape {np.shape(array)}")
+    n = a.shape[2]
+    if channels is None:
+        if n not in DEFAULT_CHANNELS:
+            raise ExrError(f"give channel names for a {n}-channel image")
+        channels = DEFAULT_CHANNELS[n]
+    channels = tuple(channels)
+    if len(channels) != n or len(set(channels)) != n:
+        raise ExrError(f"{n} channels need {n} distinct names, got {channels}")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    data = {name: np.ascontiguousarray(a[:, :, i]) for i, name in enumerate(channels)}
+    path = os.fspath(path)
+    tmp = f"{path}.tmp-{os.getpid()}.exr"
+    try:
+        OpenEXR.File(header, data).write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def exr_channel_names(path: str | os.PathLike) -> list[str]:
+    """Names of the channels stored in an EXR file (single part)."""
+    return list(_open(path).channels().keys())
+
+
+def _open(path: str | os.PathLike):
+    OpenEXR = _import_openexr()
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ExrError(f"EXR file not found: {path}")
+    try:
+        return OpenEXR.File(path, separate_channels=True)
+    except Exception as exc:  # OpenEXR raises RuntimeError/ValueError variants
+        raise ExrError(f"not a readable OpenEXR file: {path} ({exc})") from exc
+
+
+def read_exr(
+    path: str | os.PathLike,
+    channels: Sequence[str] | None = None,
+    allow_nan: bool = False,
+) -> np.ndarray:
+    """Read an EXR as a float32 ``(H, W, C)`` array.
+
+    ``channels`` picks and orders channels by name (default: R, G, B[, A] when present, else all in
+    file order). Raises :class:`ExrError` for a missing/corrupt file, a missing channel or, unless
+    ``allow_nan``, non-finite values.
+    """
+    f = _open(path)
+    stored = {name: ch.pixels for name, ch in f.channels().items()}
+    if channels is None:
+        rgba = [c for c in ("R", "G", "B", "A") if c in stored]
+        channels = rgba if rgba else list(stored)
+    missing = [c for c in channels if c not in stored]
+    if missing:
+        raise ExrError(f"{os.fspath(path)}: missing channel(s) {missing}; file has {sorted(stored)}")
+    out = np.stack([np.asarray(stored[c], dtype=np.float32) for c in channels], axis=-1)
+    if not allow_nan and not np.all(np.isfinite(out)):
+        bad = int(np.count_nonzero(~np.isfinite(out)))
+        raise ExrError(f"{os.fspath(path)}: {bad} non-finite value(s) (NaN/Inf)")
+    return out
