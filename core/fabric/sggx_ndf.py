@@ -1,0 +1,27 @@
+"""The SGGX distribution of normals ``D(omega_h)`` (eq. 3.5)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def sggx_ndf(wh: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``D(w) = 1 / (pi sqrt|S| (w^T S^-1 w)^2)`` for unit ``w`` (..., 3) and SGGX matrices (..., 3, 3).
+
+    Normalised as in Heitz et al. 2015: ``int <w, w_m> D(w_m) dw_m = sigma(w)`` over the sphere with a
+    clamped cosine. ``D`` is even (``D(-w) = D(w)``).
+    """
+    wh = np.asarray(wh, dtype=np.float64)
+    s = np.asarray(s, dtype=np.float64)
+    sinv = np.linalg.inv(s)
+    det = np.linalg.det(s)
+    q = np.einsum("...i,...ij,...j->...", wh, sinv, wh)
+    return 1.0 / (np.pi * np.sqrt(det) * q * q)
+
+
+def sggx_ndf_local(wh_local: np.ndarray, sigma3: np.ndarray) -> np.ndarray:
+    """Eq. 3.5 with ``w`` already expressed in the fibre basis: ``S = diag(sigma3^2)``."""
+    wl = np.asarray(wh_local, dtype=np.float64)
+    s3 = np.asarray(sigma3, dtype=np.float64)
+    q = np.sum((wl / s3) ** 2, axis=-1)
+    return 1.0 / (np.pi * np.prod(s3, axis=-1) * q * q)
