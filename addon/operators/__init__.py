@@ -1,0 +1,5 @@
+"""Operators (``bl_idname`` under ``material_structures.``)."""
+
+from . import scene_setup
+
+CLASSES: list[type] = [*scene_setup.CLASSES]

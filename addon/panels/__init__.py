@@ -1,0 +1,5 @@
+"""Panels: the sidebar (N panel, "Material Structures" tab) and material properties."""
+
+from . import sidebar
+
+CLASSES: list[type] = [*sidebar.CLASSES]

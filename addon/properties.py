@@ -1,0 +1,24 @@
+"""Per-feature PropertyGroups, attached to Blender datablocks (saved, undone and linked with them)."""
+
+from __future__ import annotations
+
+import bpy
+
+
+class MS_SceneSettings(bpy.types.PropertyGroup):
+    """Scene-wide Material Structures settings."""
+
+    preview_samples: bpy.props.IntProperty(
+        name="Preview Samples", default=32, min=1, max=4096, description="Cycles samples for previews"
+    )
+
+
+CLASSES: list[type] = [MS_SceneSettings]
+
+
+def register_pointers() -> None:
+    bpy.types.Scene.material_structures = bpy.props.PointerProperty(type=MS_SceneSettings)
+
+
+def unregister_pointers() -> None:
+    del bpy.types.Scene.material_structures

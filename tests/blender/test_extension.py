@@ -1,0 +1,100 @@
+"""The extension's structure: manifest, zip build and install, registration."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import bpy
+import pytest
+
+from material_structures.cli.build import build, validate
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def test_manifest_validates():
+    validate(ROOT)  # raises with the validator's message when invalid
+
+
+def test_built_zip_installs_and_enables(tmp_path):
+    """Build the zip, install it into a fresh user extension repo in a new interpreter, enable it."""
+    zip_path = build(str(tmp_path / "dist"))
+    assert os.path.basename(zip_path).startswith("material_structures-")
+    script = textwrap.dedent(
+        f"""
+        import os, sys, tempfile
+        os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp()
+        import bpy, addon_utils
+        repo_dir = tempfile.mkdtemp()
+        repo = bpy.context.preferences.extensions.repos.new(
+            name="ziptest", module="ziptest", custom_directory=repo_dir, source="USER")
+        res = bpy.ops.extensions.package_install_files(
+            filepath={zip_path!r}, repo=repo.module, enable_on_install=True)
+        assert res == {{"FINISHED"}}, res
+        name = "bl_ext.ziptest.material_structures"
+        assert name in sys.modules, sorted(m for m in sys.modules if m.startswith("bl_ext"))
+        assert addon_utils.check(name)[1], "not loaded"
+        assert os.path.isfile(os.path.join(repo_dir, "material_structures", "blender_manifest.toml"))
+        assert hasattr(bpy.types, "VIEW3D_PT_material_structures")
+        assert "setup_cycles_osl" in dir(bpy.ops.material_structures)
+        print("ZIP-INSTALL-OK")
+        """
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert "ZIP-INSTALL-OK" in proc.stdout, proc.stdout[-3000:] + proc.stderr[-3000:]
+
+
+def _classes(module_name: str) -> list[type]:
+    return list(sys.modules[f"{module_name}.addon"].CLASSES)
+
+
+def test_register_unregister_twice(addon_module):
+    root = sys.modules[addon_module]
+    classes = _classes(addon_module)
+    assert len(classes) >= 4
+    assert all(cls.is_registered for cls in classes)
+    for _ in range(2):
+        root.unregister()
+        assert not any(cls.is_registered for cls in classes)
+        assert not hasattr(bpy.types.Scene, "material_structures")
+        root.register()
+        assert all(cls.is_registered for cls in classes)
+        assert hasattr(bpy.types.Scene, "material_structures")
+
+
+def test_operator_ids_are_namespaced(addon_module):
+    ops = [c for c in _classes(addon_module) if issubclass(c, bpy.types.Operator)]
+    assert ops
+    assert all(c.bl_idname.startswith("material_structures.") for c in ops)
+
+
+def test_setup_operator_enables_osl(addon_module):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_EEVEE_NEXT" if bpy.app.version < (5, 0, 0) else "BLENDER_EEVEE"
+    assert bpy.ops.material_structures.setup_cycles_osl() == {"FINISHED"}
+    assert scene.render.engine == "CYCLES"
+    assert scene.cycles.shading_system is True
+    assert scene.cycles.device == "CPU"
+
+
+@pytest.mark.parametrize("field", ["id", "version", "blender_version_min", "license"])
+def test_manifest_fields(field):
+    import tomllib
+
+    with open(os.path.join(ROOT, "blender_manifest.toml"), "rb") as f:
+        manifest = tomllib.load(f)
+    expected = {
+        "id": "material_structures",
+        "blender_version_min": "4.5.0",
+        "license": ["SPDX:GPL-3.0-or-later"],
+    }
+    if field == "version":
+        import material_structures
+
+        assert manifest["version"] == material_structures.__version__
+    else:
+        assert manifest[field] == expected[field]
