@@ -1,6 +1,9 @@
 """Float OpenEXR read/write for parameter maps, BTF images and renders.
 
 Arrays are ``(H, W, C)`` float32, row 0 = top row of the file (the file's first scanline).
+
+Backends: the ``OpenEXR`` package (project venv) or, where it is absent (inside a desktop
+Blender), the ``OpenImageIO`` module that Blender bundles. Both give identical arrays.
 """
 
 from __future__ import annotations
@@ -17,11 +20,26 @@ class ExrError(ValueError):
     """An EXR file is missing, unreadable or does not hold what the caller needs."""
 
 
-def _import_openexr():
+BACKEND: str | None = None  # "openexr" or "oiio"; None = first available
+
+
+def _backend() -> str:
+    if BACKEND:
+        return BACKEND
     try:
-        import OpenEXR
-    except ImportError as exc:  # pragma: no cover - the venv always has it
-        raise ExrError("the 'OpenEXR' package is required to read/write EXR files") from exc
+        import OpenEXR  # noqa: F401
+    except ImportError:
+        try:
+            import OpenImageIO  # noqa: F401
+        except ImportError:
+            raise ExrError("reading EXR files needs the 'OpenEXR' package or Blender's OpenImageIO") from None
+        return "oiio"
+    return "openexr"
+
+
+def _import_openexr():
+    import OpenEXR
+
     return OpenEXR
 
 
@@ -31,7 +49,6 @@ def write_exr(path: str | os.PathLike, array: np.ndarray, channels: Sequence[str
     The file is written to a temporary name and renamed, so an interrupted write never leaves a
     truncated file under ``path``.
     """
-    OpenEXR = _import_openexr()
     a = np.asarray(array, dtype=np.float32)
     if a.ndim == 2:
         a = a[:, :, None]
@@ -45,31 +62,66 @@ def write_exr(path: str | os.PathLike, array: np.ndarray, channels: Sequence[str
     channels = tuple(channels)
     if len(channels) != n or len(set(channels)) != n:
         raise ExrError(f"{n} channels need {n} distinct names, got {channels}")
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    data = {name: np.ascontiguousarray(a[:, :, i]) for i, name in enumerate(channels)}
     path = os.fspath(path)
     tmp = f"{path}.tmp-{os.getpid()}.exr"
     try:
-        OpenEXR.File(header, data).write(tmp)
+        if _backend() == "oiio":
+            _write_oiio(tmp, a, channels)
+        else:
+            OpenEXR = _import_openexr()
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            data = {name: np.ascontiguousarray(a[:, :, i]) for i, name in enumerate(channels)}
+            OpenEXR.File(header, data).write(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
 
 
+def _write_oiio(path: str, a: np.ndarray, channels: tuple[str, ...]) -> None:
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.FLOAT)
+    spec.channelnames = channels
+    spec.attribute("compression", "zip")
+    out = oiio.ImageOutput.create(path)
+    if out is None or not out.open(path, spec):
+        raise ExrError(f"cannot write EXR {path}: {oiio.geterror()}")
+    ok = out.write_image(np.ascontiguousarray(a))
+    out.close()
+    if not ok:
+        raise ExrError(f"cannot write EXR {path}: {oiio.geterror()}")
+
+
 def exr_channel_names(path: str | os.PathLike) -> list[str]:
     """Names of the channels stored in an EXR file (single part)."""
-    return list(_open(path).channels().keys())
+    return list(_read_channels(path))
 
 
-def _open(path: str | os.PathLike):
-    OpenEXR = _import_openexr()
+def _read_channels(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """All channels of a single-part EXR as ``name -> (H, W)`` arrays."""
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise ExrError(f"EXR file not found: {path}")
     try:
-        return OpenEXR.File(path, separate_channels=True)
-    except Exception as exc:  # OpenEXR raises RuntimeError/ValueError variants
+        if _backend() == "oiio":
+            import OpenImageIO as oiio
+
+            inp = oiio.ImageInput.open(path)
+            if inp is None:
+                raise RuntimeError(oiio.geterror())
+            try:
+                names = list(inp.spec().channelnames)
+                pixels = inp.read_image(oiio.FLOAT)
+            finally:
+                inp.close()
+            if pixels is None:
+                raise RuntimeError(oiio.geterror())
+            pixels = np.asarray(pixels).reshape(pixels.shape[0], pixels.shape[1], -1)
+            return {n: pixels[:, :, i] for i, n in enumerate(names)}
+        f = _import_openexr().File(path, separate_channels=True)
+        return {name: ch.pixels for name, ch in f.channels().items()}
+    except Exception as exc:  # the libraries raise RuntimeError/ValueError variants
         raise ExrError(f"not a readable OpenEXR file: {path} ({exc})") from exc
 
 
@@ -84,8 +136,7 @@ def read_exr(
     file order). Raises :class:`ExrError` for a missing/corrupt file, a missing channel or, unless
     ``allow_nan``, non-finite values.
     """
-    f = _open(path)
-    stored = {name: ch.pixels for name, ch in f.channels().items()}
+    stored = _read_channels(path)
     if channels is None:
         rgba = [c for c in ("R", "G", "B", "A") if c in stored]
         channels = rgba if rgba else list(stored)

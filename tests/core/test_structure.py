@@ -105,3 +105,42 @@ def test_linear_to_srgb_matches_closed_form():
     x = np.array([0.0, 0.001, 0.0031308, 0.18, 0.5, 1.0, 2.0])
     expected = [0.0, 0.01292, 0.0404499, 0.4613561, 0.7353570, 1.0, 1.0]
     np.testing.assert_allclose(linear_to_srgb(x), expected, atol=1e-6)
+
+
+def test_exr_backends_agree(tmp_path, monkeypatch):
+    """The OpenEXR and the OpenImageIO (Blender-bundled) backends read and write the same data."""
+    import glob
+
+    import material_structures.core.exr_io as exr_io
+
+    bundled = glob.glob(
+        os.path.join(os.path.dirname(np.__file__), "..", "bpy", "*", "python", "lib", "*", "site-packages")
+    )
+    for path in bundled[:1]:
+        monkeypatch.syspath_prepend(path)
+    pytest.importorskip("OpenImageIO")
+    a = np.random.default_rng(3).normal(size=(4, 6, 2)).astype(np.float32)
+    monkeypatch.setattr(exr_io, "BACKEND", "oiio")
+    write_exr(tmp_path / "oiio.exr", a, ["sigma_x", "sigma_y"])
+    with pytest.raises(ExrError, match="not found"):
+        read_exr(tmp_path / "missing.exr")
+    from_oiio = read_exr(tmp_path / "oiio.exr", ["sigma_x", "sigma_y"])
+    monkeypatch.setattr(exr_io, "BACKEND", "openexr")
+    write_exr(tmp_path / "openexr.exr", a, ["sigma_x", "sigma_y"])
+    np.testing.assert_array_equal(read_exr(tmp_path / "oiio.exr", ["sigma_x", "sigma_y"]), a)
+    monkeypatch.setattr(exr_io, "BACKEND", "oiio")
+    np.testing.assert_array_equal(read_exr(tmp_path / "openexr.exr", ["sigma_x", "sigma_y"]), a)
+    np.testing.assert_array_equal(from_oiio, a)
+
+
+def test_blender_script_entry_point(tmp_path):
+    """``blender -b --python scripts/ms.py -- ARGS`` loads the checkout as the package, from anywhere."""
+    proc = subprocess.run(
+        [sys.executable, os.path.join(ROOT, "scripts", "ms.py"), "--", "render", "--list"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "test-card" in proc.stdout
