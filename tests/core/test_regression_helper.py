@@ -29,5 +29,9 @@ def test_identical_passes_changed_fails(tmp_path):
 def test_missing_reference_fails_with_instructions(tmp_path):
     with pytest.raises(RegressionMismatch, match="make refs"):
         compare_to_reference(
-            "nothing", np.zeros((2, 2, 3)), update=False, reference_dir=str(tmp_path), output_dir=str(tmp_path)
+            "nothing",
+            np.zeros((2, 2, 3)),
+            update=False,
+            reference_dir=str(tmp_path),
+            output_dir=str(tmp_path),
         )
