@@ -1,0 +1,182 @@
+"""Fit the fabric SVBRDF to a whole BTF: tiles in parallel processes, checkpoint per tile, resume.
+
+Pipeline per tile (see :mod:`tile_fit`): NDF extraction (eq. 3.11) into a parabolic map (3.12),
+PCA basis (3.13-3.15), ``S_v`` (3.16), batched Levenberg-Marquardt (3.17-3.19); then, for the
+whole map, the post-processing of section 3.4.3. Output: :func:`parameter_maps.save_params`.
+
+On-disk work state in ``OUT/.fit_cache``: ``values.npy`` (the BTF as a float32 memory map, so
+workers read only their tile), ``meta.json`` (what it was built from) and ``tiles/*.npz``
+(one checkpoint per finished tile). An interrupted fit run again with the same inputs resumes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import multiprocessing
+import os
+import shutil
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict
+
+import numpy as np
+
+from .btf_io import load_btf, read_btf_header
+from .levenberg_marquardt import Samples
+from .ndf_extraction import NdfOperator, ndf_operator
+from .parameter_maps import FabricMaps, make_maps, save_params
+from .postprocess import postprocess_basis
+from .tile_fit import FitOptions, fit_tile
+
+CACHE = ".fit_cache"
+
+
+def _tiles(height: int, width: int, tile: int) -> list[tuple[int, int, int, int]]:
+    return [(y, min(y + tile, height), x, min(x + tile, width))
+            for y in range(0, height, tile) for x in range(0, width, tile)]
+
+
+def _tile_path(cache: str, t: tuple[int, int, int, int]) -> str:
+    return os.path.join(cache, "tiles", f"tile_{t[0]:05d}_{t[2]:05d}.npz")
+
+
+_WORKER: dict = {}
+
+
+def _init_worker(values_path: str, op_path: str, wi: np.ndarray, wo: np.ndarray, options: dict) -> None:
+    _WORKER["values"] = np.load(values_path, mmap_mode="r")
+    with np.load(op_path) as z:
+        _WORKER["op"] = NdfOperator(A=z["A"], directions=z["directions"], solid_angle=z["solid_angle"],
+                                    valid=z["valid"], resolution=int(z["resolution"]))
+    _WORKER["options"] = FitOptions(**options)
+    _WORKER["samples"] = Samples.make(wi, wo, _WORKER["options"].weighting)
+
+
+def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, int, int], float, int]:
+    """Fit one tile (in a worker) and write its checkpoint atomically."""
+    y0, y1, x0, x1 = t
+    start = time.perf_counter()
+    block = np.asarray(_WORKER["values"][:, y0:y1, x0:x1], dtype=np.float64)  # (N, th, tw, 3)
+    n = block.shape[0]
+    vals = block.reshape(n, -1, 3).transpose(1, 0, 2)
+    res = fit_tile(vals, _WORKER["samples"], _WORKER["op"], _WORKER["options"])
+    path = _tile_path(cache, t)
+    tmp = path + f".tmp-{os.getpid()}.npz"
+    np.savez(tmp, quat=res.quat, sigma=res.sigma, ks=res.ks, kd=res.kd, cost=res.cost,
+             iterations=res.iterations)
+    os.replace(tmp, path)
+    return t, time.perf_counter() - start, res.iterations
+
+
+def _directions_hash(wi: np.ndarray, wo: np.ndarray) -> str:
+    return hashlib.sha1(np.ascontiguousarray(np.concatenate([wi, wo], 1)).tobytes()).hexdigest()
+
+
+def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool):
+    hdr = read_btf_header(btf_path)
+    cache = os.path.join(out_dir, CACHE)
+    meta = {
+        "source": os.path.abspath(hdr.source),
+        "source_mtime": os.path.getmtime(hdr.source),
+        "shape": [hdr.count, hdr.height, hdr.width, 3],
+        "directions": _directions_hash(hdr.wi, hdr.wo),
+        "tile": tile,
+        "options": asdict(options),
+    }
+    meta_path = os.path.join(cache, "meta.json")
+    values_path = os.path.join(cache, "values.npy")
+    old = None
+    if os.path.isfile(meta_path):
+        with open(meta_path) as f:
+            old = json.load(f)
+    if old != meta or not os.path.isfile(values_path):
+        shutil.rmtree(cache, ignore_errors=True)
+        os.makedirs(os.path.join(cache, "tiles"), exist_ok=True)
+        tmp = values_path + ".tmp.npy"
+        mm = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=tuple(meta["shape"]))
+        load_btf(btf_path, out=mm, progress=progress)
+        mm.flush()
+        del mm
+        os.replace(tmp, values_path)
+        op = ndf_operator(hdr.wi, hdr.wo)
+        np.savez(os.path.join(cache, "ndf_operator.npz"), A=op.A, directions=op.directions,
+                 solid_angle=op.solid_angle, valid=op.valid, resolution=op.resolution)
+        with open(meta_path, "w") as f:
+            json.dump(meta, f)
+    return hdr, cache, values_path
+
+
+def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int = 20, workers: int | None = None,
+            options: FitOptions | None = None, progress: bool = True, preferred=(1.0, 0.0, 0.0),
+            keep_cache: bool = True) -> tuple[FabricMaps, dict]:
+    """Fit eq. 3.9 to every texel of a BTF and write the parameter folder ``out_dir``.
+
+    ``workers`` processes (default: CPU count) fit ``tile x tile`` texel tiles; finished tiles are
+    checkpointed, so calling again after an interruption only fits the missing tiles. Returns the
+    post-processed maps and a stats dict (also stored in ``params.json`` under ``"fit"``).
+    """
+    btf_path, out_dir = os.fspath(btf_path), os.fspath(out_dir)
+    options = options or FitOptions()
+    workers = workers or os.cpu_count() or 1
+    os.makedirs(out_dir, exist_ok=True)
+    t_start = time.perf_counter()
+    hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress)
+    t_loaded = time.perf_counter()
+    tiles = _tiles(hdr.height, hdr.width, tile)
+    todo = [t for t in tiles if not os.path.isfile(_tile_path(cache, t))]
+    init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tiles), initial=len(tiles) - len(todo), desc="fit tiles", unit="tile",
+                   file=sys.stderr)
+    iters = []
+    if todo:
+        if workers <= 1:
+            _init_worker(*init_args)
+            for t in todo:
+                iters.append(_fit_one(t, cache)[2])
+                if bar:
+                    bar.update(1)
+        else:
+            method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+            ctx = multiprocessing.get_context(method)
+            with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx,
+                                     initializer=_init_worker, initargs=init_args) as pool:
+                futures = [pool.submit(_fit_one, t, cache) for t in todo]
+                for fut in as_completed(futures):
+                    iters.append(fut.result()[2])
+                    if bar:
+                        bar.update(1)
+    if bar:
+        bar.close()
+    t_fit = time.perf_counter()
+    h, w = hdr.height, hdr.width
+    quat, sigma = np.zeros((h, w, 4)), np.zeros((h, w, 2))
+    ks, kd, cost = np.zeros((h, w, 3)), np.zeros((h, w, 3)), np.zeros((h, w))
+    for t in tiles:
+        y0, y1, x0, x1 = t
+        with np.load(_tile_path(cache, t)) as z:
+            shp = (y1 - y0, x1 - x0)
+            quat[y0:y1, x0:x1] = z["quat"].reshape(shp + (4,))
+            sigma[y0:y1, x0:x1] = z["sigma"].reshape(shp + (2,))
+            ks[y0:y1, x0:x1] = z["ks"].reshape(shp + (3,))
+            kd[y0:y1, x0:x1] = z["kd"].reshape(shp + (3,))
+            cost[y0:y1, x0:x1] = z["cost"].reshape(shp)
+    pref = None if preferred is None else np.asarray(preferred, dtype=np.float64)
+    quat, sigma, labels = postprocess_basis(quat, sigma, pref)
+    maps = make_maps(kd, ks, sigma, quat)
+    stats = {
+        "btf": os.path.abspath(btf_path), "samples": hdr.count, "tile": tile, "workers": workers,
+        "tiles": len(tiles), "tiles_fitted_this_run": len(todo), "options": asdict(options),
+        "seconds_load": round(t_loaded - t_start, 3), "seconds_fit": round(t_fit - t_loaded, 3),
+        "mean_iterations": float(np.mean(iters)) if iters else None,
+        "median_cost": float(np.median(cost)), "flip_regions": int(labels.max()),
+    }
+    save_params(out_dir, maps, extra={"fit": stats})
+    if not keep_cache:
+        shutil.rmtree(cache, ignore_errors=True)
+    return maps, stats

@@ -1,0 +1,264 @@
+"""Measured BTF input/output.
+
+Two formats hold the same data: ``N`` light/view pairs and, for each, an ``H x W`` RGB image of
+``f_r(wi, wo) * cos(theta_i)`` in linear RGB.
+
+* a folder with ``btf.json`` = ``{"width": W, "height": H, "samples": [{"wi": [x, y, z],
+  "wo": [x, y, z], "image": "0000.exr"}, ...]}`` and float EXR images (channels R, G, B), paths
+  relative to the folder; directions are unit vectors in the patch's tangent frame (z = normal,
+  x along image columns, y along rows);
+* a single ``.npz`` with ``values[N, H, W, 3]``, ``wi[N, 3]``, ``wo[N, 3]``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..exr_io import ExrError, read_exr, write_exr
+
+UNIT_TOL = 1e-3
+
+
+@dataclass
+class BtfHeader:
+    """Directions and layout of a BTF without its pixel data."""
+
+    width: int
+    height: int
+    wi: np.ndarray  # (N, 3) light directions
+    wo: np.ndarray  # (N, 3) view directions
+    source: str  # the folder, or the .npz path
+    images: list[str] | None = None  # absolute EXR paths (folder format)
+
+    @property
+    def count(self) -> int:
+        return int(self.wi.shape[0])
+
+
+@dataclass
+class Btf:
+    """A loaded BTF: ``values[N, H, W, 3]`` = ``f_r cos(theta_i)``, directions ``wi, wo`` (N, 3)."""
+
+    values: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+
+
+def validate_directions(wi: np.ndarray, wo: np.ndarray, where: str = "BTF") -> tuple[np.ndarray, np.ndarray]:
+    """Check shapes, finiteness, unit length (tolerance 1e-3) and ``z > 0``; return normalised float64."""
+    out = []
+    for name, w in (("wi", wi), ("wo", wo)):
+        w = np.asarray(w, dtype=np.float64)
+        if w.ndim != 2 or w.shape[1] != 3:
+            raise ValueError(f"{where}: {name} must have shape (N, 3), got {w.shape}")
+        if not np.all(np.isfinite(w)):
+            raise ValueError(f"{where}: {name} holds non-finite values (NaN/Inf)")
+        n = np.linalg.norm(w, axis=1)
+        bad = np.flatnonzero(np.abs(n - 1.0) > UNIT_TOL)
+        if bad.size:
+            raise ValueError(f"{where}: {name}[{bad[0]}] = {w[bad[0]].tolist()} is not a unit vector "
+                             f"(|w| = {n[bad[0]]:.6g}); {bad.size} such sample(s)")
+        below = np.flatnonzero(w[:, 2] <= 0.0)
+        if below.size:
+            raise ValueError(f"{where}: {name}[{below[0]}] = {w[below[0]].tolist()} is below the horizon "
+                             f"(z <= 0); {below.size} such sample(s)")
+        out.append(w / n[:, None])
+    if out[0].shape[0] != out[1].shape[0]:
+        raise ValueError(f"{where}: wi has {out[0].shape[0]} rows but wo has {out[1].shape[0]}")
+    if out[0].shape[0] == 0:
+        raise ValueError(f"{where}: no samples")
+    return out[0], out[1]
+
+
+def _json_path(path: str) -> tuple[str, str]:
+    if os.path.isdir(path):
+        return path, os.path.join(path, "btf.json")
+    if os.path.basename(path).endswith(".json"):
+        return os.path.dirname(path) or ".", path
+    raise FileNotFoundError(f"BTF not found: {path} (expected a folder with btf.json, a btf.json or a .npz)")
+
+
+def read_btf_header(path: str | os.PathLike) -> BtfHeader:
+    """Read and validate the layout and directions of a BTF folder / ``btf.json`` / ``.npz``."""
+    path = os.fspath(path)
+    if path.endswith(".npz"):
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"BTF file not found: {path}")
+        with np.load(path) as z:
+            for key in ("values", "wi", "wo"):
+                if key not in z.files:
+                    raise ValueError(f"{path}: missing array {key!r}; has {sorted(z.files)}")
+            wi, wo = validate_directions(z["wi"], z["wo"], path)
+        shape = _npz_shape(path, "values")
+        if len(shape) != 4 or shape[3] != 3:
+            raise ValueError(f"{path}: values must have shape (N, H, W, 3), got {shape}")
+        if shape[0] != wi.shape[0]:
+            raise ValueError(f"{path}: values has {shape[0]} images but wi/wo have {wi.shape[0]} rows")
+        return BtfHeader(width=shape[2], height=shape[1], wi=wi, wo=wo, source=path)
+    folder, jpath = _json_path(path)
+    if not os.path.isfile(jpath):
+        raise FileNotFoundError(f"BTF description not found: {jpath}")
+    try:
+        with open(jpath) as f:
+            desc = json.load(f)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{jpath}: not valid JSON ({exc})") from exc
+    if not isinstance(desc, dict):
+        raise ValueError(f"{jpath}: expected an object with width, height, samples")
+    for key in ("width", "height", "samples"):
+        if key not in desc:
+            raise ValueError(f"{jpath}: missing key {key!r}")
+    width, height = desc["width"], desc["height"]
+    if not (isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0):
+        raise ValueError(f"{jpath}: width/height must be positive integers, got {width!r}, {height!r}")
+    samples = desc["samples"]
+    if not isinstance(samples, list) or not samples:
+        raise ValueError(f"{jpath}: samples must be a non-empty list")
+    wi, wo, images = [], [], []
+    for k, s in enumerate(samples):
+        if not isinstance(s, dict) or not all(key in s for key in ("wi", "wo", "image")):
+            raise ValueError(f"{jpath}: samples[{k}] needs keys wi, wo, image")
+        try:
+            wi.append([float(v) for v in s["wi"]])
+            wo.append([float(v) for v in s["wo"]])
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers") from exc
+        if len(wi[-1]) != 3 or len(wo[-1]) != 3:
+            raise ValueError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers")
+        img = os.path.join(folder, str(s["image"]))
+        if not os.path.isfile(img):
+            raise FileNotFoundError(f"{jpath}: samples[{k}] image not found: {img}")
+        images.append(img)
+    wi_a, wo_a = validate_directions(np.array(wi), np.array(wo), jpath)
+    return BtfHeader(width=width, height=height, wi=wi_a, wo=wo_a, source=folder, images=images)
+
+
+def _npz_member_header(zf, key: str):
+    """Open ``key.npy`` inside an npz and return (file, shape, fortran_order, dtype) without loading."""
+    f = zf.open(f"{key}.npy")
+    version = np.lib.format.read_magic(f)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(f)
+    else:
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(f)
+    return f, tuple(shape), fortran, dtype
+
+
+def _npz_shape(path: str, key: str) -> tuple[int, ...]:
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        f, shape, _, _ = _npz_member_header(zf, key)
+        f.close()
+    return shape
+
+
+def _stream_npz_values(path: str, out: np.ndarray) -> None:
+    """Copy ``values`` of an npz into ``out`` one image at a time (bounded memory), checking NaNs."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        f, shape, fortran, dtype = _npz_member_header(zf, "values")
+        with f:
+            if fortran:
+                raise ValueError(f"{path}: values must be stored in C order")
+            if not np.issubdtype(dtype, np.floating):
+                raise ValueError(f"{path}: values must be floating point, got {dtype}")
+            per = int(np.prod(shape[1:])) * dtype.itemsize
+            for k in range(shape[0]):
+                buf = f.read(per)
+                if len(buf) != per:
+                    raise ValueError(f"{path}: values is truncated at image {k}")
+                img = np.frombuffer(buf, dtype=dtype).reshape(shape[1:])
+                if not np.all(np.isfinite(img)):
+                    raise ValueError(f"{path}: values[{k}] holds non-finite values (NaN/Inf)")
+                out[k] = img
+
+
+def load_btf(path: str | os.PathLike, out: np.ndarray | None = None, progress: bool = False) -> Btf:
+    """Load a BTF (folder, ``btf.json`` or ``.npz``); values are float32 ``(N, H, W, 3)``.
+
+    ``out`` may be a preallocated (e.g. memory-mapped) float32 array of that shape to fill.
+    Raises ValueError/FileNotFoundError with the offending file for size mismatches, missing
+    files, non-finite pixels and directions below the horizon.
+    """
+    hdr = read_btf_header(path)
+    shape = (hdr.count, hdr.height, hdr.width, 3)
+    if out is None:
+        out = np.empty(shape, dtype=np.float32)
+    elif out.shape != shape:
+        raise ValueError(f"output array has shape {out.shape}, BTF needs {shape}")
+    if hdr.images is None:
+        _stream_npz_values(hdr.source, out)
+    else:
+        it = range(hdr.count)
+        if progress:
+            from tqdm import tqdm
+
+            it = tqdm(it, desc="read BTF", unit="img")
+        for k in it:
+            try:
+                img = read_exr(hdr.images[k], channels=("R", "G", "B"))
+            except ExrError as exc:
+                raise ValueError(f"BTF sample {k}: {exc}") from exc
+            if img.shape[:2] != (hdr.height, hdr.width):
+                raise ValueError(f"BTF sample {k}: {hdr.images[k]} is {img.shape[1]}x{img.shape[0]} "
+                                 f"(W x H), btf.json says {hdr.width}x{hdr.height}")
+            out[k] = img
+    return Btf(values=out, wi=hdr.wi, wo=hdr.wo)
+
+
+def save_btf(path: str | os.PathLike, values: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> str:
+    """Write a BTF: ``path`` ending in ``.npz`` -> single file, otherwise a folder with btf.json + EXRs."""
+    path = os.fspath(path)
+    values = np.asarray(values, dtype=np.float32)
+    wi, wo = validate_directions(wi, wo, path)
+    if values.ndim != 4 or values.shape[3] != 3 or values.shape[0] != wi.shape[0]:
+        raise ValueError(f"values must be (N, H, W, 3) with N = {wi.shape[0]}, got {values.shape}")
+    if path.endswith(".npz"):
+        os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+        np.savez(path, values=values, wi=wi, wo=wo)
+        return path
+    os.makedirs(path, exist_ok=True)
+    width = len(str(max(values.shape[0] - 1, 0)))
+    samples = []
+    for k in range(values.shape[0]):
+        name = f"{k:0{max(width, 4)}d}.exr"
+        write_exr(os.path.join(path, name), values[k])
+        samples.append({"wi": wi[k].tolist(), "wo": wo[k].tolist(), "image": name})
+    desc = {"width": int(values.shape[2]), "height": int(values.shape[1]), "samples": samples}
+    with open(os.path.join(path, "btf.json"), "w") as f:
+        json.dump(desc, f)
+    return path
+
+
+def write_directions(path: str | os.PathLike, wi: np.ndarray, wo: np.ndarray, width: int = 1,
+                     height: int = 1) -> None:
+    """Write a ``btf.json`` listing only directions (images named but absent), for ``fabric eval``."""
+    wi, wo = validate_directions(wi, wo, os.fspath(path))
+    samples = [{"wi": a.tolist(), "wo": b.tolist(), "image": f"{k:04d}.exr"}
+               for k, (a, b) in enumerate(zip(wi, wo, strict=True))]
+    with open(path, "w") as f:
+        json.dump({"width": width, "height": height, "samples": samples}, f)
+
+
+def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Directions ``(wi, wo)`` from a ``btf.json`` (images need not exist) or a ``.npz``."""
+    path = os.fspath(path)
+    if path.endswith(".npz"):
+        return read_btf_header(path).wi, read_btf_header(path).wo
+    _, jpath = _json_path(path)
+    if not os.path.isfile(jpath):
+        raise FileNotFoundError(f"directions file not found: {jpath}")
+    with open(jpath) as f:
+        desc = json.load(f)
+    try:
+        wi = np.array([s["wi"] for s in desc["samples"]], dtype=np.float64)
+        wo = np.array([s["wo"] for s in desc["samples"]], dtype=np.float64)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{jpath}: samples must each hold wi and wo") from exc
+    return validate_directions(wi, wo, jpath)

@@ -1,0 +1,116 @@
+"""Per-texel parameter maps of the fabric SVBRDF and their on-disk form (a fit's output folder).
+
+Folder layout: ``kd.exr`` (RGB), ``ks.exr`` (RGB), ``sigma.exr`` (R = sigma_x, G = sigma_y;
+sigma_z = 1), ``basis.exr`` (R, G, B, A = unit quaternion w, x, y, z of the fibre basis ``M`` of eq.
+3.6, columns of ``M`` = axes with standard deviations sigma_x, sigma_y, 1) and ``params.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import numpy as np
+
+from ..exr_io import ExrError, read_exr, write_exr
+from .quaternion import quat_normalize
+
+MAP_FILES = {"kd": ("kd.exr", 3), "ks": ("ks.exr", 3), "sigma": ("sigma.exr", 2), "basis": ("basis.exr", 4)}
+PARAMS_VERSION = 1
+
+
+@dataclasses.dataclass(frozen=True)
+class FabricMaps:
+    """SVBRDF parameter maps, all ``(H, W, C)`` float32: kd/ks (C=3), sigma (C=2), basis (C=4, wxyz)."""
+
+    kd: np.ndarray
+    ks: np.ndarray
+    sigma: np.ndarray
+    basis: np.ndarray
+
+    def __post_init__(self) -> None:
+        shape = None
+        for name, (_, c) in MAP_FILES.items():
+            a = getattr(self, name)
+            if a.ndim != 3 or a.shape[2] != c:
+                raise ValueError(f"map {name!r} must be (H, W, {c}), got {a.shape}")
+            if shape is None:
+                shape = a.shape[:2]
+            elif a.shape[:2] != shape:
+                raise ValueError(f"map {name!r} is {a.shape[:2]}, other maps are {shape}")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.kd.shape[:2])
+
+    def replace(self, **changes: np.ndarray) -> FabricMaps:
+        """A new FabricMaps with some maps replaced (the others are shared, not copied)."""
+        return dataclasses.replace(self, **changes)
+
+    def copy(self) -> FabricMaps:
+        return FabricMaps(*(np.array(getattr(self, n), copy=True) for n in MAP_FILES))
+
+    def as_dict(self) -> dict[str, np.ndarray]:
+        return {n: getattr(self, n) for n in MAP_FILES}
+
+
+def make_maps(kd, ks, sigma, basis) -> FabricMaps:
+    """Build float32 maps (normalising the quaternions)."""
+    return FabricMaps(
+        kd=np.asarray(kd, dtype=np.float32), ks=np.asarray(ks, dtype=np.float32),
+        sigma=np.asarray(sigma, dtype=np.float32),
+        basis=quat_normalize(np.asarray(basis, dtype=np.float64)).astype(np.float32),
+    )
+
+
+def save_params(out_dir: str | os.PathLike, maps: FabricMaps, extra: dict | None = None) -> None:
+    """Write the four EXR maps and ``params.json`` describing them."""
+    out_dir = os.fspath(out_dir)
+    os.makedirs(out_dir, exist_ok=True)
+    write_exr(os.path.join(out_dir, "kd.exr"), maps.kd)
+    write_exr(os.path.join(out_dir, "ks.exr"), maps.ks)
+    write_exr(os.path.join(out_dir, "sigma.exr"), maps.sigma)
+    write_exr(os.path.join(out_dir, "basis.exr"), maps.basis)
+    desc = {
+        "model": "velinov2019-pile-fabric-sggx",
+        "version": PARAMS_VERSION,
+        "width": int(maps.shape[1]),
+        "height": int(maps.shape[0]),
+        "brdf": "f_r = ks * D(wh) / (4 cos_i cos_o (sigma(wo)/cos_o + sigma(wi)/cos_i)) + kd/pi (eq. 3.9)",
+        "frame": "tangent frame: z = normal, x along image columns, y along rows",
+        "maps": {
+            "kd": {"file": "kd.exr", "channels": ["R", "G", "B"], "meaning": "diffuse albedo k_d (linear RGB)"},
+            "ks": {"file": "ks.exr", "channels": ["R", "G", "B"], "meaning": "specular albedo k_s (linear RGB)"},
+            "sigma": {"file": "sigma.exr", "channels": ["R", "G"],
+                      "meaning": "projected standard deviations sigma_x, sigma_y of the SGGX basis axes; "
+                                 "sigma_z = 1 (eq. 3.7-3.8)"},
+            "basis": {"file": "basis.exr", "channels": ["R", "G", "B", "A"],
+                      "meaning": "unit quaternion (w, x, y, z) rotating the tangent frame onto the SGGX basis M "
+                                 "(eq. 3.6); columns of M are the axes of sigma_x, sigma_y, sigma_z"},
+        },
+    }
+    if extra:
+        desc.update(extra)
+    with open(os.path.join(out_dir, "params.json"), "w") as f:
+        json.dump(desc, f, indent=2)
+
+
+def load_params(params_dir: str | os.PathLike) -> FabricMaps:
+    """Load a fit's output folder (``params.json`` + EXR maps) as :class:`FabricMaps`."""
+    params_dir = os.fspath(params_dir)
+    jpath = os.path.join(params_dir, "params.json")
+    if not os.path.isfile(jpath):
+        raise FileNotFoundError(f"not a fabric parameter folder (no params.json): {params_dir}")
+    with open(jpath) as f:
+        desc = json.load(f)
+    arrays = {}
+    for name, (default_file, c) in MAP_FILES.items():
+        entry = desc.get("maps", {}).get(name, {})
+        path = os.path.join(params_dir, entry.get("file", default_file))
+        chans = tuple(entry.get("channels", ("R", "G", "B", "A")[:c]))
+        try:
+            arrays[name] = read_exr(path, channels=chans)
+        except ExrError as exc:
+            raise ValueError(f"parameter map {name!r}: {exc}") from exc
+    return make_maps(**arrays)
