@@ -1,0 +1,119 @@
+"""Render-side verification of the fabric shader against ``core.fabric`` (tests and benchmarks).
+
+Builds a flat fabric patch seen by an orthographic camera under one lamp, renders it, renders the
+shading positions, and evaluates eq. 3.9 in numpy at the same points with the same lamp.
+"""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+
+from ...core.fabric import sggx_brdf
+from ...render import (
+    add_orthographic_camera,
+    add_textured_plane,
+    configure_cycles,
+    dark_world,
+    new_material,
+    render_to_array,
+    reset_scene,
+)
+from ...render.scene import material_output
+from .material import create_fabric_material, sync_fabric_lamps
+
+
+def tilted_quat(tilt_deg: float, azimuth_deg: float) -> np.ndarray:
+    """Fibre basis whose z axis is tilted by ``tilt`` from the normal towards azimuth ``azimuth``."""
+    t, a = math.radians(tilt_deg) / 2.0, math.radians(azimuth_deg) / 2.0
+    qz = np.array([math.cos(a), 0.0, 0.0, math.sin(a)])
+    qy = np.array([math.cos(t), 0.0, math.sin(t), 0.0])
+    w1, x1, y1, z1 = qz
+    w2, x2, y2, z2 = qy
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
+
+
+def _direction(theta_deg: float, phi_deg: float) -> np.ndarray:
+    th, ph = math.radians(theta_deg), math.radians(phi_deg)
+    return np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
+
+
+def render_patch_vs_core(
+    kd=(0.05, 0.03, 0.02),
+    ks=(0.7, 0.4, 0.3),
+    sigma=(0.3, 0.8),
+    quat=(1.0, 0.0, 0.0, 0.0),
+    view=(30.0, 200.0),
+    lamp_position=(0.4, -0.3, 1.2),
+    lamp_power=50.0,
+    lamp_type="POINT",
+    resolution=(24, 24),
+    samples=1,
+    fast_preview=False,
+    seed=0,
+):
+    """Render the patch and return ``(rendered_rgb, reference_rgb, mask)`` for its pixels.
+
+    ``view`` = (theta, phi) of the direction towards the camera in degrees.
+    """
+    scene = reset_scene()
+    configure_cycles(scene, resolution=resolution, samples=samples, seed=seed)
+    dark_world(scene)
+    mat = create_fabric_material("Patch", kd=kd, ks=ks, sigma=sigma, quat=quat, scene=scene)
+    group_node = next(n for n in mat.node_tree.nodes if n.type == "GROUP")
+    group_node.inputs["FastPreview"].default_value = 1 if fast_preview else 0
+    plane = add_textured_plane(scene, 1.0, mat)
+    wo = _direction(*view)
+    cam = add_orthographic_camera(scene, ortho_scale=0.7)
+    cam.location = tuple(5.0 * wo)
+    from mathutils import Vector
+
+    cam.rotation_euler = Vector(tuple(-wo)).to_track_quat("-Z", "Y").to_euler()
+    light = bpy.data.lights.new("Lamp", lamp_type)
+    light.energy = lamp_power
+    if lamp_type == "SUN":
+        light.angle = 0.0
+    else:
+        light.shadow_soft_size = 0.0
+    lamp = bpy.data.objects.new("Lamp", light)
+    lamp.location = lamp_position
+    if lamp_type == "SUN":
+        lamp.rotation_euler = Vector(tuple(-np.asarray(lamp_position))).to_track_quat("-Z", "Y").to_euler()
+    scene.collection.objects.link(lamp)
+    if not fast_preview:
+        sync_fabric_lamps(scene)
+    rgb = render_to_array(scene)[..., :3]
+
+    # Shading positions of the same pixels: the plane re-rendered with emission = position.
+    pos_mat = new_material("Position")
+    tree = pos_mat.node_tree
+    geo = tree.nodes.new("ShaderNodeNewGeometry")
+    em = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(geo.outputs["Position"], em.inputs["Color"])
+    tree.links.new(em.outputs[0], material_output(pos_mat).inputs["Surface"])
+    plane.data.materials[0] = pos_mat
+    scene.render.film_transparent = True  # alpha = coverage: pixels fully on the patch
+    pos_rgba = render_to_array(scene)
+    mask = pos_rgba[..., 3] > 0.999
+    pos = pos_rgba[..., :3].astype(np.float64)
+    if lamp_type == "SUN":
+        wi = np.broadcast_to(np.asarray(lamp_position) / np.linalg.norm(lamp_position), pos.shape)
+        irradiance = lamp_power
+    else:
+        d = np.asarray(lamp_position)[None, None, :] - pos
+        dist2 = np.sum(d * d, axis=-1, keepdims=True)
+        wi = d / np.sqrt(dist2)
+        irradiance = lamp_power / (4.0 * math.pi) / dist2
+    wo_px = np.broadcast_to(wo, pos.shape)
+    f = sggx_brdf(wi, wo_px, np.asarray(kd), np.asarray(ks), np.asarray(sigma), np.asarray(quat))
+    ref = f * np.maximum(wi[..., 2:3], 0.0) * irradiance
+    return rgb, ref, mask
