@@ -1,0 +1,186 @@
+"""Capture model (thesis Sec. 5.4): calibrated pinhole cameras, point lights, dataset folders.
+
+Camera convention (OpenCV): world-to-camera ``x_c = R x_w + t``, image x to the right, y down,
+intrinsics ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` in pixels, pixel (i, j) covers
+[j, j + 1) x [i, i + 1). Units: mm. Point lights: position and RGB radiant intensity; irradiance at
+distance r is I / r^2.
+
+Dataset folder::
+
+    capture.json                    cameras, lights, image/mask file names, units
+    images/cam{c}_light{l}.exr      linear RGB images (H, W, 3)
+    masks/cam{c}.exr                valid-pixel masks (H, W, 1), 1 = use
+    scene.json                      (optional) the scene model, e.g. the synthetic ground truth
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..exr_io import read_exr, write_exr
+
+FORMAT = "material_structures.teeth.capture/1"
+
+
+@dataclass
+class Camera:
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    name: str = "camera"
+
+    def __post_init__(self) -> None:
+        self.K = np.asarray(self.K, dtype=np.float64).reshape(3, 3)
+        self.R = np.asarray(self.R, dtype=np.float64).reshape(3, 3)
+        self.t = np.asarray(self.t, dtype=np.float64).reshape(3)
+        self.width, self.height = int(self.width), int(self.height)
+
+    @property
+    def center(self) -> np.ndarray:
+        return -self.R.T @ self.t
+
+    def rays(self, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World-space origins and unit directions through image points (px, py) (pixel units)."""
+        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
+        dc = np.stack([(px - cx) / fx, (py - cy) / fy, np.ones_like(px)], axis=1)
+        d = dc @ self.R  # R^T dc
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return np.broadcast_to(self.center, d.shape).copy(), d
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        xc = x @ self.R.T + self.t
+        uv = xc @ self.K.T
+        return uv[:, :2] / uv[:, 2:3]
+
+    @classmethod
+    def look_at(cls, eye, target, up, fov_x_deg: float, width: int, height: int, name: str = "camera") -> Camera:
+        eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+        z = target - eye
+        z /= np.linalg.norm(z)
+        x = np.cross(z, up)
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        R = np.stack([x, y, z])
+        fx = 0.5 * width / np.tan(0.5 * np.radians(fov_x_deg))
+        K = np.array([[fx, 0, 0.5 * width], [0, fx, 0.5 * height], [0, 0, 1.0]])
+        return cls(K, R, -R @ eye, width, height, name)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "K": self.K.tolist(), "R": self.R.tolist(), "t": self.t.tolist(),
+                "width": self.width, "height": self.height}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Camera:
+        return cls(d["K"], d["R"], d["t"], d["width"], d["height"], d.get("name", "camera"))
+
+
+@dataclass
+class PointLight:
+    position: np.ndarray
+    intensity: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
+        self.intensity = np.asarray(self.intensity, dtype=np.float64).reshape(-1) * np.ones(3)
+
+    def to_dict(self) -> dict:
+        return {"position": self.position.tolist(), "intensity": self.intensity.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> PointLight:
+        return cls(d["position"], d["intensity"])
+
+
+def default_rig(target=(0.0, 0.0, 5.0), width: int = 96, height: int = 64, n_lights: int = 54,
+                n_cameras: int = 3, light_distance: float = 1000.0, camera_distance: float = 300.0,
+                fov_x_deg: float = 5.0, intensity: float = 1.0e6) -> tuple[list[Camera], list[PointLight]]:
+    """The thesis' rig: 54 point lights about 1 m away covering the frontal directions, 3 cameras.
+
+    The mouth faces +y, z is up. Lights lie on a Fibonacci spiral over the frontal cap within 75
+    degrees of +y; cameras sit left, centre and right (azimuth -30, 0, +30 deg) with long lenses.
+    """
+    target = np.asarray(target, dtype=np.float64)
+    cams = []
+    az = np.linspace(-30.0, 30.0, n_cameras) if n_cameras > 1 else np.zeros(1)
+    names = ["left", "center", "right"] if n_cameras == 3 else [f"cam{i}" for i in range(n_cameras)]
+    for a, name in zip(az, names, strict=True):
+        r = np.radians(a)
+        eye = target + camera_distance * np.array([np.sin(r), np.cos(r), 0.12])
+        cams.append(Camera.look_at(eye, target, (0, 0, 1), fov_x_deg, width, height, name))
+    lights = []
+    golden = np.pi * (3.0 - np.sqrt(5.0))
+    cos_max = np.cos(np.radians(75.0))
+    for i in range(n_lights):
+        cz = 1.0 - (i + 0.5) / n_lights * (1.0 - cos_max)  # cos of angle to +y
+        s = np.sqrt(1.0 - cz * cz)
+        ang = golden * i
+        d = np.array([s * np.cos(ang), cz, s * np.sin(ang)])
+        lights.append(PointLight(target + light_distance * d, np.full(3, intensity)))
+    return cams, lights
+
+
+@dataclass
+class Capture:
+    """Cameras, lights, images (n_cam, n_light, H, W, 3) and masks (n_cam, H, W) bool."""
+
+    cameras: list[Camera]
+    lights: list[PointLight]
+    images: np.ndarray | None = None
+    masks: np.ndarray | None = None
+
+    def save(self, folder: str | os.PathLike, scene_dict: dict | None = None) -> None:
+        folder = os.fspath(folder)
+        os.makedirs(os.path.join(folder, "images"), exist_ok=True)
+        os.makedirs(os.path.join(folder, "masks"), exist_ok=True)
+        images, masks = {}, {}
+        for c in range(len(self.cameras)):
+            if self.masks is not None:
+                masks[str(c)] = f"masks/cam{c}.exr"
+                write_exr(os.path.join(folder, masks[str(c)]), self.masks[c].astype(np.float32)[:, :, None])
+            if self.images is not None:
+                for li in range(len(self.lights)):
+                    rel = f"images/cam{c}_light{li}.exr"
+                    images[f"{c},{li}"] = rel
+                    write_exr(os.path.join(folder, rel), self.images[c, li])
+        meta = {"format": FORMAT, "units": "mm", "cameras": [c.to_dict() for c in self.cameras],
+                "lights": [li.to_dict() for li in self.lights], "images": images, "masks": masks}
+        with open(os.path.join(folder, "capture.json"), "w") as f:
+            json.dump(meta, f, indent=1)
+        if scene_dict is not None:
+            with open(os.path.join(folder, "scene.json"), "w") as f:
+                json.dump(scene_dict, f)
+
+    @classmethod
+    def load(cls, folder: str | os.PathLike) -> Capture:
+        folder = os.fspath(folder)
+        path = os.path.join(folder, "capture.json")
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"no capture.json in {folder!r}")
+        with open(path) as f:
+            meta = json.load(f)
+        if meta.get("format") != FORMAT:
+            raise ValueError(f"{path}: unknown format {meta.get('format')!r}, expected {FORMAT!r}")
+        cams = [Camera.from_dict(c) for c in meta["cameras"]]
+        lights = [PointLight.from_dict(li) for li in meta["lights"]]
+        images = None
+        if meta.get("images"):
+            h, w = cams[0].height, cams[0].width
+            images = np.zeros((len(cams), len(lights), h, w, 3), dtype=np.float32)
+            for key, rel in meta["images"].items():
+                c, li = (int(v) for v in key.split(","))
+                img = read_exr(os.path.join(folder, rel), channels=["R", "G", "B"])
+                if img.shape[:2] != (cams[c].height, cams[c].width):
+                    raise ValueError(f"{rel}: image size {img.shape[:2]} does not match camera {c}")
+                images[c, li] = img
+        masks = None
+        if meta.get("masks"):
+            masks = np.zeros((len(cams), cams[0].height, cams[0].width), dtype=bool)
+            for key, rel in meta["masks"].items():
+                masks[int(key)] = read_exr(os.path.join(folder, rel))[:, :, 0] > 0.5
+        return cls(cams, lights, images, masks)

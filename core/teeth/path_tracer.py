@@ -1,0 +1,558 @@
+"""Wavefront Monte Carlo volumetric path tracer with per-path analytic derivatives (eq. 5.7-5.32).
+
+Estimator. Camera paths are sampled with the *sampling* parameters theta_0: pinhole camera with box
+filter, thin-boundary events chosen with probability F (reflect) / 1 - F (transmit straight on,
+eq. 5.1-5.2), free-flight distances by analytic transmittance in the piecewise-homogeneous media
+(enamel, dentin, gums; one hero colour channel per path, combined over channels with the balance
+heuristic), scattering directions from the two-lobe HG phase function (eq. 5.4), cosine sampling on
+the Lambertian oral-cavity proxy. Every scattering / cavity vertex connects to every point light
+(next-event estimation through the non-bending boundaries, attenuated by all media crossed and by
+a_t (1 - F) at each boundary). The contribution is f(path; theta) / p(path; theta_0).
+
+Derivatives. With the path and its discrete structure fixed, d/dtheta [f / p] = (f / p) d log f,
+and d log f is the sum of per-interaction terms (eq. 5.8): 1 / a_t (eq. 5.10), phase-function terms
+(eq. 5.11-5.14), blended albedo / phase terms via l(q) (eq. 5.15-5.21), (N - 1) / sigma_t - sum t_k
+(eq. 5.23), and the dentin-shape term (S_i - S_e) dt/dc for every dentin crossing (eq. 5.25-5.32).
+With ``adjoint`` = d rho / d C (eq. 5.7) the tracer returns grad = sum adjoint * dC/dtheta; terms that
+precede a vertex are weighted by the adjoint-weighted contributions of all later vertices (suffix
+sums), connection terms by the connection's own contribution.
+
+The sampling and evaluation scenes are the same for ordinary rendering; the finite-difference tests
+evaluate the same estimator at theta +- h with the sampling fixed at theta_0 (common random numbers).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .capture import Camera, PointLight
+from .compiled_scene import (
+    KIND_DIELECTRIC,
+    KIND_INDEX_MATCHED,
+    KIND_OPAQUE,
+    MED_AIR,
+    MED_DENTIN,
+    CompiledScene,
+)
+from .distance_derivatives import ray_distance_vertex_derivative, ray_triangle_distance
+from .enamel_transmission import lookup_a_t
+from .fresnel import fresnel_dielectric
+from .phase_function import direction_from_mu, hg, hg_dlog_dg, sample_hg_mu
+from .sigmoid_blend import blend_weight, blend_weight_dq
+
+MAX_CROSSINGS = 12
+
+
+@dataclass
+class RenderSettings:
+    spp: int = 4
+    max_depth: int = 6  # path vertices (scattering + surface events)
+    seed: int = 0
+    chunk: int = 2048  # camera paths per wavefront batch
+    jitter: bool = True
+
+
+@dataclass
+class RenderResult:
+    images: np.ndarray  # (n_cam, n_light, H, W, 3)
+    grad: np.ndarray | None  # (n_params,) physical-parameter gradient of sum(adjoint * C)
+    stats: dict = field(default_factory=dict)
+
+
+def _accumulate(g: np.ndarray, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, w: np.ndarray) -> None:
+    """g[cols[k, j]] += sum_c vals[k, j, c] * w[rows[k], c]."""
+    if len(rows) == 0:
+        return
+    contrib = np.einsum("kjc,kc->kj", vals, w[rows])
+    ok = cols >= 0
+    g += np.bincount(cols[ok], contrib[ok], minlength=g.size)
+
+
+def _diag(vals: np.ndarray) -> np.ndarray:
+    """(k, 3) per-channel values -> (k, 3, 3) with vals on the channel diagonal."""
+    out = np.zeros(vals.shape + (3,))
+    idx = np.arange(3)
+    out[:, idx, idx] = vals
+    return out
+
+
+class _Tracer:
+    def __init__(self, cs: CompiledScene, want_grad: bool):
+        self.cs = cs
+        self.want_grad = want_grad
+        self.n_shadow = 0
+        self.n_casts = 0
+
+    # ---------------------------------------------------------------- ray traversal
+    def through(self, o, d, tmax, shadow: bool):
+        """All crossings along rays. Path mode stops at the first non-index-matched surface;
+        shadow mode passes dielectric boundaries and stops at opaque surfaces or tmax."""
+        cs = self.cs
+        n = len(o)
+        tri_x = np.full((n, MAX_CROSSINGS), -1, dtype=np.int64)
+        t_x = np.full((n, MAX_CROSSINGS), np.inf)
+        cnt = np.zeros(n, dtype=np.int64)
+        end_tri = np.full(n, -1, dtype=np.int64)
+        end_t = np.full(n, np.inf) if tmax is None else tmax.copy()
+        blocked = np.zeros(n, dtype=bool)
+        act = np.arange(n)
+        cur = o.copy()
+        tcur = np.zeros(n)
+        for _ in range(MAX_CROSSINGS + 1):
+            if len(act) == 0:
+                break
+            tm = None if tmax is None else tmax[act] - tcur[act]
+            tri, _ = cs.caster.first_hit(cur[act], d[act], tm)
+            self.n_casts += len(act)
+            hit = tri >= 0
+            act_h, tri_h = act[hit], tri[hit]
+            tv = cs.tris_s[tri_h]
+            th, _ = ray_triangle_distance(o[act_h], d[act_h], tv[:, 0], tv[:, 1], tv[:, 2])
+            k = cs.kind[tri_h]
+            if shadow:
+                stop = k == KIND_OPAQUE
+                blocked[act_h[stop]] = True
+            else:
+                stop = k != KIND_INDEX_MATCHED
+                end_tri[act_h[stop]] = tri_h[stop]
+                end_t[act_h[stop]] = th[stop]
+            go = ~stop
+            full = cnt[act_h[go]] >= MAX_CROSSINGS
+            if np.any(full):  # degenerate geometry: give up on these rays
+                blocked[act_h[go][full]] = True
+                end_tri[act_h[go][full]] = -1
+            go_idx = np.flatnonzero(go)[~full]
+            rows = act_h[go_idx]
+            tri_x[rows, cnt[rows]] = tri_h[go_idx]
+            t_x[rows, cnt[rows]] = th[go_idx]
+            cnt[rows] += 1
+            cur[rows] = o[rows] + th[go_idx, None] * d[rows]
+            tcur[rows] = th[go_idx]
+            act = rows
+        return tri_x, t_x, cnt, end_tri, end_t, blocked
+
+    def media_sequence(self, med0, d, tri_x):
+        """Medium of each piece between crossings, (n, K + 1)."""
+        cs = self.cs
+        n, k = tri_x.shape
+        med = np.zeros((n, k + 1), dtype=np.int64)
+        med[:, 0] = med0
+        valid = tri_x >= 0
+        tx = np.where(valid, tri_x, 0)
+        entering = np.einsum("nkx,nx->nk", cs.normal_s[tx], d) < 0
+        nxt = np.where(entering, cs.inside[tx], cs.outside[tx])
+        for j in range(k):
+            med[:, j + 1] = np.where(valid[:, j], nxt[:, j], med[:, j])
+        return med
+
+    def eval_crossings(self, o, d, tri_x, t_x):
+        """Crossing distances on the evaluation geometry (dentin moves with c), (n, K)."""
+        cs = self.cs
+        t_e = t_x.copy()
+        rows, cols = np.nonzero((tri_x >= 0) & (cs.kind[np.maximum(tri_x, 0)] == KIND_INDEX_MATCHED))
+        if len(rows):
+            tv = cs.tris_e[tri_x[rows, cols]]
+            t_e[rows, cols], _ = ray_triangle_distance(o[rows], d[rows], tv[:, 0], tv[:, 1], tv[:, 2])
+        return t_e
+
+    def crossing_records(self, o, d, tri_x, med, upto, rows_out):
+        """Dentin-shape terms (S_i - S_e) dt/dc for dentin crossings j < upto (eq. 5.29-5.32)."""
+        cs = self.cs
+        valid = (tri_x >= 0) & (np.arange(tri_x.shape[1])[None, :] < upto[:, None])
+        valid &= cs.kind[np.maximum(tri_x, 0)] == KIND_INDEX_MATCHED
+        r, j = np.nonzero(valid)
+        if len(r) == 0:
+            return None
+        tri = tri_x[r, j]
+        tv = cs.tris_e[tri]
+        _, bary = ray_triangle_distance(o[r], d[r], tv[:, 0], tv[:, 1], tv[:, 2])
+        dt_dv = ray_distance_vertex_derivative(d[r], tv[:, 0], tv[:, 1], tv[:, 2], bary)
+        tooth = cs.dentin_tooth[tri]
+        dt_dc = np.zeros((len(r), 3))
+        for i in np.unique(tooth):
+            m = tooth == i
+            dp = cs.dentin[i]
+            dB = dp.deltas[:, dp.faces[cs.dentin_face[tri[m]]], :]  # (3, k, 3v, 3)
+            dt_dc[m] = np.einsum("nvx,knvx->nk", dt_dv[m], dB)
+        s_diff = cs.sigma_e[med[r, j + 1]] - cs.sigma_e[med[r, j]]  # S_i - S_e
+        cols = cs.c_col[tooth][:, None] + np.arange(3)[None, :]
+        vals = dt_dc[:, :, None] * s_diff[:, None, :]
+        return rows_out[r], cols, vals
+
+    def sigma_records(self, lens_e, med, rows_out):
+        """Beer-Lambert terms -t_k per medium piece (eq. 5.23, second term)."""
+        cs = self.cs
+        r, j = np.nonzero((lens_e != 0) & (med != MED_AIR))
+        if len(r) == 0:
+            return None
+        m = med[r, j]
+        cols = cs.col_sigma[m][:, None] + np.arange(3)[None, :]
+        return rows_out[r], cols, _diag(-np.repeat(lens_e[r, j][:, None], 3, axis=1))
+
+    def a_t_at(self, tri, o, d, t, which: str):
+        """a_t at boundary hits (n, 3) plus (texel cols (n, 12), 1/a_t weights) for eq. 5.10."""
+        cs = self.cs
+        tv = cs.tris_s[tri]
+        _, bary = ray_triangle_distance(o, d, tv[:, 0], tv[:, 1], tv[:, 2])
+        uv = np.einsum("nv,nvk->nk", bary, cs.corner_uv[tri])
+        tid = cs.tex_id[tri]
+        a = np.ones((len(tri), 3))
+        cols = np.full((len(tri), 12), -1, dtype=np.int64)
+        w4 = np.zeros((len(tri), 4))
+        for k in np.unique(tid):
+            m = tid == k
+            tex = cs.tex_e[k] if which == "e" else cs.tex_s[k]
+            vals, idx, wts = lookup_a_t(tex, uv[m])
+            a[m] = vals
+            cols[m] = (cs.tex_col[k] + 3 * idx[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, 12)
+            w4[m] = wts
+        return a, cols, w4
+
+    @staticmethod
+    def a_t_vals(a, w4):
+        """(n, 12, 3) values w_i / a_t on the texel-channel diagonal."""
+        n = len(a)
+        vals = np.zeros((n, 4, 3, 3))
+        idx = np.arange(3)
+        vals[:, :, idx, idx] = w4[:, :, None] / a[:, None, :]
+        return vals.reshape(n, 12, 3)
+
+    # ---------------------------------------------------------------- shadow rays
+    def shadow(self, x, w, r, med0):
+        """Transmittance (n, 3) from x towards a point light at distance r, and score records."""
+        cs = self.cs
+        self.n_shadow += len(x)
+        tri_x, t_x, cnt, _, _, blocked = self.through(x, w, r, shadow=True)
+        med = self.media_sequence(med0, w, tri_x)
+        t_e = self.eval_crossings(x, w, tri_x, t_x)
+        k = tri_x.shape[1]
+        tb = np.concatenate([np.zeros((len(x), 1)), np.where(tri_x >= 0, t_e, r[:, None]), r[:, None]], axis=1)
+        lens = np.diff(tb, axis=1)
+        logT = -np.einsum("nk,nkc->nc", lens, cs.sigma_e[med])
+        recs = []
+        rows_all = np.arange(len(x))
+        rb, jb = np.nonzero((tri_x >= 0) & (cs.kind[np.maximum(tri_x, 0)] == KIND_DIELECTRIC))
+        if len(rb):
+            tri = tri_x[rb, jb]
+            cosv = np.einsum("nx,nx->n", cs.normal_s[tri], w[rb])
+            a, cols, w4 = self.a_t_at(tri, x[rb], w[rb], t_x[rb, jb], "e")
+            np.add.at(logT, rb, np.log(a) + np.log1p(-fresnel_dielectric(cosv, cs.eta[tri]))[:, None])
+            if self.want_grad:
+                recs.append((rb, cols, self.a_t_vals(a, w4)))
+        T = np.exp(logT)
+        T[blocked] = 0.0
+        if self.want_grad:
+            rs = self.sigma_records(lens, med, rows_all)
+            if rs is not None:
+                recs.append(rs)
+            rc = self.crossing_records(x, w, tri_x, med, np.full(len(x), k), rows_all)
+            if rc is not None:
+                recs.append(rc)
+        return T, recs
+
+    # ---------------------------------------------------------------- phase function at a vertex
+    def vertex_phase(self, med, lw, which: str):
+        cs = self.cs
+        pe, pd = cs.ph["E" + which][med], cs.ph["D" + which][med]
+        mixp = pe * lw[:, None] + pd * (1.0 - lw[:, None])
+        return pe, pd, mixp
+
+    def phase_eval(self, mu, mixp):
+        g1, g2, beta = mixp[:, 0:1], mixp[:, 1:2], mixp[:, 2:3]
+        h1, h2 = hg(mu, g1), hg(mu, g2)
+        return beta * h1 + (1 - beta) * h2, h1, h2
+
+    def phase_scores(self, mu, med, lw, dl, dqdc, pe, pd, mixp):
+        """d log f_p per vertex and direction: cols (n, m, 9), vals (n, m, 9) (eq. 5.11-5.19)."""
+        cs = self.cs
+        g1, g2, beta = mixp[:, 0:1], mixp[:, 1:2], mixp[:, 2:3]
+        h1, h2 = hg(mu, g1), hg(mu, g2)
+        f = beta * h1 + (1 - beta) * h2
+        d1 = beta * h1 * hg_dlog_dg(mu, g1) / f
+        d2 = (1 - beta) * h2 * hg_dlog_dg(mu, g2) / f
+        db = (h1 - h2) / f
+        l_ = lw[:, None]
+        vals = [d1 * l_, d1 * (1 - l_), d2 * l_, d2 * (1 - l_), db * l_, db * (1 - l_)]
+        dmix = d1 * (pe[:, 0:1] - pd[:, 0:1]) + d2 * (pe[:, 1:2] - pd[:, 1:2]) + db * (pe[:, 2:3] - pd[:, 2:3])
+        for k in range(3):
+            vals.append(dmix * (dl * dqdc[:, k])[:, None])
+        vals = np.stack(vals, axis=-1)  # (n, m, 9)
+        cE, cD = cs.col_ph["E"][med], cs.col_ph["D"][med]
+        tooth = cs.med_tooth[med]
+        ccol = np.where(tooth[:, None] >= 0, cs.c_col[np.maximum(tooth, 0)][:, None] + np.arange(3), -1)
+        cols = np.stack([cE[:, 0], cD[:, 0], cE[:, 1], cD[:, 1], cE[:, 2], cD[:, 2]], axis=1)
+        cols = np.concatenate([cols, ccol], axis=1)
+        return cols, vals
+
+
+def render(scene, cameras: list[Camera], lights: list[PointLight], settings: RenderSettings | None = None, *,
+           pixels: list[np.ndarray] | None = None, light_ids: np.ndarray | None = None, sampling_scene=None,
+           adjoint: np.ndarray | None = None, compiled: CompiledScene | None = None) -> RenderResult:
+    """Render ``scene`` for every camera and (selected) light; optionally the gradient of sum(adjoint * C).
+
+    ``pixels``: per camera, flat pixel indices (row * W + col) to trace (default: all).
+    ``adjoint``: (n_cam, n_selected_lights, H, W, 3) = d rho / d C; returns ``grad`` (physical params).
+    ``sampling_scene``: theta_0 for the path sampling (default ``scene``), see module docstring.
+    """
+    settings = settings or RenderSettings()
+    cs = compiled or CompiledScene(scene, sampling_scene)
+    light_ids = np.arange(len(lights)) if light_ids is None else np.asarray(light_ids, dtype=np.int64)
+    lp = np.array([lights[i].position for i in light_ids])
+    li = np.array([lights[i].intensity for i in light_ids])
+    n_l = len(light_ids)
+    h, w = cameras[0].height, cameras[0].width
+    hw = h * w
+    if pixels is None:
+        pixels = [np.arange(hw) for _ in cameras]
+    cam_of = np.concatenate([np.full(len(p), c) for c, p in enumerate(pixels)]).astype(np.int64)
+    pix_of = np.concatenate([np.asarray(p, dtype=np.int64) for p in pixels])
+    cam_of = np.repeat(cam_of, settings.spp)
+    pix_of = np.repeat(pix_of, settings.spp)
+    img = np.zeros(len(cameras) * n_l * hw * 3)
+    want_grad = adjoint is not None
+    adj = None if adjoint is None else np.asarray(adjoint, dtype=np.float64).reshape(len(cameras), n_l, hw, 3)
+    grad = np.zeros(cs.layout.size) if want_grad else None
+    tr = _Tracer(cs, want_grad)
+    t0 = time.perf_counter()
+    n_vertices = 0
+    for ci, start in enumerate(range(0, len(pix_of), settings.chunk)):
+        sl = slice(start, start + settings.chunk)
+        rng = np.random.Generator(np.random.PCG64([settings.seed, ci]))
+        n_vertices += _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad, hw)
+    stats = {"seconds": time.perf_counter() - t0, "path_vertices": int(n_vertices),
+             "shadow_rays": int(tr.n_shadow), "ray_casts": int(tr.n_casts), "camera_paths": int(len(pix_of))}
+    images = img.reshape(len(cameras), n_l, h, w, 3)
+    return RenderResult(images, grad, stats)
+
+
+def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings, img, adj, grad, hw) -> int:
+    cs = tr.cs
+    n = len(pix)
+    want = grad is not None
+    # --- camera rays (pinhole, box filter, eq. 5.8)
+    jit = rng.random((n, 2)) if st.jitter else np.full((n, 2), 0.5)
+    o = np.zeros((n, 3))
+    d = np.zeros((n, 3))
+    for c in np.unique(cam):
+        m = cam == c
+        wcam = cameras[c].width
+        o[m], d[m] = cameras[c].rays(pix[m] % wcam + jit[m, 0], pix[m] // wcam + jit[m, 1])
+    hero = rng.integers(0, 3, n)
+    pid = np.arange(n)
+    med = np.zeros(n, dtype=np.int64)
+    logf = np.zeros((n, 3))
+    logp = np.zeros((n, 3))
+    levels = st.max_depth + 2
+    A = np.zeros((n, levels, 3)) if want else None
+    prefix = []  # (level, rows, cols, vals)
+    n_vertices = 0
+    inv_spp = 1.0 / st.spp
+
+    for b in range(st.max_depth):
+        if len(pid) == 0:
+            break
+        m_ = len(pid)
+        u = rng.random((m_, 6))
+        tri_x, t_x, cnt, end_tri, end_t, _ = tr.through(o, d, None, shadow=False)
+        mseq = tr.media_sequence(med, d, tri_x)
+        k = tri_x.shape[1]
+        in_medium = med != MED_AIR
+        end_f = np.where(np.isfinite(end_t), end_t, 0.0)
+        tb_s = np.concatenate([np.zeros((m_, 1)), np.where(tri_x >= 0, t_x, end_f[:, None]), end_f[:, None]], 1)
+        lens_s = np.diff(tb_s, axis=1)
+        sig_s = cs.sigma_s[mseq]  # (m, k+1, 3)
+        tau_cum = np.cumsum(lens_s[:, :, None] * sig_s, axis=1)
+        tau_star = -np.log1p(-u[:, 0])
+        tau_h = tau_cum[np.arange(m_), :, hero]
+        scatter = in_medium & (tau_star < tau_h[:, -1]) & (end_tri >= 0)
+        kstar = np.where(scatter, np.argmax(tau_h > tau_star[:, None], axis=1), k)
+        prev_tau = np.where(kstar > 0, tau_cum[np.arange(m_), np.maximum(kstar - 1, 0), :].T, 0.0).T
+        prev_tau_h = prev_tau[np.arange(m_), hero]
+        sig_k_s = sig_s[np.arange(m_), np.minimum(kstar, k)]
+        s = np.where(scatter, tb_s[np.arange(m_), kstar] + (tau_star - prev_tau_h) /
+                     np.maximum(sig_k_s[np.arange(m_), hero], 1e-300), end_f)
+        # sampling pdf, all channels (balance heuristic over the hero channel)
+        tau_at_s = prev_tau + sig_k_s * (s - tb_s[np.arange(m_), kstar])[:, None]
+        logp += -tau_at_s
+        logp[scatter] += np.log(sig_k_s[scatter])
+        # evaluation: piece lengths on the evaluation geometry up to s
+        t_e = tr.eval_crossings(o, d, tri_x, t_x)
+        tb_e = np.concatenate([np.zeros((m_, 1)), np.where(tri_x >= 0, t_e, end_f[:, None]), end_f[:, None]], 1)
+        jj = np.arange(k + 1)[None, :]
+        upper = np.where(jj < kstar[:, None], tb_e[:, 1:], s[:, None])
+        lens_e = np.where(jj <= kstar[:, None], upper - tb_e[:, :-1], 0.0)
+        lens_e = np.where(in_medium[:, None], lens_e, 0.0)
+        logf -= np.einsum("nk,nkc->nc", lens_e, cs.sigma_e[mseq])
+        if want:
+            rec = tr.sigma_records(lens_e, mseq, pid)
+            if rec is not None:
+                prefix.append((b,) + rec)
+            rec = tr.crossing_records(o, d, tri_x, mseq, np.where(in_medium, kstar, 0), pid)
+            if rec is not None:
+                prefix.append((b,) + rec)
+        x = o + s[:, None] * d
+        new_med = mseq[np.arange(m_), np.minimum(kstar, k)]
+        alive = np.ones(m_, dtype=bool)
+        new_d = d.copy()
+
+        # ---------------- volume scattering vertices
+        vs = np.flatnonzero(scatter)
+        if len(vs):
+            n_vertices += len(vs)
+            mv = new_med[vs]
+            xv = x[vs]
+            lw_s = np.ones(len(vs))
+            lw_e = np.ones(len(vs))
+            dl = np.zeros(len(vs))
+            dqdc = np.zeros((len(vs), 3))
+            tooth = cs.med_tooth[mv]
+            for i in np.unique(tooth[tooth >= 0]):
+                mm = tooth == i
+                sign = np.where(cs.med_kind[mv[mm]] == MED_DENTIN, -1.0, 1.0)
+                q_s, q_e, dq = cs.dentin[i].query(xv[mm], sign)
+                lw_s[mm] = blend_weight(q_s, cs.spread)
+                lw_e[mm] = blend_weight(q_e, cs.spread)
+                dl[mm] = blend_weight_dq(q_e, cs.spread)
+                dqdc[mm] = dq
+            sig_e = cs.sigma_e[mv]
+            aE, aD = cs.alb["Ee"][mv], cs.alb["De"][mv]
+            a_mix = aE * lw_e[:, None] + aD * (1 - lw_e[:, None])
+            logf[vs] += np.log(sig_e) + np.log(a_mix)
+            if want:
+                rows = pid[vs]
+                cols = cs.col_sigma[mv][:, None] + np.arange(3)
+                prefix.append((b, rows, cols, _diag(1.0 / sig_e)))  # (N - 1) / sigma_t term of eq. 5.23
+                cols = np.concatenate([cs.col_alb["E"][mv][:, None] + np.arange(3),
+                                       cs.col_alb["D"][mv][:, None] + np.arange(3)], axis=1)
+                vals = np.concatenate([_diag(lw_e[:, None] / a_mix), _diag((1 - lw_e[:, None]) / a_mix)], axis=1)
+                prefix.append((b, rows, cols, vals))  # eq. 5.20-5.21
+                ht = tooth >= 0
+                if np.any(ht):
+                    cols = cs.c_col[tooth[ht]][:, None] + np.arange(3)
+                    vals = ((aE - aD)[ht] / a_mix[ht])[:, None, :] * (dl[ht, None] * dqdc[ht])[:, :, None]
+                    prefix.append((b, rows[ht], cols, vals))  # eq. 5.21 via dl/dq dq/dc
+            pe_e, pd_e, mix_e = tr.vertex_phase(mv, lw_e, "e")
+            _, _, mix_s = tr.vertex_phase(mv, lw_s, "s")
+            # next-event estimation to every light
+            wv = np.exp(logf[vs] - _logmeanexp(logp[vs]))
+            _nee(tr, vs, xv, d[vs], mv, wv, None, lp, li, cam, pix, pid, b, img, adj, grad, A, hw, inv_spp,
+                 (lw_e, dl, dqdc, pe_e, pd_e, mix_e))
+            # continue: sample the phase function with the sampling parameters
+            first = u[vs, 1] < mix_s[:, 2]
+            gsel = np.where(first, mix_s[:, 0], mix_s[:, 1])
+            mu = sample_hg_mu(gsel, u[vs, 2])
+            new_d[vs] = direction_from_mu(d[vs], mu, 2 * np.pi * u[vs, 3])
+            f_e, _, _ = tr.phase_eval(mu[:, None], mix_e)
+            f_s, _, _ = tr.phase_eval(mu[:, None], mix_s)
+            logf[vs] += np.log(f_e[:, 0])[:, None]
+            logp[vs] += np.log(f_s[:, 0])[:, None]
+            if want:
+                cols, vals = tr.phase_scores(mu[:, None], mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)
+                prefix.append((b + 1, pid[vs], cols[:, :], np.repeat(vals[:, 0, :, None], 3, axis=2)))
+
+        # ---------------- surface events
+        sv = np.flatnonzero(~scatter & (end_tri >= 0))
+        alive[np.flatnonzero(~scatter & (end_tri < 0))] = False
+        if len(sv):
+            tri = end_tri[sv]
+            kind = cs.kind[tri]
+            # thin dielectric boundary (eq. 5.1-5.2)
+            dv = sv[kind == KIND_DIELECTRIC]
+            if len(dv):
+                n_vertices += len(dv)
+                tri_d = end_tri[dv]
+                nrm = cs.normal_s[tri_d]
+                cosv = np.einsum("nx,nx->n", nrm, d[dv])
+                F = fresnel_dielectric(cosv, cs.eta[tri_d])
+                refl = u[dv, 4] < F
+                rv, tv_ = dv[refl], dv[~refl]
+                new_d[rv] = d[rv] - 2 * cosv[refl, None] * nrm[refl]
+                if len(tv_):
+                    tt = tri_d[~refl]
+                    entering = cosv[~refl] < 0
+                    new_med[tv_] = np.where(entering, cs.inside[tt], cs.outside[tt])
+                    a, cols, w4 = tr.a_t_at(tt, o[tv_], d[tv_], end_t[tv_], "e")
+                    logf[tv_] += np.log(a)
+                    if want:
+                        prefix.append((b, pid[tv_], cols, tr.a_t_vals(a, w4)))
+                new_med[rv] = med[rv]
+            # opaque Lambertian oral cavity
+            ov = sv[kind == KIND_OPAQUE]
+            if len(ov):
+                n_vertices += len(ov)
+                nrm = cs.normal_s[end_tri[ov]]
+                nrm = nrm * -np.sign(np.einsum("nx,nx->n", nrm, d[ov]))[:, None]
+                logf[ov] += np.log(cs.rho_e)[None, :]
+                if want:
+                    prefix.append((b, pid[ov], np.broadcast_to(cs.col_rho + np.arange(3), (len(ov), 3)),
+                                   _diag(np.broadcast_to(1.0 / cs.rho_e, (len(ov), 3)))))
+                wv = np.exp(logf[ov] - _logmeanexp(logp[ov]))
+                _nee(tr, ov, x[ov], d[ov], med[ov], wv, nrm, lp, li, cam, pix, pid, b, img, adj, grad, A, hw,
+                     inv_spp, None)
+                # cosine-weighted continuation: f / p = rho
+                r1, r2 = u[ov, 4], u[ov, 5]
+                mu = np.sqrt(1.0 - r1)
+                new_d[ov] = direction_from_mu(nrm, mu, 2 * np.pi * r2)
+                new_med[ov] = MED_AIR
+            # anything else (should not happen): terminate
+            bad = sv[(kind != KIND_DIELECTRIC) & (kind != KIND_OPAQUE)]
+            alive[bad] = False
+        # compact
+        keep = np.flatnonzero(alive)
+        o, d, med = x[keep], new_d[keep], new_med[keep]
+        logf, logp, hero, pid = logf[keep], logp[keep], hero[keep], pid[keep]
+        cam, pix = cam[keep], pix[keep]
+
+    if grad is not None and prefix:
+        R = np.cumsum(A[:, ::-1, :], axis=1)[:, ::-1, :]  # suffix sums over vertex levels
+        for level, rows, cols, vals in prefix:
+            _accumulate(grad, rows, np.asarray(cols), vals, R[:, level, :])
+    return n_vertices
+
+
+def _logmeanexp(a: np.ndarray) -> np.ndarray:
+    m = a.max(axis=1, keepdims=True)
+    return m + np.log(np.mean(np.exp(a - m), axis=1, keepdims=True))
+
+
+def _nee(tr: _Tracer, idx, xv, dv, mv, wv, normal, lp, li, cam, pix, pid, b, img, adj, grad, A, hw, inv_spp,
+         phase_ctx):
+    """Connect vertices to all lights; splat contributions; gradient terms of the connections."""
+    n = len(idx)
+    n_l = len(lp)
+    xx = np.repeat(xv, n_l, axis=0)
+    to = np.tile(lp, (n, 1)) - xx
+    r = np.linalg.norm(to, axis=1)
+    w = to / r[:, None]
+    if phase_ctx is not None:
+        lw_e, dl, dqdc, pe_e, pd_e, mix_e = phase_ctx
+        mu = np.einsum("nlx,nx->nl", w.reshape(n, n_l, 3), dv)
+        fp, _, _ = tr.phase_eval(mu, mix_e)
+        geo = fp
+    else:
+        cosl = np.einsum("nlx,nx->nl", w.reshape(n, n_l, 3), normal)
+        geo = np.maximum(cosl, 0.0) / np.pi
+    T, recs = tr.shadow(xx, w, r, np.repeat(mv, n_l))
+    contrib = (wv[:, None, :] * geo[:, :, None] * T.reshape(n, n_l, 3) * li[None, :, :]
+               / (r * r).reshape(n, n_l)[:, :, None]) * inv_spp
+    c_ = cam[idx]
+    p_ = pix[idx]
+    base = ((c_[:, None] * n_l + np.arange(n_l)[None, :]) * hw + p_[:, None]) * 3  # (n, L)
+    flat = (base[:, :, None] + np.arange(3)).ravel()
+    img += np.bincount(flat, contrib.ravel(), minlength=img.size)
+    if grad is None:
+        return
+    a = adj.reshape(-1)[flat].reshape(n, n_l, 3) * contrib
+    A[pid[idx], b, :] += a.sum(axis=1)
+    a2 = a.reshape(n * n_l, 3)
+    for rows, cols, vals in recs:
+        _accumulate(grad, rows, cols, vals, a2)
+    if phase_ctx is not None:
+        cols, vals = tr.phase_scores(mu, mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)  # (n, L, 9)
+        rows = np.repeat(np.arange(n), n_l)
+        vals3 = np.repeat(vals.reshape(n * n_l, 9)[:, :, None], 3, axis=2)
+        _accumulate(grad, np.arange(n * n_l), np.repeat(cols, n_l, axis=0), vals3, a2)
+        del rows

@@ -1,0 +1,33 @@
+"""Small scenes shared by the teeth tests (not a test module)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from material_structures.core.teeth.capture import Camera, PointLight
+from material_structures.core.teeth.dentin_blend_shapes import DentinBlendShape
+from material_structures.core.teeth.mesh import TriMesh
+from material_structures.core.teeth.scene import OralCavity, TeethScene, Tooth, VolumeMaterial
+from material_structures.core.teeth.synthetic import box_mesh
+
+
+def slab_scene(sigma_t, albedo, thickness=2.0, a_t=0.9, g1=0.5, g2=-0.3, beta=0.7, floor_albedo=None):
+    """A 100 x 100 mm slab z in [0, thickness] with a tiny far-away dentin core; optional floor at z=-5."""
+    slab = box_mesh((-50, -50, 0), (50, 50, thickness))
+    core = box_mesh((40, 40, 0.4 * thickness), (40.2, 40.2, 0.6 * thickness))
+    dentin = DentinBlendShape(core, np.zeros((3, len(core.vertices), 3)))
+    mat = VolumeMaterial(sigma_t, albedo, g1, g2, beta)
+    tooth = Tooth("slab", slab, dentin, mat, VolumeMaterial(3.0, 0.5), np.full((1, 1, 3), a_t))
+    cavity = None
+    if floor_albedo is not None:
+        floor = TriMesh([[-400, -400, -5], [400, -400, -5], [400, 400, -5], [-400, 400, -5]], [[0, 1, 2], [0, 2, 3]])
+        cavity = OralCavity(floor, floor_albedo)
+    return TeethScene([tooth], None, cavity)
+
+
+def down_camera(width=16, height=16, fov=4.0, eye=(0.0, 0.0, 300.0), target=(0.0, 0.0, 0.0)):
+    return Camera.look_at(eye, target, (0, 1, 0), fov, width, height)
+
+
+def light(pos, intensity=1.0e5):
+    return PointLight(pos, np.full(3, intensity))
