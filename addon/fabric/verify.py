@@ -117,3 +117,73 @@ def render_patch_vs_core(
     f = sggx_brdf(wi, wo_px, np.asarray(kd), np.asarray(ks), np.asarray(sigma), np.asarray(quat))
     ref = f * np.maximum(wi[..., 2:3], 0.0) * irradiance
     return rgb, ref, mask
+
+
+def render_maps_vs_core(
+    maps,
+    view=(35.0, 210.0),
+    lamp_position=(0.3, -0.4, 1.1),
+    lamp_power=40.0,
+    resolution=(32, 32),
+):
+    """Render a 1 x 1 patch textured with ``maps`` (core FabricMaps, BTF frame, row 0 = top) and
+    evaluate eq. 3.9 in numpy at each pixel's texel with the directions expressed in the BTF frame.
+
+    Returns ``(rendered_rgb, reference_rgb, mask)``.
+    """
+    from .maps import maps_to_images
+
+    scene = reset_scene()
+    configure_cycles(scene, resolution=resolution, samples=1, seed=0)
+    dark_world(scene)
+    images = maps_to_images(maps, "Verify")
+    mat = create_fabric_material("Mapped", maps=images, scene=scene)
+    plane = add_textured_plane(scene, 1.0, mat)
+    wo = _direction(*view)
+    cam = add_orthographic_camera(scene, ortho_scale=0.7)
+    cam.location = tuple(5.0 * wo)
+    from mathutils import Vector
+
+    cam.rotation_euler = Vector(tuple(-wo)).to_track_quat("-Z", "Y").to_euler()
+    light = bpy.data.lights.new("Lamp", "POINT")
+    light.energy = lamp_power
+    light.shadow_soft_size = 0.0
+    lamp = bpy.data.objects.new("Lamp", light)
+    lamp.location = lamp_position
+    scene.collection.objects.link(lamp)
+    sync_fabric_lamps(scene)
+    rgb = render_to_array(scene)[..., :3]
+
+    pos_mat = new_material("Position")
+    tree = pos_mat.node_tree
+    geo = tree.nodes.new("ShaderNodeNewGeometry")
+    em = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(geo.outputs["Position"], em.inputs["Color"])
+    tree.links.new(em.outputs[0], material_output(pos_mat).inputs["Surface"])
+    plane.data.materials[0] = pos_mat
+    scene.render.film_transparent = True
+    pos_rgba = render_to_array(scene)
+    pos = pos_rgba[..., :3].astype(np.float64)
+    h, w = maps.shape
+    u, v = pos[..., 0] + 0.5, pos[..., 1] + 0.5
+    col = np.clip(np.floor(u * w).astype(int), 0, w - 1)
+    row = np.clip(h - 1 - np.floor(v * h).astype(int), 0, h - 1)
+    # Stay away from texel borders, where a pixel may straddle two texels.
+    fu, fv = u * w - np.floor(u * w), v * h - np.floor(v * h)
+    mask = (pos_rgba[..., 3] > 0.999) & (np.minimum(fu, 1 - fu) > 0.02) & (np.minimum(fv, 1 - fv) > 0.02)
+
+    d = np.asarray(lamp_position)[None, None, :] - pos
+    dist2 = np.sum(d * d, axis=-1, keepdims=True)
+    wi = d / np.sqrt(dist2)
+    flip = np.array([1.0, -1.0, 1.0])  # mesh frame (y up the image) -> BTF frame (y down)
+    wi_btf, wo_btf = wi * flip, np.broadcast_to(wo * flip, pos.shape)
+    f = sggx_brdf(
+        wi_btf,
+        wo_btf,
+        maps.kd[row, col].astype(np.float64),
+        maps.ks[row, col].astype(np.float64),
+        maps.sigma[row, col].astype(np.float64),
+        maps.basis[row, col].astype(np.float64),
+    )
+    ref = f * np.maximum(wi[..., 2:3], 0.0) * lamp_power / (4.0 * math.pi) / dist2
+    return rgb, ref, mask

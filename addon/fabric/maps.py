@@ -1,0 +1,79 @@
+"""Fabric parameter maps as Blender images (packed into the .blend, so save/undo/link keep them).
+
+Core arrays are ``(H, W, C)`` with row 0 = the top row of the EXR file; Blender image pixels start
+at the bottom row. Fit folders describe the fibre basis in the BTF tangent frame (x along image
+columns, y along rows, i.e. *down* the image); on the mesh, the frame is (UV tangent, normal x
+tangent = *up* the image, normal). The two differ by the reflection F = diag(1, -1, 1), under which
+eq. 3.9 is invariant when the basis becomes F M F: quaternion (w, x, y, z) -> (w, -x, y, -z).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps, load_params, make_maps
+
+IMAGE_PREFIX = "SGGX"
+
+
+def btf_quat_to_mesh(quat: np.ndarray) -> np.ndarray:
+    """Basis quaternions from the BTF frame (y down the image) to the mesh frame (y up)."""
+    q = np.array(quat, dtype=np.float32, copy=True)
+    q[..., 1] *= -1.0
+    q[..., 3] *= -1.0
+    return q
+
+
+mesh_quat_to_btf = btf_quat_to_mesh  # the reflection is its own inverse
+
+
+def array_to_image(array: np.ndarray, name: str, pack: bool = True):
+    """A float, Non-Color, channel-packed image holding ``array`` (H, W, C<=4), row 0 = top."""
+    a = np.asarray(array, dtype=np.float32)
+    if a.ndim != 3 or not 1 <= a.shape[2] <= 4:
+        raise ValueError(f"{name}: expected an (H, W, C<=4) map, got shape {a.shape}")
+    h, w, c = a.shape
+    rgba = np.zeros((h, w, 4), dtype=np.float32)
+    rgba[..., 3] = 1.0
+    rgba[..., :c] = a
+    image = bpy.data.images.get(name)
+    if image is None or tuple(image.size) != (w, h) or not image.is_float:
+        if image is not None:
+            bpy.data.images.remove(image)
+        image = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.alpha_mode = "CHANNEL_PACKED"
+    image.pixels.foreach_set(rgba[::-1].ravel())
+    image.update()
+    if pack:
+        image.pack()
+    return image
+
+
+def image_to_array(image, channels: int) -> np.ndarray:
+    """Inverse of :func:`array_to_image`: (H, W, channels) float32, row 0 = top."""
+    w, h = image.size
+    buf = np.empty(w * h * 4, dtype=np.float32)
+    image.pixels.foreach_get(buf)
+    return buf.reshape(h, w, 4)[::-1, :, :channels].copy()
+
+
+def maps_to_images(maps: FabricMaps, prefix: str, btf_frame: bool = True) -> dict:
+    """Create the four images of a parameter set (basis converted to the mesh frame)."""
+    basis = btf_quat_to_mesh(maps.basis) if btf_frame else maps.basis
+    arrays = {"kd": maps.kd, "ks": maps.ks, "sigma": maps.sigma, "basis": basis}
+    return {key: array_to_image(arrays[key], f"{prefix} {key}") for key in MAP_FILES}
+
+
+def images_to_maps(images: dict, btf_frame: bool = True) -> FabricMaps:
+    """Read the four images back as core maps (basis in the BTF frame when ``btf_frame``)."""
+    arrays = {key: image_to_array(images[key], c) for key, (_, c) in MAP_FILES.items()}
+    if btf_frame:
+        arrays["basis"] = mesh_quat_to_btf(arrays["basis"])
+    return make_maps(**arrays)
+
+
+def load_fit_folder(params_dir: str) -> FabricMaps:
+    """Validated maps from a fit's output folder (clear errors for missing/corrupt files)."""
+    return load_params(params_dir)
