@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     f = fsub.add_parser("fit", help="fit the SGGX fabric model (eq. 3.9) to a BTF")
     f.add_argument("btf", help="BTF folder (btf.json + EXRs), btf.json, or .npz")
-    f.add_argument("--out", required=True, help="parameter folder to write (kd/ks/sigma/basis.exr, params.json)")
+    f.add_argument("--out", required=True,
+                   help="parameter folder to write (kd/ks/sigma/basis.exr, params.json)")
     f.add_argument("--tile", type=int, default=20, help="tile edge in texels (default 20)")
     f.add_argument("--workers", type=int, default=None, help="parallel processes (default: CPU count)")
     f.add_argument("--weighting", choices=("radiance", "brdf"), default="radiance",

@@ -108,9 +108,9 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
     return hdr, cache, values_path
 
 
-def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int = 20, workers: int | None = None,
-            options: FitOptions | None = None, progress: bool = True, preferred=(1.0, 0.0, 0.0),
-            keep_cache: bool = True) -> tuple[FabricMaps, dict]:
+def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int = 20,
+            workers: int | None = None, options: FitOptions | None = None, progress: bool = True,
+            preferred=(1.0, 0.0, 0.0), keep_cache: bool = True) -> tuple[FabricMaps, dict]:
     """Fit eq. 3.9 to every texel of a BTF and write the parameter folder ``out_dir``.
 
     ``workers`` processes (default: CPU count) fit ``tile x tile`` texel tiles; finished tiles are

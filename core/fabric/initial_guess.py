@@ -14,19 +14,19 @@ from .ndf_extraction import NdfOperator
 from .quaternion import matrix_to_quat
 
 
-def initial_basis(ndf: np.ndarray, op: NdfOperator, floor_quantile: float = 0.1
+def initial_basis(ndf: np.ndarray, op: NdfOperator, floor_quantile: float | None = 0.1
                   ) -> tuple[np.ndarray, np.ndarray]:
     """From NDFs ``(cells, T)`` return ``(quat (T, 4), sigma (T, 2))`` following eq. 3.13-3.16.
 
     The diffuse part of the BTF adds a constant to ``D_BTF``; it is removed by subtracting the
-    ``floor_quantile`` of each texel's NDF over the valid cells before the PCA.
+    ``floor_quantile`` of each texel's NDF over the valid cells before the PCA (None: keep it).
     """
     valid = op.valid
     d = ndf[valid]  # (V, T)
     h = op.directions[valid]  # (V, 3)
     dw = op.solid_angle[valid][:, None]
-    floor = np.quantile(d, floor_quantile, axis=0)
-    d = np.maximum(d - floor[None], 0.0)
+    if floor_quantile is not None:
+        d = np.maximum(d - np.quantile(d, floor_quantile, axis=0)[None], 0.0)
     # eq. 3.13 (argmax, refined by the NDF-weighted mean of the cells above 70 % of the peak)
     peak = d.max(axis=0)
     top = d >= 0.7 * peak[None]
@@ -42,9 +42,10 @@ def initial_basis(ndf: np.ndarray, op: NdfOperator, floor_quantile: float = 0.1
     w0 -= np.sum(w0 * w2, -1, keepdims=True) * w2
     n0 = np.linalg.norm(w0, axis=-1, keepdims=True)
     fallback = np.cross(w2, np.array([0.0, 1.0, 0.0]))
-    fallback = np.where(np.linalg.norm(fallback, axis=-1, keepdims=True) < 1e-6, np.array([1.0, 0, 0]), fallback)
-    w0 = np.where(n0 > 1e-9, w0 / np.maximum(n0, 1e-300), fallback / np.linalg.norm(fallback, axis=-1,
-                                                                                    keepdims=True))
+    degenerate = np.linalg.norm(fallback, axis=-1, keepdims=True) < 1e-6
+    fallback = np.where(degenerate, np.array([1.0, 0, 0]), fallback)
+    fallback /= np.linalg.norm(fallback, axis=-1, keepdims=True)
+    w0 = np.where(n0 > 1e-9, w0 / np.maximum(n0, 1e-300), fallback)
     w1 = np.cross(w2, w0)  # eq. 3.15 (right-handed order)
     m = np.stack([w0, w1, w2], axis=-1)  # columns
     # eq. 3.16

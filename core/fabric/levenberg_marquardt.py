@@ -235,7 +235,7 @@ def levenberg_marquardt(s: Samples, values: np.ndarray, quat: np.ndarray, sigma:
         m, by = _normal_moments(kd, u[idx], quat[idx], ya)
         ksa, kda = ks[idx], kd_[idx]
         # gradient of 0.5 * sum r^2 w.r.t. theta: sum_c ks_c (ks_c M_tG + kd_c M_tE - (B^T Y)_tc)
-        grad = (np.einsum("ac,aj->aj", ksa * ksa, m[:, :5, 5]) + np.einsum("ac,aj->aj", ksa * kda, m[:, :5, 6])
+        grad = (np.sum(ksa * ksa, 1)[:, None] * m[:, :5, 5] + np.sum(ksa * kda, 1)[:, None] * m[:, :5, 6]
                 - np.einsum("ac,ajc->aj", ksa, by[:, :5]))
         # Schur complement of the linear block: (sum_c ks_c^2) (M_tt - M_tL M_LL^-1 M_Lt)
         mll = m[:, 5:, 5:] + np.eye(2) * 1e-12 * (m[:, 5, 5] + m[:, 6, 6])[:, None, None]

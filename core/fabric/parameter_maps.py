@@ -80,14 +80,16 @@ def save_params(out_dir: str | os.PathLike, maps: FabricMaps, extra: dict | None
         "brdf": "f_r = ks * D(wh) / (4 cos_i cos_o (sigma(wo)/cos_o + sigma(wi)/cos_i)) + kd/pi (eq. 3.9)",
         "frame": "tangent frame: z = normal, x along image columns, y along rows",
         "maps": {
-            "kd": {"file": "kd.exr", "channels": ["R", "G", "B"], "meaning": "diffuse albedo k_d (linear RGB)"},
-            "ks": {"file": "ks.exr", "channels": ["R", "G", "B"], "meaning": "specular albedo k_s (linear RGB)"},
+            "kd": {"file": "kd.exr", "channels": ["R", "G", "B"],
+                   "meaning": "diffuse albedo k_d (linear RGB)"},
+            "ks": {"file": "ks.exr", "channels": ["R", "G", "B"],
+                   "meaning": "specular albedo k_s (linear RGB)"},
             "sigma": {"file": "sigma.exr", "channels": ["R", "G"],
                       "meaning": "projected standard deviations sigma_x, sigma_y of the SGGX basis axes; "
                                  "sigma_z = 1 (eq. 3.7-3.8)"},
             "basis": {"file": "basis.exr", "channels": ["R", "G", "B", "A"],
-                      "meaning": "unit quaternion (w, x, y, z) rotating the tangent frame onto the SGGX basis M "
-                                 "(eq. 3.6); columns of M are the axes of sigma_x, sigma_y, sigma_z"},
+                      "meaning": "unit quaternion (w, x, y, z) rotating the tangent frame onto the SGGX "
+                                 "basis M (eq. 3.6); columns of M are the axes of sigma_x, sigma_y, sigma_z"},
         },
     }
     if extra:

@@ -81,7 +81,8 @@ def reorient_regions(quat: np.ndarray, labels: np.ndarray, preferred: np.ndarray
     counts = np.bincount(labels.ravel(), minlength=n + 1)
     counts[0] = 0
     dom = int(np.argmax(counts))
-    sums = np.stack([np.bincount(labels.ravel(), weights=x[..., i].ravel(), minlength=n + 1) for i in range(3)], -1)
+    flat = labels.ravel()
+    sums = np.stack([np.bincount(flat, weights=x[..., i].ravel(), minlength=n + 1) for i in range(3)], -1)
     d = sums[dom] / max(np.linalg.norm(sums[dom]), 1e-300)
     flip_region = (sums @ d) < 0
     flip = flip_region[labels]
