@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import nodes, operators, panels, preferences, properties
+from . import handlers, nodes, operators, panels, preferences, properties
 
 CLASSES: list[type] = [
     *properties.CLASSES,
@@ -25,9 +25,11 @@ def register() -> None:
         bpy.utils.register_class(cls)
     properties.register_pointers()
     nodes.register_menus()
+    handlers.register_handlers()
 
 
 def unregister() -> None:
+    handlers.unregister_handlers()
     nodes.unregister_menus()
     properties.unregister_pointers()
     for cls in reversed(CLASSES):

@@ -23,23 +23,9 @@ from ...render import (
 )
 from ...render.scene import material_output
 from .material import create_fabric_material, sync_fabric_lamps
+from .presets import tilted_quat
 
-
-def tilted_quat(tilt_deg: float, azimuth_deg: float) -> np.ndarray:
-    """Fibre basis whose z axis is tilted by ``tilt`` from the normal towards azimuth ``azimuth``."""
-    t, a = math.radians(tilt_deg) / 2.0, math.radians(azimuth_deg) / 2.0
-    qz = np.array([math.cos(a), 0.0, 0.0, math.sin(a)])
-    qy = np.array([math.cos(t), 0.0, math.sin(t), 0.0])
-    w1, x1, y1, z1 = qz
-    w2, x2, y2, z2 = qy
-    return np.array(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ]
-    )
+__all__ = ["render_maps_vs_core", "render_patch_vs_core", "tilted_quat"]
 
 
 def _direction(theta_deg: float, phi_deg: float) -> np.ndarray:

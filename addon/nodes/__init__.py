@@ -5,7 +5,9 @@ from __future__ import annotations
 import bpy
 
 # (label, operator bl_idname, operator kwargs) shown under Add > Material Structures in the shader editor.
-MENU_ENTRIES: list[tuple[str, str, dict]] = []
+MENU_ENTRIES: list[tuple[str, str, dict]] = [
+    ("SGGX Fabric", "material_structures.fabric_add_group_node", {}),
+]
 
 
 class NODE_MT_material_structures_add(bpy.types.Menu):

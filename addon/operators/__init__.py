@@ -1,5 +1,5 @@
 """Operators (``bl_idname`` under ``material_structures.``)."""
 
-from . import scene_setup
+from . import fabric, scene_setup
 
-CLASSES: list[type] = [*scene_setup.CLASSES]
+CLASSES: list[type] = [*scene_setup.CLASSES, *fabric.CLASSES]

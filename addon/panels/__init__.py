@@ -1,5 +1,5 @@
 """Panels: the sidebar (N panel, "Material Structures" tab) and material properties."""
 
-from . import sidebar
+from . import fabric, sidebar
 
-CLASSES: list[type] = [*sidebar.CLASSES]
+CLASSES: list[type] = [*sidebar.CLASSES, *fabric.CLASSES]

@@ -1,0 +1,47 @@
+"""App handlers: keep lamp data in the exact-path shaders current (moving a lamp just works)."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from .fabric.material import fabric_script_nodes, sync_fabric_lamps
+
+
+def _has_fabric() -> bool:
+    return next(fabric_script_nodes(), None) is not None
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph) -> None:
+    if not _has_fabric():
+        return
+    for update in depsgraph.updates:
+        idb = update.id
+        if isinstance(idb, bpy.types.Light) or (isinstance(idb, bpy.types.Object) and idb.type in {"LIGHT", "MESH"}):
+            sync_fabric_lamps(scene, update_matrices=False)
+            return
+
+
+@persistent
+def on_render_pre(scene, *_args) -> None:
+    if _has_fabric():
+        sync_fabric_lamps(scene, update_matrices=False)
+
+
+HANDLERS = [
+    (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
+    (bpy.app.handlers.render_pre, on_render_pre),
+]
+
+
+def register_handlers() -> None:
+    for handler_list, fn in HANDLERS:
+        if fn not in handler_list:
+            handler_list.append(fn)
+
+
+def unregister_handlers() -> None:
+    for handler_list, fn in HANDLERS:
+        while fn in handler_list:
+            handler_list.remove(fn)

@@ -1,0 +1,77 @@
+"""Material properties panel of SGGX fabric materials: multipliers, maps, lamps."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..fabric.material import GROUP_NAME, MARKER
+from ..operators.fabric import material_map_images
+
+MULTIPLIERS = ("Tint", "SigmaScale", "Anisotropy", "FastPreview")
+LABELS = {"SigmaScale": "Roughness Scale", "FastPreview": "Fast Preview (closures only)"}
+
+
+def fabric_group_node(mat):
+    if mat is None or mat.node_tree is None:
+        return None
+    return next((n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree and n.node_tree.get(MARKER)), None)
+
+
+class MATERIAL_PT_material_structures_fabric(bpy.types.Panel):
+    bl_label = "SGGX Fabric"
+    bl_idname = "MATERIAL_PT_material_structures_fabric"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        mat = getattr(context, "material", None)
+        return mat is not None and bool(mat.get(MARKER))
+
+    def draw(self, context):
+        layout = self.layout
+        mat = context.material
+        node = fabric_group_node(mat)
+        if node is None:
+            layout.label(text=f"No '{GROUP_NAME}' node in this material", icon="ERROR")
+            return
+        col = layout.column()
+        for name in MULTIPLIERS:
+            sock = node.inputs[name]
+            if sock.is_linked:
+                col.label(text=f"{LABELS.get(name, name)}: from a map")
+            else:
+                col.prop(sock, "default_value", text=LABELS.get(name, name))
+        images = material_map_images(mat)
+        box = layout.box()
+        box.label(text="Parameter maps" if images else "Constant parameters (no maps)")
+        for key, image in sorted(images.items()):
+            row = box.row()
+            row.label(text=key)
+            row.label(text=f"{image.name} ({image.size[0]} x {image.size[1]})")
+        if not images:
+            for name in ("Kd", "Ks", "SigmaX", "SigmaY"):
+                box.prop(node.inputs[name], "default_value", text=name)
+        row = layout.row()
+        row.operator("material_structures.fabric_sync_lamps", icon="LIGHT")
+        row.operator("material_structures.fabric_save_maps", icon="FILE_TICK")
+        layout.operator("material_structures.fabric_import_maps", icon="IMPORT")
+
+
+class VIEW3D_PT_material_structures_fabric(bpy.types.Panel):
+    bl_label = "Pile Fabric"
+    bl_idname = "VIEW3D_PT_material_structures_fabric"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Material Structures"
+    bl_parent_id = "VIEW3D_PT_material_structures"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator_menu_enum("material_structures.fabric_new_material", "preset", icon="MATERIAL")
+        layout.operator("material_structures.fabric_import_maps", icon="IMPORT")
+        layout.operator("material_structures.fabric_sync_lamps", icon="LIGHT")
+
+
+CLASSES: list[type] = [MATERIAL_PT_material_structures_fabric, VIEW3D_PT_material_structures_fabric]

@@ -1,0 +1,106 @@
+"""Fabric operators: clear errors, map import/save round trip, lamps kept in sync."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from material_structures.core.fabric.parameter_maps import load_params, make_maps, save_params
+
+
+def _scene_with_plane(uv=True):
+    from material_structures import render as R
+
+    scene = R.reset_scene()
+    R.configure_cycles(scene, resolution=(8, 8), samples=1)
+    if uv:
+        obj = R.add_textured_plane(scene, 1.0)
+    else:
+        mesh = bpy.data.meshes.new("NoUV")
+        mesh.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [], [(0, 1, 2)])
+        obj = bpy.data.objects.new("NoUV", mesh)
+        scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    return scene, obj
+
+
+def _write_fit(folder, h=3, w=4, seed=0):
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(h, w, 4))
+    maps = make_maps(
+        kd=rng.uniform(0, 0.3, (h, w, 3)),
+        ks=rng.uniform(0.1, 1, (h, w, 3)),
+        sigma=rng.uniform(0.2, 2, (h, w, 2)),
+        basis=q,
+    )
+    save_params(folder, maps)
+    return maps
+
+
+def test_new_material_needs_uvs(addon_module):
+    _, obj = _scene_with_plane(uv=False)
+    with pytest.raises(RuntimeError, match="no UV map"):
+        bpy.ops.material_structures.fabric_new_material(preset="VELVET")
+    assert len(obj.data.materials) == 0
+
+
+def test_new_material_from_preset(addon_module):
+    _, obj = _scene_with_plane()
+    assert bpy.ops.material_structures.fabric_new_material(preset="CORDUROY") == {"FINISHED"}
+    mat = obj.active_material
+    assert mat is not None and mat.get("material_structures_fabric")
+    group = next(n for n in mat.node_tree.nodes if n.type == "GROUP")
+    assert group.inputs["SigmaX"].default_value == pytest.approx(2.2)
+    targets = sorted(n.target for n in mat.node_tree.nodes if n.type == "OUTPUT_MATERIAL")
+    assert targets == ["CYCLES", "EEVEE"]  # never pink in EEVEE
+
+
+def test_import_and_save_roundtrip(addon_module, tmp_path):
+    maps = _write_fit(tmp_path / "fit")
+    _, obj = _scene_with_plane()
+    assert bpy.ops.material_structures.fabric_import_maps(directory=str(tmp_path / "fit")) == {"FINISHED"}
+    mat = obj.active_material
+    from material_structures.addon.operators.fabric import material_map_images
+
+    images = material_map_images(mat)
+    assert sorted(images) == ["basis", "kd", "ks", "sigma"]
+    assert all(img.packed_file is not None for img in images.values())  # saved inside the .blend
+    assert bpy.ops.material_structures.fabric_save_maps(directory=str(tmp_path / "saved")) == {"FINISHED"}
+    back = load_params(tmp_path / "saved")
+    for key in ("kd", "ks", "sigma", "basis"):
+        np.testing.assert_allclose(getattr(back, key), getattr(maps, key), atol=1e-7)
+
+
+def test_import_reports_bad_folder(addon_module, tmp_path):
+    _scene_with_plane()
+    with pytest.raises(RuntimeError, match="params.json"):
+        bpy.ops.material_structures.fabric_import_maps(directory=str(tmp_path))
+    _write_fit(tmp_path / "fit")
+    (tmp_path / "fit" / "sigma.exr").write_bytes(b"garbage")
+    with pytest.raises(RuntimeError, match="sigma"):
+        bpy.ops.material_structures.fabric_import_maps(directory=str(tmp_path / "fit"))
+
+
+def test_moving_a_lamp_updates_the_shader(addon_module):
+    scene, obj = _scene_with_plane()
+    bpy.ops.material_structures.fabric_new_material(preset="VELVET")
+    light = bpy.data.lights.new("Key", "POINT")
+    light.energy = 10.0
+    lamp = bpy.data.objects.new("Key", light)
+    scene.collection.objects.link(lamp)
+    lamp.location = (1.0, 2.0, 3.0)
+    bpy.context.view_layer.update()  # fires depsgraph_update_post
+    from material_structures.addon.fabric.material import fabric_script_nodes
+
+    node = next(fabric_script_nodes())
+    assert node.inputs["Lamp1Type"].default_value == 1
+    assert tuple(node.inputs["Lamp1Position"].default_value) == pytest.approx((1.0, 2.0, 3.0))
+    assert node.inputs["Lamp1Color"].default_value[0] == pytest.approx(10.0 / (4 * np.pi), rel=1e-6)
+    lamp.location = (-1.0, 0.5, 2.0)
+    bpy.context.view_layer.update()
+    assert tuple(node.inputs["Lamp1Position"].default_value) == pytest.approx((-1.0, 0.5, 2.0))
+    # the fabric object is light-linked off the lamp (its closures must not count it twice)
+    coll = lamp.light_linking.receiver_collection
+    assert coll is not None and obj.name in coll.objects
+    assert coll.collection_objects[0].light_linking.link_state == "EXCLUDE"
