@@ -1,6 +1,6 @@
 """Named scenes that ``render`` and ``demo`` know how to build (the sample library's showcase).
 
-A feature adds its scenes with :func:`register_scene`; each builder receives an empty scene that
+A feature adds its scenes with :func:`register_scene` in its own ``render/scenes_<feature>.py``; each builder receives an empty scene that
 :func:`render_library_scene` has already configured (Cycles CPU, OSL, fixed seed, dark world).
 """
 
@@ -61,4 +61,12 @@ def available_scenes() -> list[str]:
 
 
 def _load_builtin_scenes() -> None:
-    from . import scenes  # noqa: F401  (registers on import)
+    """Import ``render/scenes.py`` and every ``render/scenes_<feature>.py`` (they register on import)."""
+    import importlib
+    import pkgutil
+
+    from . import __path__ as package_path
+
+    for info in pkgutil.iter_modules(package_path):
+        if info.name == "scenes" or info.name.startswith("scenes_"):
+            importlib.import_module(f"{__package__}.{info.name}")
