@@ -94,7 +94,7 @@ def brushed_basis(direction, fibre_length: float = 1.2) -> np.ndarray:
 
 def _flip_z(q: np.ndarray) -> np.ndarray:
     """``q * (0, 0, 0, 1)``: the same SGGX ellipsoid with x and y negated."""
-    return np.stack([-q[..., 3], -q[..., 2], q[..., 1], q[..., 0]], axis=-1)
+    return np.stack([-q[..., 3], q[..., 2], -q[..., 1], q[..., 0]], axis=-1)
 
 
 def _slerp_toward(q: np.ndarray, target: np.ndarray, w: np.ndarray) -> np.ndarray:
