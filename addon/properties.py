@@ -4,16 +4,21 @@ from __future__ import annotations
 
 import bpy
 
+from .fabric.properties import CLASSES as FABRIC_CLASSES
+from .fabric.properties import MS_FabricBrushSettings
+
 
 class MS_SceneSettings(bpy.types.PropertyGroup):
-    """Scene-wide Material Structures settings."""
+    """Scene-wide Material Structures settings (one pointer per feature)."""
 
     preview_samples: bpy.props.IntProperty(
         name="Preview Samples", default=32, min=1, max=4096, description="Cycles samples for previews"
     )
+    fabric_brush: bpy.props.PointerProperty(type=MS_FabricBrushSettings)
 
 
-CLASSES: list[type] = [MS_SceneSettings]
+# Feature property groups first: MS_SceneSettings points at them.
+CLASSES: list[type] = [*FABRIC_CLASSES, MS_SceneSettings]
 
 
 def register_pointers() -> None:

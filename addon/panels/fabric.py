@@ -72,6 +72,32 @@ class VIEW3D_PT_material_structures_fabric(bpy.types.Panel):
         layout.operator_menu_enum("material_structures.fabric_new_material", "preset", icon="MATERIAL")
         layout.operator("material_structures.fabric_import_maps", icon="IMPORT")
         layout.operator("material_structures.fabric_sync_lamps", icon="LIGHT")
+        brush = context.scene.material_structures.fabric_brush
+        box = layout.box()
+        box.label(text="Brush", icon="BRUSH_DATA")
+        box.prop(brush, "mode")
+        col = box.column(align=True)
+        col.prop(brush, "radius")
+        col.prop(brush, "strength")
+        col.prop(brush, "use_pressure")
+        if brush.mode == "COMB":
+            box.prop(brush, "fibre_length")
+        elif brush.mode == "RECOLOR":
+            row = box.row()
+            row.prop(brush, "recolor_diffuse")
+            row.prop(brush, "kd", text="")
+            row = box.row()
+            row.prop(brush, "recolor_specular")
+            row.prop(brush, "ks", text="")
+        elif brush.mode == "SMOOTH":
+            box.prop(brush, "smooth_factor")
+        elif brush.mode == "ANISOTROPY":
+            box.prop(brush, "anisotropy_factor")
+        else:
+            box.prop(brush, "states_dir")
+        row = box.row()
+        row.operator("material_structures.fabric_brush", icon="BRUSH_DATA")
+        row.operator("material_structures.fabric_brush_undo", icon="LOOP_BACK")
 
 
 CLASSES: list[type] = [MATERIAL_PT_material_structures_fabric, VIEW3D_PT_material_structures_fabric]

@@ -1,0 +1,183 @@
+"""Brushing fabric parameter maps in Blender: strokes on packed images through ``core.fabric.brushing``.
+
+A :class:`BrushSession` keeps a material's four maps in memory twice: as core arrays (BTF frame, row 0
+= top) and as Blender RGBA pixel buffers (mesh frame, row 0 = bottom). Each stroke segment edits
+only the window around its capsule (core functions on a sub-map), writes that window into both
+copies and uploads the changed images once (``foreach_set``), so an update of a 2048 x 2048 map
+costs a few milliseconds plus the upload. Every stroke records the windows it overwrote, so
+:meth:`BrushSession.undo_stroke` restores the maps exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...core.fabric import brushing as core_brush
+from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps
+from .maps import btf_quat_to_mesh
+
+MODES = ("COMB", "RECOLOR", "SMOOTH", "ANISOTROPY", "DATA_DRIVEN")
+MAX_UNDO = 32
+
+
+@dataclass
+class BrushSettings:
+    mode: str = "COMB"
+    radius: float = 0.03  # in UV units (fraction of the map width)
+    strength: float = 1.0
+    fibre_length: float = 1.2  # pile-height units; limits the tilt (core max_tilt)
+    kd: tuple[float, float, float] | None = None
+    ks: tuple[float, float, float] | None = None
+    smooth_factor: float = 0.8
+    anisotropy_factor: float = 0.8
+    states: core_brush.BrushStates | None = None
+
+
+@dataclass
+class _Stroke:
+    saved: list = field(default_factory=list)  # (key, r0, r1, c0, c1, old array)
+
+
+class BrushSession:
+    """The maps of one material, ready for strokes. ``images``: kd/ks/sigma/basis Blender images."""
+
+    def __init__(self, images: dict):
+        missing = [k for k in MAP_FILES if k not in images]
+        if missing:
+            raise ValueError(f"the material has no {', '.join(missing)} map(s): brushing edits parameter maps")
+        sizes = {tuple(images[k].size) for k in MAP_FILES}
+        if len(sizes) != 1:
+            raise ValueError(f"the fabric maps differ in size: {sorted(sizes)}")
+        self.images = {k: images[k] for k in MAP_FILES}
+        self.width, self.height = sizes.pop()
+        h, w = self.height, self.width
+        self.buffers: dict[str, np.ndarray] = {}
+        self.top: dict[str, np.ndarray] = {}
+        for key, (_, c) in MAP_FILES.items():
+            buf = np.empty(h * w * 4, dtype=np.float32)
+            self.images[key].pixels.foreach_get(buf)
+            self.buffers[key] = buf.reshape(h, w, 4)
+            top = self.buffers[key][::-1, :, :c].copy()
+            if key == "basis":
+                top = btf_quat_to_mesh(top)  # the reflection is its own inverse: mesh -> BTF frame
+            self.top[key] = top
+        self.undo_stack: list[_Stroke] = []
+        self._stroke: _Stroke | None = None
+        self._dirty: set[str] = set()
+
+    # -- coordinates -------------------------------------------------------------------------
+    def uv_to_pixel(self, uv) -> np.ndarray:
+        """UV (v up) -> map pixel coordinates (x = column, y = row from the top), as core expects."""
+        uv = np.asarray(uv, dtype=np.float64)
+        return np.stack([uv[..., 0] * self.width, (1.0 - uv[..., 1]) * self.height], axis=-1)
+
+    def maps(self) -> FabricMaps:
+        """The current maps as core arrays (BTF frame, row 0 = top); shares memory with the session."""
+        return FabricMaps(self.top["kd"], self.top["ks"], self.top["sigma"], self.top["basis"])
+
+    # -- strokes -----------------------------------------------------------------------------
+    def begin_stroke(self) -> None:
+        self._stroke = _Stroke()
+
+    def end_stroke(self) -> None:
+        if self._stroke is not None and self._stroke.saved:
+            self.undo_stack.append(self._stroke)
+            del self.undo_stack[:-MAX_UNDO]
+        self._stroke = None
+
+    def segment(self, uv0, uv1, settings: BrushSettings, pressure: float = 1.0) -> bool:
+        """Apply one stroke segment from ``uv0`` to ``uv1``; returns whether any texel changed."""
+        p0, p1 = self.uv_to_pixel(uv0), self.uv_to_pixel(uv1)
+        radius = max(settings.radius * self.width, 0.5)
+        strength = float(np.clip(settings.strength * pressure, 0.0, 1.0))
+        if strength <= 0.0:
+            return False
+        r0, r1, c0, c1 = self._window(p0, p1, radius, settings)
+        if r0 >= r1 or c0 >= c1:
+            return False
+        sub = FabricMaps(*(self.top[k][r0:r1, c0:c1] for k in MAP_FILES))
+        off = np.array([c0, r0], dtype=np.float64)
+        q0, q1 = p0 - off, p1 - off
+        mode = settings.mode
+        if mode == "COMB":
+            new = core_brush.brush_fibres(sub, q0, q1, radius, strength, settings.fibre_length)
+        elif mode == "RECOLOR":
+            new = core_brush.brush_edit(sub, q0, q1, radius, strength, kd=settings.kd, ks=settings.ks)
+        elif mode == "SMOOTH":
+            new = core_brush.brush_edit(sub, q0, q1, radius, strength, smooth_factor=settings.smooth_factor)
+        elif mode == "ANISOTROPY":
+            new = core_brush.brush_edit(sub, q0, q1, radius, strength, anisotropy_factor=settings.anisotropy_factor)
+        elif mode == "DATA_DRIVEN":
+            if settings.states is None:
+                raise ValueError("the data-driven brush needs the 8 brushing states (a states folder)")
+            new = core_brush.brush_data_driven(sub, q0, q1, radius, settings.states, strength)
+        else:
+            raise ValueError(f"unknown brush mode {mode!r}; one of {MODES}")
+        changed = False
+        for key, (_, c) in MAP_FILES.items():
+            old_sub, new_sub = getattr(sub, key), getattr(new, key)
+            if new_sub is old_sub:
+                continue
+            if self._stroke is not None:
+                self._stroke.saved.append((key, r0, r1, c0, c1, old_sub.copy()))
+            self._write(key, r0, r1, c0, c1, np.asarray(new_sub, dtype=np.float32), c)
+            changed = True
+        return changed
+
+    def _window(self, p0, p1, radius, settings):
+        lo = np.floor(np.minimum(p0, p1) - radius - 1).astype(int)
+        hi = np.ceil(np.maximum(p0, p1) + radius + 1).astype(int)
+        c0, r0 = max(lo[0], 0), max(lo[1], 0)
+        c1, r1 = min(hi[0], self.width), min(hi[1], self.height)
+        if settings.mode == "DATA_DRIVEN" and settings.states is not None:
+            th, tw = settings.states.states[0].shape  # align to the state tiles (they tile from 0, 0)
+            c0, r0 = c0 - c0 % tw, r0 - r0 % th
+        return r0, r1, c0, c1
+
+    def _write(self, key, r0, r1, c0, c1, values, c) -> None:
+        self.top[key][r0:r1, c0:c1] = values
+        mesh = btf_quat_to_mesh(values) if key == "basis" else values
+        h = self.height
+        self.buffers[key][h - r1 : h - r0, c0:c1, :c] = mesh[::-1]
+        self._dirty.add(key)
+
+    def undo_stroke(self) -> bool:
+        """Restore the maps as they were before the last stroke; False when there is none."""
+        if not self.undo_stack:
+            return False
+        stroke = self.undo_stack.pop()
+        for key, r0, r1, c0, c1, old in reversed(stroke.saved):
+            self._write(key, r0, r1, c0, c1, old, MAP_FILES[key][1])
+        self.flush()
+        return True
+
+    def flush(self) -> None:
+        """Upload the changed images to Blender (what the viewport and renders see)."""
+        for key in sorted(self._dirty):
+            image = self.images[key]
+            image.pixels.foreach_set(self.buffers[key].ravel())
+            image.update()
+        self._dirty.clear()
+
+    def pack(self) -> None:
+        """Store the current pixels in the .blend (packed images), e.g. before saving."""
+        for image in self.images.values():
+            image.pack()
+
+
+def load_brush_states(folder: str) -> core_brush.BrushStates:
+    """The data-driven mode's 8 states from ``folder/state_0`` ... ``folder/state_7`` (fit folders,
+    brushed toward k * 45 degrees)."""
+    import os
+
+    from ...core.fabric.parameter_maps import load_params
+
+    states = []
+    for k in range(8):
+        path = os.path.join(folder, f"state_{k}")
+        if not os.path.isdir(path):
+            raise FileNotFoundError(f"brushing state folder missing: {path} (need state_0 ... state_7)")
+        states.append(load_params(path))
+    return core_brush.BrushStates(tuple(states))
