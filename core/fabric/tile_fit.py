@@ -16,6 +16,7 @@ from .levenberg_marquardt import (
     optimal_albedos,
 )
 from .ndf_extraction import NdfOperator
+from .quaternion import quat_from_axis_angle, quat_multiply
 
 
 @dataclass
@@ -23,8 +24,10 @@ class FitOptions:
     """Knobs of the per-texel fit (defaults are the benchmarked configuration)."""
 
     weighting: str = "radiance"  # residual weight: "radiance" (f_r cos_i) or "brdf" (eq. 3.17 as printed)
-    coarse_samples: int = 768  # samples used by the first LM stage (0 = all)
-    coarse_iter: int = 30
+    coarse_samples: int = 768  # samples used by the first LM stages (0 = all)
+    starts: int = 3  # multi-start: the initial guess plus bases turned about their z axis
+    start_iter: int = 12  # LM iterations run from every start before keeping the best
+    coarse_iter: int = 20
     fine_iter: int = 8
     seed: int = 0
 
@@ -69,7 +72,22 @@ def fit_tile(values: np.ndarray, samples: Samples, op: NdfOperator, options: Fit
         better = c < best_cost
         best_cost = np.where(better, c, best_cost)
         best_q[better], best_s[better] = qc[better], sc[better]
-    res = levenberg_marquardt(ss, vs, best_q, best_s, max_iter=opt.coarse_iter)
+    # multi-start: near-isotropic or saddle starts (sigma_x ~ sigma_y) cannot find the tangent
+    # direction by local descent, so also start from the basis turned about its z axis by
+    # +-180/starts degrees with an anisotropic sigma, run a few LM iterations from every start
+    # (one batch of starts x texels) and keep the best per texel.
+    k = max(1, opt.starts)
+    qs, sgs = [best_q], [best_s]
+    gm = np.sqrt(best_s[:, 0] * best_s[:, 1])
+    for j in range(1, k):
+        ang = np.pi * j / k
+        qs.append(quat_multiply(best_q, quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), np.array(ang))))
+        sgs.append(np.stack([0.7 * gm, np.minimum(1.4 * gm, 1.0)], -1))
+    res = levenberg_marquardt(ss, np.concatenate([vs] * k), np.concatenate(qs), np.concatenate(sgs),
+                              max_iter=opt.start_iter)
+    pick = np.argmin(res.cost.reshape(k, t), axis=0) * t + np.arange(t)
+    res = levenberg_marquardt(ss, vs, res.quat[pick], res.sigma[pick], max_iter=opt.coarse_iter,
+                              lam0=res.lam[pick])
     if len(sub) < n:
         res2 = levenberg_marquardt(samples, values, res.quat, res.sigma, max_iter=opt.fine_iter,
                                    lam0=np.maximum(res.lam, 1e-4))
