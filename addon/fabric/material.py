@@ -195,12 +195,25 @@ def fabric_script_nodes():
                 yield node
 
 
-def fabric_objects(scene):
-    return [
-        obj
-        for obj in scene.objects
-        if obj.type == "MESH" and any(s.material is not None and s.material.get(MARKER) for s in obj.material_slots)
-    ]
+def _exact_path_on(mat) -> bool:
+    """Whether a fabric material evaluates lamps itself (FastPreview off on its group node)."""
+    for node in mat.node_tree.nodes:
+        if node.type == "GROUP" and node.node_tree is not None and node.node_tree.get(MARKER):
+            sock = node.inputs["FastPreview"]
+            return sock.is_linked or not sock.default_value
+    return True
+
+
+def fabric_objects(scene, exact_only: bool = False):
+    """Meshes with a fabric material (``exact_only``: one whose exact lamp path is on)."""
+    out = []
+    for obj in scene.objects:
+        if obj.type != "MESH":
+            continue
+        mats = [s.material for s in obj.material_slots if s.material is not None and s.material.get(MARKER)]
+        if mats and (not exact_only or any(_exact_path_on(m) for m in mats)):
+            out.append(obj)
+    return out
 
 
 def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
@@ -217,9 +230,15 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
     lamps = [lamp for _, lamp in pairs]
     for node in fabric_script_nodes():
         write_lamp_inputs(node, lamps)
-    receivers = fabric_objects(scene)
+    # Exact path on: the lamp is light-linked off (the shader has it). Fast preview: closures see it.
+    receivers = fabric_objects(scene, exact_only=True)
+    previews = [o for o in fabric_objects(scene) if o not in receivers]
     for lamp_obj, _ in pairs:
         _exclude_receivers(lamp_obj, receivers)
+        coll = lamp_obj.light_linking.receiver_collection
+        for obj in previews:
+            if coll is not None and obj.name in coll.objects:
+                coll.objects.unlink(obj)
     return len(lamps)
 
 

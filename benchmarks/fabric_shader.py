@@ -1,0 +1,102 @@
+"""Benchmarks of the fabric's Blender side: shader accuracy vs eq. 3.9, viewport brushing latency."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+TILTS = (0.0, 10.0, 20.0, 30.0)
+EXACT_CASES = [
+    # sigma, tilt, azimuth, view, lamp position
+    ((0.3, 0.8), 0.0, 0.0, (30.0, 200.0), (0.4, -0.3, 1.2)),
+    ((0.3, 0.8), 15.0, 40.0, (30.0, 200.0), (0.4, -0.3, 1.2)),
+    ((0.3, 0.8), 30.0, 40.0, (50.0, 120.0), (-0.6, 0.2, 0.9)),
+    ((1.2, 0.25), 30.0, 250.0, (10.0, 0.0), (0.0, 0.8, 0.6)),
+    ((2.5, 2.5), 30.0, 90.0, (60.0, 300.0), (0.9, 0.9, 0.5)),
+]
+
+
+def _bpy():
+    from ..render.session import prepare_user_resources
+
+    prepare_user_resources()
+    import bpy
+
+    return bpy
+
+
+def _enable_addon():
+    """Register the add-on's classes from this checkout (no extension repository needed)."""
+    bpy = _bpy()
+    from .. import addon
+
+    if not hasattr(bpy.types.Scene, "material_structures"):
+        addon.register()
+
+
+def fabric_shader() -> dict:
+    _enable_addon()
+    from ..addon.fabric.presets import tilted_quat
+    from ..addon.fabric.verify import render_patch_vs_core
+
+    rel = []
+    for sigma, tilt, az, view, lamp in EXACT_CASES:
+        rgb, ref, mask = render_patch_vs_core(sigma=sigma, quat=tilted_quat(tilt, az), view=view, lamp_position=lamp)
+        rel.append((np.abs(rgb[mask] - ref[mask]) / ref[mask]).ravel())
+    rel = np.concatenate(rel)
+    closure = {}
+    for label, sigma in (("surface_like_sigma_0.3_0.8", (0.3, 0.8)), ("fibre_like_sigma_2.5_2.5", (2.5, 2.5))):
+        per_tilt = {}
+        for tilt in TILTS:
+            rgb, ref, mask = render_patch_vs_core(sigma=sigma, quat=tilted_quat(tilt, 40.0), fast_preview=True)
+            per_tilt[f"tilt_{int(tilt)}"] = float(np.median(np.abs(rgb[mask] - ref[mask]) / ref[mask]))
+        closure[label] = per_tilt
+    return {
+        "median_rel_err": float(np.median(rel)),
+        "p99_rel_err": float(np.percentile(rel, 99)),
+        "closure_approx_median_rel_err": closure,
+        "pixels": int(rel.size),
+    }
+
+
+def fabric_brush_viewport(size: int = 2048, points: int = 200, repeats: int = 3) -> dict:
+    """Per-segment update of a 2048 x 2048 map in Blender: core edit + upload to the image."""
+    _enable_addon()
+    bpy = _bpy()
+    from ..addon.fabric.brushing import BrushSession, BrushSettings
+    from ..addon.fabric.maps import maps_to_images
+    from ..core.fabric.parameter_maps import make_maps
+
+    rng = np.random.default_rng(0)
+    maps = make_maps(
+        kd=np.full((size, size, 3), 0.05),
+        ks=np.full((size, size, 3), 0.5),
+        sigma=np.full((size, size, 2), 0.8),
+        basis=np.tile([1.0, 0.0, 0.0, 0.0], (size, size, 1)),
+    )
+    bpy.ops.wm.read_homefile(use_empty=True)
+    session = BrushSession(maps_to_images(maps, "Bench"))
+    t = np.linspace(0.0, 1.0, points)
+    uv = np.stack([0.1 + 0.8 * t, 0.5 + 0.3 * np.sin(6.0 * t)], axis=-1) + rng.normal(scale=1e-4, size=(points, 2))
+    timings = []
+    for mode in ("COMB", "RECOLOR"):
+        settings = BrushSettings(mode=mode, radius=0.02, strength=0.8, kd=(0.8, 0.1, 0.1))
+        for _ in range(repeats):
+            session.begin_stroke()
+            for a, b in zip(uv[:-1], uv[1:], strict=True):
+                start = time.perf_counter()
+                session.segment(a, b, settings)
+                session.flush()
+                timings.append(time.perf_counter() - start)
+            session.end_stroke()
+    ms = 1000.0 * np.asarray(timings)
+    return {
+        "ms_per_update": float(np.median(ms)),
+        "p95_ms_per_update": float(np.percentile(ms, 95)),
+        "map_size": size,
+        "segments": len(timings),
+    }
+
+
+BENCHMARKS = {"fabric-shader": fabric_shader, "fabric-brush-viewport": fabric_brush_viewport}
