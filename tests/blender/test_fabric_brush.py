@@ -39,7 +39,10 @@ def _current(obj):
 
 
 def _stroke_kwargs(uvs, pressure=1.0):
-    return {"stroke": [{"name": "", "uv": uv, "location": (0, 0, 0), "pressure": pressure} for uv in uvs], "stroke_space": "UV"}
+    return {
+        "stroke": [{"name": "", "uv": uv, "location": (0, 0, 0), "pressure": pressure} for uv in uvs],
+        "stroke_space": "UV",
+    }
 
 
 UVS = [(0.2, 0.3), (0.35, 0.4), (0.5, 0.45), (0.7, 0.4)]
@@ -73,7 +76,9 @@ def test_world_space_stroke_equals_uv_stroke(addon_module, tmp_path):
     brush = scene.material_structures.fabric_brush
     brush.mode, brush.radius, brush.strength = "COMB", 0.05, 1.0
     before = _current(obj)
-    world = [{"name": "", "uv": (0, 0), "location": (2 * u - 1, 2 * v - 1, 0.01), "pressure": 1.0} for u, v in UVS]  # plane is 2 x 2
+    world = [
+        {"name": "", "uv": (0, 0), "location": (2 * u - 1, 2 * v - 1, 0.01), "pressure": 1.0} for u, v in UVS
+    ]  # plane is 2 x 2
     assert bpy.ops.material_structures.fabric_brush(stroke=world, stroke_space="WORLD") == {"FINISHED"}
     via_world = _current(obj).basis.copy()
     bpy.ops.material_structures.fabric_brush_undo()
