@@ -1,7 +1,8 @@
 """Named scenes that ``render`` and ``demo`` know how to build (the sample library's showcase).
 
 A feature adds its scenes with :func:`register_scene` in its own ``render/scenes_<feature>.py``; each
-builder receives an empty scene that :func:`render_library_scene` has already configured (Cycles CPU, OSL, fixed seed, dark world).
+builder receives an empty scene that :func:`render_library_scene` has already configured (Cycles CPU,
+OSL, fixed seed, dark world).
 """
 
 from __future__ import annotations
