@@ -1,0 +1,190 @@
+"""Scratch-set files: ``.npz`` (one file) and float EXR tables (a folder) for the OSL shader.
+
+NPZ (``save_scratch_set_npz`` / ``load_scratch_set``), format ``material_structures.scratch_set``
+version 1, arrays:
+
+    format (str), version (int), segments (M, 4) float64 x0 y0 x1 y1 [um], width_um (M,),
+    depth_um (M,), profile (M,) int (0 = rectangular), scratch_id (M,) int, patch_size_um (2,),
+    sigma_um, cell_size_um, query_radius_um (scalars), grid_offset (ny, nx) int,
+    grid_count (ny, nx) int, cell_segments (K,) int
+
+EXR tables (``save_scratch_set_exr`` / ``load_scratch_set``), a folder of 32-bit float EXRs laid out
+for closest-texel ``texture()`` lookups. Row 0 is the first scanline (top; OIIO t = 0). Integers are
+stored exactly as floats (limit 2^24 entries). Long 1D tables are wrapped into rows of
+TABLE_WIDTH = 1024 texels: entry i lives at column i % 1024, row i // 1024, i.e. at texture
+coordinates s = (i % 1024 + 0.5) / 1024, t = (i // 1024 + 0.5) / rows.
+
+    segments.exr       RGBA  = x0, y0, x1, y1 (um)                    1024 x ceil(M / 1024)
+    segment_params.exr RGBA  = width_um, depth_um, profile, scratch_id 1024 x ceil(M / 1024)
+    grid.exr           R, G  = offset, count into cell_segments       nx x ny; cell (ix, iy) at
+                                                                       column ix, row iy
+    cell_segments.exr  Y     = segment index                          1024 x ceil(K / 1024)
+    meta.exr           Y     = 16 floats in one row: version, Px, Py, nx, ny, cell_size_um,
+                               query_radius_um, sigma_um, M, K, TABLE_WIDTH, 0...
+
+Unused texels at the end of a wrapped table are -1 (segments: zero). Shader walk for a point
+(x, y) um: ix = floor(x / cell), iy = floor(y / cell); (offset, count) = grid[ix, iy];
+for j in 0..count-1: m = cell_segments[offset + j]; fetch segments[m] and segment_params[m].
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..exr_io import ExrError, read_exr, write_exr
+from .scratch_set import ScratchSet, validate_scratch_set
+
+FORMAT = "material_structures.scratch_set"
+VERSION = 1
+TABLE_WIDTH = 1024
+EXR_FILES = ("segments.exr", "segment_params.exr", "grid.exr", "cell_segments.exr", "meta.exr")
+_NPZ_KEYS = (
+    "segments", "width_um", "depth_um", "profile", "scratch_id", "patch_size_um", "sigma_um",
+    "cell_size_um", "query_radius_um", "grid_offset", "grid_count", "cell_segments",
+)
+
+
+def save_scratch_set_npz(path: str | os.PathLike, s: ScratchSet) -> None:
+    """Write the set as one ``.npz`` (layout in the module docstring)."""
+    validate_scratch_set(s)
+    np.savez_compressed(
+        path, format=FORMAT, version=VERSION, **{k: np.asarray(getattr(s, k)) for k in _NPZ_KEYS}
+    )
+
+
+def _load_npz(path: str) -> ScratchSet:
+    try:
+        z = np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise ValueError(f"{path}: not a readable .npz file ({exc})") from exc
+    with z:
+        if "format" not in z.files or str(z["format"]) != FORMAT:
+            raise ValueError(f"{path}: not a scratch-set file (missing format tag {FORMAT!r})")
+        if int(z["version"]) != VERSION:
+            raise ValueError(f"{path}: unsupported scratch-set version {int(z['version'])} (need {VERSION})")
+        missing = [k for k in _NPZ_KEYS if k not in z.files]
+        if missing:
+            raise ValueError(f"{path}: scratch-set file lacks array(s) {missing}")
+        d = {k: z[k] for k in _NPZ_KEYS}
+    s = ScratchSet(
+        segments=d["segments"].astype(np.float64),
+        width_um=d["width_um"].astype(np.float64),
+        depth_um=d["depth_um"].astype(np.float64),
+        profile=d["profile"].astype(np.int64),
+        scratch_id=d["scratch_id"].astype(np.int64),
+        patch_size_um=d["patch_size_um"].astype(np.float64),
+        sigma_um=float(d["sigma_um"]),
+        cell_size_um=float(d["cell_size_um"]),
+        query_radius_um=float(d["query_radius_um"]),
+        grid_offset=d["grid_offset"].astype(np.int64),
+        grid_count=d["grid_count"].astype(np.int64),
+        cell_segments=d["cell_segments"].astype(np.int64),
+    )
+    try:
+        validate_scratch_set(s)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+    return s
+
+
+def _wrap(table: np.ndarray, fill: float) -> np.ndarray:
+    """(n, C) -> (rows, TABLE_WIDTH, C) with entry i at (i // W, i % W)."""
+    n, c = table.shape
+    rows = max(1, -(-n // TABLE_WIDTH))
+    out = np.full((rows * TABLE_WIDTH, c), fill, dtype=np.float32)
+    out[:n] = table
+    return out.reshape(rows, TABLE_WIDTH, c)
+
+
+def _unwrap(img: np.ndarray, n: int, name: str) -> np.ndarray:
+    if img.shape[1] != TABLE_WIDTH or img.shape[0] * TABLE_WIDTH < n:
+        raise ValueError(f"{name}: expected a {TABLE_WIDTH}-wide table holding {n} entries, got {img.shape[:2]}")
+    return img.reshape(-1, img.shape[2])[:n].astype(np.float64)
+
+
+def save_scratch_set_exr(folder: str | os.PathLike, s: ScratchSet) -> list[str]:
+    """Write the EXR tables into ``folder`` (created); returns the written paths."""
+    validate_scratch_set(s)
+    folder = os.fspath(folder)
+    os.makedirs(folder, exist_ok=True)
+    m, k = s.n_segments, int(s.cell_segments.size)
+    ny, nx = s.grid_shape
+    params = np.stack([s.width_um, s.depth_um, s.profile, s.scratch_id], 1).astype(np.float64)
+    meta = np.zeros((1, 16, 1), np.float32)
+    meta[0, :11, 0] = [
+        VERSION, s.patch_size_um[0], s.patch_size_um[1], nx, ny, s.cell_size_um, s.query_radius_um,
+        s.sigma_um, m, k, TABLE_WIDTH,
+    ]
+    paths = [os.path.join(folder, f) for f in EXR_FILES]
+    write_exr(paths[0], _wrap(s.segments, 0.0), ("R", "G", "B", "A"))
+    write_exr(paths[1], _wrap(params, -1.0), ("R", "G", "B", "A"))
+    write_exr(paths[2], np.stack([s.grid_offset, s.grid_count], -1).astype(np.float32), ("R", "G"))
+    write_exr(paths[3], _wrap(s.cell_segments[:, None].astype(np.float64), -1.0), ("Y",))
+    write_exr(paths[4], meta, ("Y",))
+    return paths
+
+
+def _load_exr_folder(folder: str) -> ScratchSet:
+    for f in EXR_FILES:
+        if not os.path.isfile(os.path.join(folder, f)):
+            raise FileNotFoundError(f"{folder}: scratch-set EXR folder lacks {f} (needs {', '.join(EXR_FILES)})")
+    try:
+        meta = read_exr(os.path.join(folder, "meta.exr"), ["Y"])[0, :, 0].astype(np.float64)
+        if meta.size < 11 or int(meta[0]) != VERSION:
+            raise ValueError(f"{folder}/meta.exr: unsupported version {meta[0] if meta.size else '?'}")
+        if int(meta[10]) != TABLE_WIDTH:
+            raise ValueError(f"{folder}/meta.exr: table width {int(meta[10])}, expected {TABLE_WIDTH}")
+        m, k = int(meta[8]), int(meta[9])
+        nx, ny = int(meta[3]), int(meta[4])
+        seg = _unwrap(read_exr(os.path.join(folder, "segments.exr"), ["R", "G", "B", "A"]), m, "segments.exr")
+        par = _unwrap(
+            read_exr(os.path.join(folder, "segment_params.exr"), ["R", "G", "B", "A"]), m, "segment_params.exr"
+        )
+        grid = read_exr(os.path.join(folder, "grid.exr"), ["R", "G"]).astype(np.float64)
+        if grid.shape[:2] != (ny, nx):
+            raise ValueError(f"{folder}/grid.exr: shape {grid.shape[:2]} but meta says (ny, nx) = {(ny, nx)}")
+        cs = _unwrap(read_exr(os.path.join(folder, "cell_segments.exr"), ["Y"]), k, "cell_segments.exr")[:, 0]
+    except ExrError as exc:
+        raise ValueError(str(exc)) from exc
+    for name, a in (("segment_params", par[:, 2:]), ("grid", grid), ("cell_segments", cs)):
+        if np.any(a != np.round(a)):
+            raise ValueError(f"{folder}: {name} holds non-integer indices")
+    s = ScratchSet(
+        segments=seg,
+        width_um=par[:, 0],
+        depth_um=par[:, 1],
+        profile=par[:, 2].astype(np.int64),
+        scratch_id=par[:, 3].astype(np.int64),
+        patch_size_um=meta[1:3].copy(),
+        sigma_um=float(meta[7]),
+        cell_size_um=float(meta[5]),
+        query_radius_um=float(meta[6]),
+        grid_offset=grid[..., 0].astype(np.int64),
+        grid_count=grid[..., 1].astype(np.int64),
+        cell_segments=cs.astype(np.int64),
+    )
+    try:
+        validate_scratch_set(s)
+    except ValueError as exc:
+        raise ValueError(f"{folder}: {exc}") from exc
+    return s
+
+
+def load_scratch_set(path: str | os.PathLike) -> ScratchSet:
+    """Load a ``.npz`` file or an EXR-table folder; raises FileNotFoundError/ValueError with the reason."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        return _load_exr_folder(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"scratch set not found: {path}")
+    return _load_npz(path)
+
+
+def save_scratch_set(path: str | os.PathLike, s: ScratchSet) -> None:
+    """``.npz`` path -> one file; any other path -> EXR-table folder."""
+    if os.fspath(path).endswith(".npz"):
+        save_scratch_set_npz(path, s)
+    else:
+        save_scratch_set_exr(path, s)

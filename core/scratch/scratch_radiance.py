@@ -1,0 +1,412 @@
+"""Per-shading-point evaluation of the scratch term: grid walk, footprint, light integral, colour.
+
+This is the function the OSL port mirrors (one shading point = one row):
+
+    shading = scratch_radiance(points_um, footprint, wo, light, scratch_set, wavelengths_nm="rgb")
+    pixel   = (1 - shading.rho_p) * base_radiance + shading.rgb
+
+For each point x (um, in the scratch plane; wrapped into the patch, so the patch tiles):
+1. grid walk: cell (floor(x / c)), its segment list (``ScratchSet``);
+2. per segment: tangent t, s_b, l_contained (line-ellipse), |eta_P|^2 (eq. 4.15-4.16),
+   rho_P (eq. 4.18);
+3. per segment and light: the xi2 intervals of the line xi1 = 0 inside the light
+   (sphere eq. 4.30-4.37, polygon eq. 4.38-4.41) and N(zeta1) - N(zeta0) (eq. 4.27, Si of eq. 4.29),
+   or for directional/point lights the BRDF at the light direction;
+4. radiance per wavelength  L_s(lambda) = L_i / (A_C lambda^2) sum_m W^2 |D|^2 |eta_P|^2 (N1 - N0)
+   (eq. 4.12 with eq. 4.3, 4.11), then linear sRGB by band quadrature (``cie_colour``).
+
+Conventions: local frame (t_u, t_v, n) = (x axis of the scratch plane, y axis, normal). ``wo`` is the
+unit direction towards the viewer in that frame. Light geometry is relative to the shaded point, in
+that frame, any length unit. Radiance is linear in the light's radiance/irradiance.
+
+``energy="thesis"`` returns rho_P of eq. 4.18 as printed (wavelength independent, one chord per
+segment, alpha_P-blended towards rho_C for small footprints; see ``scratch_footprint``). ``energy="conserving"``
+instead returns, per wavelength, the energy the scratch lobe scatters over the whole xi plane,
+rho = sum_m W |D|^2 |eta_P|^2 / (2 sqrt(pi) sigma A_C), so the scratch term never returns more light
+than the base reflection it removes (eq. 4.18 equals this averaged over depth phases, |D|^2 -> 2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .cie_colour import spectral_to_srgb_matrix
+from .light_integration import (
+    DirectionalLight,
+    PointLight,
+    PolygonLight,
+    SphereLight,
+    band_limited_integral,
+    scratch_frame,
+    specular_line_intervals_polygon,
+    specular_line_intervals_sphere,
+)
+from .scratch_footprint import (
+    _chord_setup,
+    footprint_matrix,
+    footprint_semi_major,
+    scratch_footprint_density,
+    scratch_footprint_phase_sq,
+    scratch_weighted_length,
+)
+from .scratch_model_terms import coherence_area, scratch_depth_term_sq
+from .scratch_set import ScratchSet
+
+
+@dataclass
+class ScratchShading:
+    """Result of :func:`scratch_radiance` for N points and L wavelength samples."""
+
+    wavelengths_nm: np.ndarray  # (L,)
+    spectral: np.ndarray  # (N, L) scratch radiance at each wavelength sample
+    rgb: np.ndarray | None  # (N, 3) linear sRGB (None for explicit wavelengths)
+    rho_p: np.ndarray  # (N,) or (N, L) alpha of the base, clamped to [0, 1]
+    n_pairs: int = 0  # point-segment pairs that contributed (diagnostics)
+
+
+def resolve_wavelengths(wavelengths_nm) -> tuple[np.ndarray, np.ndarray | None]:
+    """'rgb' | '16' | array of nm -> (wavelengths nm, sRGB matrix (3, L) or None)."""
+    if isinstance(wavelengths_nm, str):
+        return spectral_to_srgb_matrix(wavelengths_nm)
+    lam = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
+    if lam.ndim != 1 or np.any(~np.isfinite(lam)) or np.any(lam <= 0):
+        raise ValueError("wavelengths_nm must be 'rgb', '16' or positive wavelengths in nm")
+    return lam, None
+
+
+def _per_point(a: ArrayLike, n: int, tail: tuple[int, ...], name: str) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
+    if a.shape == tail:
+        return np.broadcast_to(a, (n,) + tail)
+    if a.shape == (n,) + tail:
+        return a
+    raise ValueError(f"{name} must have shape {tail} or {(n,) + tail}; got {a.shape}")
+
+
+def _spectral(v: ArrayLike, n_lam: int) -> np.ndarray:
+    v = np.atleast_1d(np.asarray(v, dtype=np.float64))
+    if v.size not in (1, n_lam):
+        raise ValueError(f"light radiance must be a scalar or have one value per wavelength ({n_lam})")
+    return np.broadcast_to(v, (n_lam,))
+
+
+def shade_scratch_pairs(
+    x: np.ndarray,
+    J: np.ndarray,
+    wo: np.ndarray,
+    light_geom: dict,
+    seg: np.ndarray,
+    width_um: np.ndarray,
+    depth_um: np.ndarray,
+    lam_um: np.ndarray,
+    sigma_um: float,
+    si: str = "series",
+    footprint_rule: str = "chords",
+    need_conserving: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Evaluate P point-segment pairs. Returns (radiance per unit light (P, L), rho_P (P,),
+    conserving rho (P, L) or None unless ``need_conserving``). ``light_geom`` holds per-pair light
+    arrays (see ``_light_geometry``)."""
+    p0, p1 = seg[:, :2], seg[:, 2:]
+    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+    J_inv = np.stack([np.stack([J[:, 1, 1], -J[:, 0, 1]], -1), np.stack([-J[:, 1, 0], J[:, 0, 0]], -1)], 1)
+    J_inv = J_inv / det[:, None, None]
+    area = np.pi * np.abs(det)
+    setup = _chord_setup(p0, p1, x, J, J_inv)
+    length, v0 = setup[6], setup[7]
+    t2 = (p1 - p0) / length[:, None]
+    along = -((p0[:, 0] - x[:, 0]) * t2[:, 0] + (p0[:, 1] - x[:, 1]) * t2[:, 1])
+    s_b = v0
+    on_seg = (along >= 0) & (along < length)
+    # rho_P for every pair with eq. 4.18 as printed (one chord, l_contained); |eta_P|^2 with the
+    # selected footprint rule, only for pairs whose specular line meets the light
+    l_rho = scratch_weighted_length(p0, p1, x, J, J_inv, sigma_um, "thesis", setup)
+    rho = scratch_footprint_density(width_um, l_rho, s_b, on_seg, area, sigma_um)
+    lam = lam_um[None, :]
+    P, L = x.shape[0], lam_um.size
+    dsq = scratch_depth_term_sq(depth_um[:, None], lam)  # (P, L)
+    w = width_um[:, None]
+    rad = np.zeros((P, L))
+    rho_cons = None
+    kind = light_geom["kind"]
+    if need_conserving or kind not in ("sphere", "polygon"):
+        live = np.arange(P)
+    else:  # area lights: only pairs whose specular line meets the light can radiate
+        if kind == "sphere":
+            z0, z1 = specular_line_intervals_sphere(t2, wo, light_geom["center"], light_geom["radius"])
+        else:
+            z0, z1 = specular_line_intervals_polygon(t2, wo, light_geom["vertices"])
+        live = np.flatnonzero(np.any(z1 > z0, axis=1))
+    sub = tuple(a[live] for a in setup)
+    l_eta = scratch_weighted_length(p0[live], p1[live], x[live], None, None, sigma_um, footprint_rule, sub)
+    eta_p = np.zeros(P)
+    eta_p[live] = scratch_footprint_phase_sq(l_eta, s_b[live], on_seg[live], area[live], sigma_um)
+    if need_conserving:
+        rho_cons = w * dsq * eta_p[:, None] / (2 * np.sqrt(np.pi) * sigma_um * coherence_area(sigma_um))
+    live = live[eta_p[live] > 0]
+    if live.size == 0:
+        return rad, rho, rho_cons
+    amp = w[live] ** 2 * dsq[live] * eta_p[live, None] / (coherence_area(sigma_um) * lam * lam)  # (P', L)
+    wo_l = wo[live]
+    if kind in ("sphere", "polygon"):
+        if kind == "sphere":
+            z0, z1 = specular_line_intervals_sphere(
+                t2[live], wo_l, light_geom["center"][live], light_geom["radius"][live]
+            )
+        else:
+            z0, z1 = specular_line_intervals_polygon(t2[live], wo_l, light_geom["vertices"][live])
+        ip, ik = np.nonzero(z1 > z0)  # non-empty (pair, interval) entries only
+        if ip.size:
+            bl = band_limited_integral(
+                z0[ip, ik][:, None], z1[ip, ik][:, None], w[live][ip], lam, sigma_um, si
+            )  # (E, L)
+            nb = np.zeros((live.size, L))
+            for j in range(L):
+                nb[:, j] = np.bincount(ip, weights=bl[:, j], minlength=live.size)
+            rad[live] = amp * nb
+    else:  # directional: BRDF at the light direction times E cos(theta_i)
+        wi = light_geom["direction"][live]
+        t3, b3 = scratch_frame(t2[live])
+        k = 2 * np.pi / lam
+        xi1 = np.einsum("pi,pi->p", wi + wo_l, t3)[:, None]
+        xi2 = np.einsum("pi,pi->p", wi + wo_l, b3)[:, None]
+        cos_i = np.maximum(wi[:, 2], 0.0)[:, None]
+        ang = np.sinc(w[live] * xi2 / lam) ** 2 * np.exp(-((sigma_um * k * xi1) ** 2))
+        rad[live] = amp * ang * cos_i * light_geom["scale"][live][:, None]
+    return rad, rho, rho_cons
+
+
+def _light_geometry(light, n: int) -> tuple[dict, np.ndarray | float]:
+    """Per-point light arrays and the light's spectral scale (radiance or irradiance)."""
+    if isinstance(light, SphereLight):
+        c = _per_point(light.center, n, (3,), "SphereLight.center")
+        r = np.broadcast_to(np.asarray(light.radius, dtype=np.float64), (n,))
+        if np.any(r <= 0):
+            raise ValueError("SphereLight.radius must be > 0")
+        return {"kind": "sphere", "center": c, "radius": r}, light.radiance
+    if isinstance(light, PolygonLight):
+        v = np.asarray(light.vertices, dtype=np.float64)
+        if v.ndim not in (2, 3) or v.shape[-1] != 3 or v.shape[-2] < 3:
+            raise ValueError(f"PolygonLight.vertices must be (V>=3, 3) or (N, V, 3); got {v.shape}")
+        v = _per_point(v, n, v.shape[-2:], "PolygonLight.vertices")
+        return {"kind": "polygon", "vertices": v}, light.radiance
+    if isinstance(light, DirectionalLight):
+        dvec = _per_point(light.direction, n, (3,), "DirectionalLight.direction")
+        dvec = dvec / np.linalg.norm(dvec, axis=-1, keepdims=True)
+        return {"kind": "directional", "direction": dvec, "scale": np.ones(n)}, light.irradiance
+    if isinstance(light, PointLight):
+        pvec = _per_point(light.position, n, (3,), "PointLight.position")
+        dist = np.linalg.norm(pvec, axis=-1)
+        return {"kind": "directional", "direction": pvec / dist[:, None], "scale": 1.0 / dist**2}, light.intensity
+    raise ValueError(f"unsupported light type {type(light).__name__}")
+
+
+def _gather(geom: dict, idx: np.ndarray) -> dict:
+    return {k: (v if k == "kind" else np.asarray(v)[idx]) for k, v in geom.items()}
+
+
+def scratch_radiance_pairs(
+    points_um: ArrayLike,
+    footprint: ArrayLike,
+    wo: ArrayLike,
+    light,
+    segments: ArrayLike,
+    width_um: ArrayLike,
+    depth_um: ArrayLike,
+    pair_point: ArrayLike,
+    pair_segment: ArrayLike,
+    wavelengths_nm="rgb",
+    *,
+    sigma_um: float = 60.0,
+    si: str = "series",
+    footprint_rule: str = "chords",
+    energy: str = "thesis",
+) -> ScratchShading:
+    """Like :func:`scratch_radiance` but for explicit (point, segment) pairs, no grid and no wrapping.
+
+    Use it to evaluate a few points against a handful of segments (validation, references).
+    """
+    if energy not in ("thesis", "conserving"):
+        raise ValueError(f"energy must be 'thesis' or 'conserving'; got {energy!r}")
+    x = np.asarray(points_um, dtype=np.float64).reshape(-1, 2)
+    n = x.shape[0]
+    lam_nm, M = resolve_wavelengths(wavelengths_nm)
+    J = footprint_matrix(footprint, n)
+    wo = _per_point(wo, n, (3,), "wo")
+    geom, scale = _light_geometry(light, n)
+    li = _spectral(scale, lam_nm.size)
+    pp = np.asarray(pair_point, dtype=np.int64)
+    ps = np.asarray(pair_segment, dtype=np.int64)
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    width_um = np.broadcast_to(np.asarray(width_um, dtype=np.float64), (seg.shape[0],))
+    depth_um = np.broadcast_to(np.asarray(depth_um, dtype=np.float64), (seg.shape[0],))
+    rad, rho, rho_c = shade_scratch_pairs(
+        x[pp], J[pp], wo[pp], _gather(geom, pp), seg[ps], width_um[ps], depth_um[ps], lam_nm / 1000.0,
+        sigma_um, si, footprint_rule, energy == "conserving",
+    )
+    return _accumulate(n, pp, rad * li, rho, rho_c, lam_nm, M, energy, int(pp.size))
+
+
+def _accumulate(n, pp, rad, rho, rho_c, lam_nm, M, energy, n_pairs) -> ScratchShading:
+    L = lam_nm.size
+    spec = np.zeros((n, L))
+    for j in range(L):
+        spec[:, j] = np.bincount(pp, weights=rad[:, j], minlength=n)
+    if energy == "thesis":
+        r = np.minimum(np.bincount(pp, weights=rho, minlength=n), 1.0)
+    elif energy == "conserving":
+        r = np.stack([np.bincount(pp, weights=rho_c[:, j], minlength=n) for j in range(L)], -1)
+        r = np.minimum(r, 1.0)
+    else:
+        raise ValueError(f"energy must be 'thesis' or 'conserving'; got {energy!r}")
+    rgb = spec @ M.T if M is not None else None
+    return ScratchShading(lam_nm, spec, rgb, r, n_pairs)
+
+
+def scratch_radiance(
+    points_um: ArrayLike,
+    footprint: ArrayLike,
+    wo: ArrayLike,
+    light,
+    scratch_set: ScratchSet,
+    wavelengths_nm="rgb",
+    *,
+    sigma_um: float | None = None,
+    si: str = "series",
+    footprint_rule: str = "chords",
+    energy: str = "thesis",
+    chunk_points: int = 1024,
+    workers: int = 1,
+) -> ScratchShading:
+    """Scratch radiance of N shading points (the public entry point; see the module docstring).
+
+    points_um   (N, 2) positions in the scratch plane (um); wrapped into the patch.
+    footprint   pixel footprint: radius (um), (N,) radii, (2, 2) or (N, 2, 2) matrix J (columns =
+                conjugate semi-diameters, um). Footprints wider than the index allows are shrunk.
+    wo          (3,) or (N, 3) unit direction to the viewer, local frame.
+    light       SphereLight | PolygonLight | DirectionalLight | PointLight (light_integration).
+    scratch_set ScratchSet (scratch_set / scratch_io).
+    wavelengths_nm  'rgb' (3 representative wavelengths), '16' (16 bands) -> rgb filled; or an
+                array of wavelengths (nm) -> spectral only.
+    sigma_um    coherence radius; defaults to the one the set was indexed for.
+    si          Si(x) evaluation: "series" (default, |err| < 2e-6), "thesis" (eq. 4.29) or "exact".
+    footprint_rule  "chords" (default, 12 chords across each scratch) or "thesis" (eq. 4.14-4.15).
+    energy      "thesis" (rho_P of eq. 4.18) or "conserving" (see module docstring).
+    workers     processes (fork) sharing the points; 1 = in-process.
+    """
+    s = scratch_set
+    sigma = float(s.sigma_um if sigma_um is None else sigma_um)
+    if energy not in ("thesis", "conserving"):
+        raise ValueError(f"energy must be 'thesis' or 'conserving'; got {energy!r}")
+    x = np.asarray(points_um, dtype=np.float64).reshape(-1, 2)
+    n = x.shape[0]
+    lam_nm, M = resolve_wavelengths(wavelengths_nm)
+    J = footprint_matrix(footprint, n)
+    reach = s.query_radius_um - 4.0 * sigma
+    if reach <= 0:
+        raise ValueError("the scratch set's query radius is below 4 sigma; rebuild its index with this sigma")
+    amax = footprint_semi_major(J)
+    shrink = np.where(amax > reach, reach / np.maximum(amax, 1e-300), 1.0)
+    J = J * shrink[:, None, None]
+    wo = _per_point(wo, n, (3,), "wo")
+    geom, scale = _light_geometry(light, n)
+    li = _spectral(scale, lam_nm.size)
+    ps = s.patch_size_um
+    xw = np.mod(x, ps)
+    ny, nx = s.grid_shape
+    ix = np.clip((xw[:, 0] // s.cell_size_um).astype(np.int64), 0, nx - 1)
+    iy = np.clip((xw[:, 1] // s.cell_size_um).astype(np.int64), 0, ny - 1)
+    ctx = {
+        "s": s, "xw": xw, "J": J, "wo": wo, "geom": geom, "li": li, "lam_nm": lam_nm, "sigma": sigma,
+        "si": si, "footprint_rule": footprint_rule, "conserving": energy == "conserving",
+        "reach": amax * shrink + 3.5 * sigma, "cnt": s.grid_count[iy, ix], "off": s.grid_offset[iy, ix],
+        "chunk": int(chunk_points),
+    }
+    workers = max(1, min(int(workers), n // max(1, chunk_points) or 1))
+    bounds = np.linspace(0, n, workers + 1).astype(int)
+    blocks = [(int(bounds[i]), int(bounds[i + 1])) for i in range(workers)]
+    if workers == 1:
+        parts = [_walk_block(ctx, *blocks[0])]
+    else:
+        import multiprocessing as mp
+
+        global _CTX
+        _CTX = ctx
+        try:
+            with mp.get_context("fork").Pool(workers) as pool:
+                parts = pool.map(_walk_block_forked, blocks)
+        finally:
+            _CTX = None
+    spec = np.concatenate([p[0] for p in parts])
+    rho_t = np.concatenate([p[1] for p in parts])
+    rho_c = np.concatenate([p[2] for p in parts])
+    n_pairs = sum(p[3] for p in parts)
+    if energy == "thesis":
+        r = np.minimum(rho_t, 1.0)
+    elif energy == "conserving":
+        r = np.minimum(rho_c, 1.0)
+    else:
+        raise ValueError(f"energy must be 'thesis' or 'conserving'; got {energy!r}")
+    rgb = spec @ M.T if M is not None else None
+    return ScratchShading(lam_nm, spec, rgb, r, n_pairs)
+
+
+_CTX: dict | None = None
+
+
+def _walk_block_forked(block: tuple[int, int]):
+    return _walk_block(_CTX, *block)
+
+
+def _walk_block(ctx: dict, a0: int, b0: int):
+    """Grid walk + shading of points a0..b0-1; returns (spectral, rho_P, conserving rho, n_pairs)."""
+    s, xw, J, wo, geom, li = ctx["s"], ctx["xw"], ctx["J"], ctx["wo"], ctx["geom"], ctx["li"]
+    lam_nm, sigma, chunk = ctx["lam_nm"], ctx["sigma"], ctx["chunk"]
+    L = lam_nm.size
+    n = b0 - a0
+    spec = np.zeros((n, L))
+    rho_t = np.zeros(n)
+    rho_c = np.zeros((n, L))
+    n_pairs = 0
+    for a in range(a0, b0, chunk):
+        b = min(b0, a + chunk)
+        cnt = ctx["cnt"][a:b]
+        tot = int(cnt.sum())
+        if tot == 0:
+            continue
+        pp = np.repeat(np.arange(a, b), cnt)
+        start = np.cumsum(cnt) - cnt
+        within = np.arange(tot) - np.repeat(start, cnt)
+        sg = s.cell_segments[np.repeat(ctx["off"][a:b], cnt) + within]
+        # cull pairs that cannot contribute: farther than the footprint's semi-major axis + 3.5 sigma
+        seg = s.segments[sg]
+        xp = xw[pp]
+        keep = _point_segment_distance_fast(xp, seg) <= ctx["reach"][pp]
+        if not np.any(keep):
+            continue
+        pp, sg, seg, xp = pp[keep], sg[keep], seg[keep], xp[keep]
+        rad, rho, rc = shade_scratch_pairs(
+            xp, J[pp], wo[pp], _gather(geom, pp), seg, s.width_um[sg], s.depth_um[sg], lam_nm / 1000.0,
+            sigma, ctx["si"], ctx["footprint_rule"], ctx["conserving"],
+        )
+        n_pairs += int(pp.size)
+        loc = pp - a
+        lo, m = a - a0, b - a
+        for j in range(L):
+            spec[lo : lo + m, j] += np.bincount(loc, weights=rad[:, j] * li[j], minlength=m)
+            if rc is not None:
+                rho_c[lo : lo + m, j] += np.bincount(loc, weights=rc[:, j], minlength=m)
+        rho_t[lo : lo + m] += np.bincount(loc, weights=rho, minlength=m)
+    return spec, rho_t, rho_c, n_pairs
+
+
+def _point_segment_distance_fast(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    dx = seg[:, 2] - seg[:, 0]
+    dy = seg[:, 3] - seg[:, 1]
+    rx = x[:, 0] - seg[:, 0]
+    ry = x[:, 1] - seg[:, 1]
+    t = np.clip((rx * dx + ry * dy) / (dx * dx + dy * dy), 0.0, 1.0)
+    return np.hypot(rx - t * dx, ry - t * dy)

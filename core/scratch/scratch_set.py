@@ -1,0 +1,192 @@
+"""Scratch sets: straight segments of scratch polylines plus a uniform grid index (thesis Sec. 4.4).
+
+A scratch is a polyline in the scratch plane (the surface's UV/tangent plane mapped to micrometres:
+x_um = u * patch_size_um[0], y_um = v * patch_size_um[1]) with a width W_s, a depth D_s (um) and a
+profile per segment. Only the rectangular profile (code 0) is modelled (thesis Table 4.3); the code
+is stored so that files stay forward compatible.
+
+Grid index: the patch [0, Px] x [0, Py] is cut into nx x ny square cells of side ``cell_size_um``.
+Cell (ix, iy) covers [ix c, (ix+1) c) x [iy c, (iy+1) c) and lists every segment that comes within
+``query_radius_um`` of the cell. A shaded point therefore only walks the list of its own cell, as
+long as its footprint's semi-major axis plus 4 sigma stays below the query radius (the evaluator
+shrinks larger footprints to that size). Lists are stored CSR-style: ``cell_segments`` holds segment
+indices cell after cell (row-major, iy * nx + ix), ``grid_offset``/``grid_count`` (ny, nx) give each
+cell's slice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+PROFILE_RECTANGULAR = 0
+KNOWN_PROFILES = (PROFILE_RECTANGULAR,)
+MAX_TABLE_INDEX = 2**24  # integers stored in float32 tables are exact below this
+
+
+@dataclass
+class ScratchSet:
+    """Segments of a scratch set and its grid index. Arrays are float64/int64; lengths in um."""
+
+    segments: np.ndarray  # (M, 4) x0, y0, x1, y1
+    width_um: np.ndarray  # (M,)
+    depth_um: np.ndarray  # (M,)
+    profile: np.ndarray  # (M,) int
+    scratch_id: np.ndarray  # (M,) int, polyline each segment belongs to
+    patch_size_um: np.ndarray  # (2,)
+    sigma_um: float
+    cell_size_um: float
+    query_radius_um: float
+    grid_offset: np.ndarray = field(repr=False)  # (ny, nx) int
+    grid_count: np.ndarray = field(repr=False)  # (ny, nx) int
+    cell_segments: np.ndarray = field(repr=False)  # (K,) int
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.segments.shape[0])
+
+    @property
+    def n_scratches(self) -> int:
+        return int(np.unique(self.scratch_id).size) if self.n_segments else 0
+
+    @property
+    def grid_shape(self) -> tuple[int, int]:
+        return tuple(int(v) for v in self.grid_count.shape)  # (ny, nx)
+
+    def validate(self) -> None:
+        validate_scratch_set(self)
+
+
+def validate_scratch_set(s: ScratchSet) -> None:
+    """Raise ValueError with a precise message if ``s`` is inconsistent."""
+    seg = np.asarray(s.segments)
+    if seg.ndim != 2 or seg.shape[1] != 4:
+        raise ValueError(f"segments must have shape (M, 4) = x0, y0, x1, y1; got {seg.shape}")
+    m = seg.shape[0]
+    for name in ("width_um", "depth_um", "profile", "scratch_id"):
+        a = np.asarray(getattr(s, name))
+        if a.shape != (m,):
+            raise ValueError(f"{name} must have shape ({m},) like the segment table; got {a.shape}")
+    if not np.all(np.isfinite(seg)):
+        raise ValueError("segment table holds non-finite coordinates")
+    if m and np.any(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) <= 0):
+        raise ValueError("segment table holds zero-length segments")
+    w, d = np.asarray(s.width_um), np.asarray(s.depth_um)
+    if m and (not np.all(np.isfinite(w)) or np.any(w <= 0)):
+        raise ValueError("scratch widths must be finite and > 0 um")
+    if m and (not np.all(np.isfinite(d)) or np.any(d < 0)):
+        raise ValueError("scratch depths must be finite and >= 0 um")
+    bad = np.setdiff1d(np.unique(np.asarray(s.profile)), KNOWN_PROFILES)
+    if bad.size:
+        raise ValueError(f"unknown scratch profile code(s) {bad.tolist()}; known: {list(KNOWN_PROFILES)}")
+    ps = np.asarray(s.patch_size_um, dtype=np.float64)
+    if ps.shape != (2,) or not np.all(np.isfinite(ps)) or np.any(ps <= 0):
+        raise ValueError(f"patch_size_um must be two positive numbers; got {ps}")
+    for name in ("sigma_um", "cell_size_um", "query_radius_um"):
+        v = float(getattr(s, name))
+        if not np.isfinite(v) or v <= 0:
+            raise ValueError(f"{name} must be > 0; got {v}")
+    off, cnt, cs = np.asarray(s.grid_offset), np.asarray(s.grid_count), np.asarray(s.cell_segments)
+    nx = int(np.ceil(ps[0] / s.cell_size_um - 1e-9))
+    ny = int(np.ceil(ps[1] / s.cell_size_um - 1e-9))
+    if off.shape != (ny, nx) or cnt.shape != (ny, nx):
+        raise ValueError(f"grid tables must have shape (ny, nx) = {(ny, nx)}; got {off.shape} and {cnt.shape}")
+    if cs.ndim != 1:
+        raise ValueError("cell_segments must be one-dimensional")
+    if np.any(cnt < 0) or np.any(off < 0) or np.any(off + cnt > cs.size):
+        raise ValueError(f"grid offset/count point outside the cell-segment list (length {cs.size})")
+    if cs.size and (cs.min() < 0 or cs.max() >= m):
+        raise ValueError(f"cell-segment list references segments outside 0..{m - 1}")
+    if max(m, cs.size) >= MAX_TABLE_INDEX:
+        raise ValueError(f"too many entries for exact float32 tables (limit {MAX_TABLE_INDEX})")
+
+
+def build_grid_index(
+    segments: ArrayLike, patch_size_um: ArrayLike, cell_size_um: float, query_radius_um: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR grid index: (grid_offset (ny, nx), grid_count (ny, nx), cell_segments (K,)).
+
+    A segment is listed in a cell when it comes within ``query_radius_um`` of the cell (tested
+    conservatively against the cell's circumscribed disk).
+    """
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    ps = np.asarray(patch_size_um, dtype=np.float64)
+    c = float(cell_size_um)
+    r = float(query_radius_um)
+    nx = int(np.ceil(ps[0] / c - 1e-9))
+    ny = int(np.ceil(ps[1] / c - 1e-9))
+    lo = np.minimum(seg[:, :2], seg[:, 2:]) - r
+    hi = np.maximum(seg[:, :2], seg[:, 2:]) + r
+    ix0 = np.clip(np.floor(lo[:, 0] / c).astype(np.int64), 0, nx - 1)
+    iy0 = np.clip(np.floor(lo[:, 1] / c).astype(np.int64), 0, ny - 1)
+    ix1 = np.clip(np.floor(hi[:, 0] / c).astype(np.int64), 0, nx - 1)
+    iy1 = np.clip(np.floor(hi[:, 1] / c).astype(np.int64), 0, ny - 1)
+    wx = ix1 - ix0 + 1
+    n = wx * (iy1 - iy0 + 1)
+    rep = np.repeat(np.arange(seg.shape[0]), n)
+    local = np.arange(rep.size) - np.repeat(np.cumsum(n) - n, n)
+    ix = ix0[rep] + local % wx[rep]
+    iy = iy0[rep] + local // wx[rep]
+    # keep cells whose centre is within r + half diagonal of the segment
+    cx = (ix + 0.5) * c
+    cy = (iy + 0.5) * c
+    dist = point_segment_distance(np.stack([cx, cy], -1), seg[rep, :2], seg[rep, 2:])
+    keep = dist <= r + c * np.sqrt(0.5)
+    rep, cell = rep[keep], (iy * nx + ix)[keep]
+    order = np.argsort(cell, kind="stable")
+    cell_segments = rep[order]
+    count = np.bincount(cell, minlength=nx * ny)
+    offset = np.cumsum(count) - count
+    return offset.reshape(ny, nx), count.reshape(ny, nx), cell_segments
+
+
+def point_segment_distance(x: ArrayLike, p0: ArrayLike, p1: ArrayLike) -> np.ndarray:
+    """Euclidean distance from points x to segments p0-p1 (broadcast over leading axes)."""
+    x, p0, p1 = (np.asarray(a, dtype=np.float64) for a in (x, p0, p1))
+    d = p1 - p0
+    dd = np.einsum("...i,...i->...", d, d)
+    t = np.clip(np.einsum("...i,...i->...", x - p0, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    return np.linalg.norm(x - (p0 + t[..., None] * d), axis=-1)
+
+
+def make_scratch_set(
+    segments: ArrayLike,
+    width_um: ArrayLike,
+    depth_um: ArrayLike,
+    patch_size_um: ArrayLike,
+    *,
+    scratch_id: ArrayLike | None = None,
+    profile: ArrayLike | None = None,
+    sigma_um: float = 60.0,
+    max_footprint_um: float = 500.0,
+    cell_size_um: float | None = None,
+) -> ScratchSet:
+    """Assemble and index a scratch set.
+
+    The query radius is ``max_footprint_um + 4 sigma``: footprints with a semi-major axis up to
+    ``max_footprint_um`` are evaluated exactly. The cell size defaults to half the query radius.
+    """
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    m = seg.shape[0]
+    q = float(max_footprint_um) + 4.0 * float(sigma_um)
+    c = float(cell_size_um) if cell_size_um is not None else 0.5 * q
+    ps = np.asarray(patch_size_um, dtype=np.float64).reshape(2)
+    off, cnt, cs = build_grid_index(seg, ps, c, q)
+    s = ScratchSet(
+        segments=seg,
+        width_um=np.broadcast_to(np.asarray(width_um, dtype=np.float64), (m,)).copy(),
+        depth_um=np.broadcast_to(np.asarray(depth_um, dtype=np.float64), (m,)).copy(),
+        profile=(np.zeros(m, np.int64) if profile is None else np.broadcast_to(profile, (m,)).astype(np.int64)),
+        scratch_id=(np.arange(m) if scratch_id is None else np.asarray(scratch_id, dtype=np.int64).reshape(m)),
+        patch_size_um=ps,
+        sigma_um=float(sigma_um),
+        cell_size_um=c,
+        query_radius_um=q,
+        grid_offset=off,
+        grid_count=cnt,
+        cell_segments=cs,
+    )
+    validate_scratch_set(s)
+    return s
