@@ -12,6 +12,9 @@ from material_structures.render import library
 CASES = [
     ("test-card", (32, 32), 2, 0.0),
     ("studio-ball", (64, 48), 8, 2e-3),
+    ("fabric-velvet", (48, 36), 4, 2e-3),
+    ("fabric-corduroy", (48, 36), 4, 2e-3),
+    ("fabric-plush", (48, 36), 4, 2e-3),
 ]
 
 

@@ -1,0 +1,146 @@
+"""Pile-fabric showcase scenes: brushed velvet cushion, corduroy bolster with wales, plush ball."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .library import LibraryScene, register_scene
+from .stage import add_studio_stage
+
+MAP_SIZE = 256
+
+
+def _preset_maps(preset: str, size: int = MAP_SIZE, seed: int = 0):
+    """Constant maps from a preset, with a little texel-level variation (real pile is never uniform)."""
+    from ..addon.fabric.presets import PRESETS, tilted_quat
+    from ..core.fabric.parameter_maps import make_maps
+
+    p = PRESETS[preset]
+    rng = np.random.default_rng(seed)
+    jitter = 1.0 + 0.08 * rng.standard_normal((size, size, 1))
+    basis = np.broadcast_to(tilted_quat(*p["tilt"]), (size, size, 4))
+    return make_maps(
+        kd=np.clip(np.asarray(p["kd"]) * jitter, 0, 1),
+        ks=np.clip(np.asarray(p["ks"]) * jitter, 0, 1),
+        sigma=np.broadcast_to(np.asarray(p["sigma"]), (size, size, 2)),
+        basis=basis,
+    )
+
+
+def _fabric_object(obj, maps, name, scene, strokes=()):
+    """Give ``obj`` a mapped fabric material; ``strokes``: list of (uv points, BrushSettings)."""
+    from ..addon.fabric.brushing import BrushSession
+    from ..addon.fabric.maps import maps_to_images
+    from ..addon.fabric.material import create_fabric_material
+
+    images = maps_to_images(maps, name, btf_frame=False)
+    if strokes:
+        session = BrushSession(images)
+        for points, settings in strokes:
+            session.begin_stroke()
+            for a, b in zip(points[:-1], points[1:], strict=True):
+                session.segment(a, b, settings)
+            session.end_stroke()
+        session.flush()
+    mat = create_fabric_material(name, maps=images, scene=scene)
+    obj.data.materials.append(mat)
+    for poly in obj.data.polygons:
+        poly.use_smooth = True
+    return mat
+
+
+def _key_lamp(scene, location=(2.5, -2.0, 3.0), power=900.0):
+    """A point key lamp: evaluated exactly (eq. 3.9) by the fabric shader."""
+    import bpy
+
+    light = bpy.data.lights.new("MS Fabric Key", "POINT")
+    light.energy = power
+    light.shadow_soft_size = 0.0
+    obj = bpy.data.objects.new("MS Fabric Key", light)
+    obj.location = location
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def _finish(scene):
+    from ..addon.fabric.material import sync_fabric_lamps
+
+    sync_fabric_lamps(scene)
+
+
+def build_velvet_cushion(scene, workdir: str) -> None:
+    import bpy
+
+    from ..addon.fabric.brushing import BrushSettings
+
+    add_studio_stage(scene, target=(0.0, 0.0, 0.35))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0.0, 0.0, 0.38), segments=64, ring_count=32)
+    cushion = bpy.context.active_object
+    cushion.scale = (1.15, 1.15, 0.38)
+    t = np.linspace(0.0, 1.0, 40)
+    comb = BrushSettings(mode="COMB", radius=0.06, strength=1.0, fibre_length=2.0)
+    strokes = [
+        (np.stack([0.05 + 0.9 * t, 0.62 + 0.05 * np.sin(9 * t)], -1), comb),
+        (np.stack([0.95 - 0.9 * t, 0.72 + 0.04 * np.sin(7 * t)], -1), comb),
+        (np.stack([0.3 + 0.02 * np.sin(5 * t), 0.52 + 0.4 * t], -1), comb),
+    ]
+    _fabric_object(cushion, _preset_maps("VELVET"), "Velvet Cushion", scene, strokes)
+    _key_lamp(scene)
+    _finish(scene)
+
+
+def build_corduroy_bolster(scene, workdir: str) -> None:
+    import bpy
+
+    from ..addon.fabric.presets import tilted_quat
+
+    add_studio_stage(scene, target=(0.0, 0.0, 0.5))
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.5, depth=2.2, location=(0.0, 0.0, 0.5), vertices=96)
+    bolster = bpy.context.active_object
+    bolster.rotation_euler = (0.0, math.radians(90.0), math.radians(25.0))
+    maps = _preset_maps("CORDUROY", seed=1)
+    # Wales: ridges across u; the pile leans to either flank of each ridge.
+    u = (np.arange(MAP_SIZE) + 0.5) / MAP_SIZE
+    phase = (u * 24.0) % 1.0
+    lean = np.where(phase < 0.5, 1.0, -1.0) * 25.0 * np.abs(np.sin(np.pi * phase * 2.0))
+    quats = np.stack([tilted_quat(abs(a), 0.0 if a >= 0 else 180.0) for a in lean])
+    basis = np.broadcast_to(quats[None, :, :], (MAP_SIZE, MAP_SIZE, 4))
+    groove = (np.abs(phase - 0.5) > 0.42)[None, :, None]
+    kd = np.where(groove, maps.kd * 0.5, maps.kd)
+    from ..core.fabric.parameter_maps import make_maps
+
+    maps = make_maps(kd=kd, ks=maps.ks, sigma=maps.sigma, basis=basis)
+    _fabric_object(bolster, maps, "Corduroy Bolster", scene)
+    _key_lamp(scene, location=(1.5, -2.5, 2.8))
+    _finish(scene)
+
+
+def build_plush_ball(scene, workdir: str) -> None:
+    import bpy
+
+    from ..addon.fabric.presets import tilted_quat
+    from ..core.fabric.parameter_maps import make_maps
+
+    add_studio_stage(scene, target=(0.0, 0.0, 0.7))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.75, location=(0.0, 0.0, 0.75), segments=64, ring_count=32)
+    ball = bpy.context.active_object
+    maps = _preset_maps("PLUSH", seed=2)
+    rng = np.random.default_rng(7)
+    # Clumps: the pile leans 30 degrees toward a direction that varies smoothly over the surface.
+    from scipy.ndimage import zoom
+
+    coarse = np.radians(rng.uniform(0.0, 360.0, size=(8, 8)))
+    c, s = (zoom(f(coarse), MAP_SIZE / 8, order=1, mode="grid-wrap", grid_mode=True) for f in (np.cos, np.sin))
+    az = np.degrees(np.arctan2(s, c))
+    quats = np.stack([tilted_quat(30.0, a) for a in az.ravel()]).reshape(MAP_SIZE, MAP_SIZE, 4)
+    maps = make_maps(kd=maps.kd, ks=maps.ks, sigma=maps.sigma, basis=quats)
+    _fabric_object(ball, maps, "Plush Ball", scene)
+    _key_lamp(scene, location=(2.0, -2.5, 3.2))
+    _finish(scene)
+
+
+register_scene(LibraryScene("fabric-velvet", "Velvet cushion (brushed)", build_velvet_cushion, samples=16))
+register_scene(LibraryScene("fabric-corduroy", "Corduroy bolster (wales)", build_corduroy_bolster, samples=16))
+register_scene(LibraryScene("fabric-plush", "Plush ball (clumped pile)", build_plush_ball, samples=16))
