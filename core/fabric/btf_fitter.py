@@ -4,8 +4,8 @@ Pipeline per tile (see :mod:`tile_fit`): NDF extraction (eq. 3.11) into a parabo
 PCA basis (3.13-3.15), ``S_v`` (3.16), batched Levenberg-Marquardt (3.17-3.19); then, for the
 whole map, the post-processing of section 3.4.3. Output: :func:`parameter_maps.save_params`.
 
-On-disk work state in ``OUT/.fit_cache``: ``values.npy`` (the BTF as a float32 memory map, so
-workers read only their tile), ``meta.json`` (what it was built from) and ``tiles/*.npz``
+On-disk work state in ``OUT/.fit_cache``: ``values.npy`` (the BTF as a texel-major (H, W, N, 3)
+float32 memory map, so workers read only their tile), ``meta.json`` (what it was built from) and ``tiles/*.npz``
 (one checkpoint per finished tile). An interrupted fit run again with the same inputs resumes.
 """
 
@@ -23,7 +23,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from .btf_io import load_btf, read_btf_header
+from .btf_io import iter_btf_blocks, read_btf_header
 from .levenberg_marquardt import Samples
 from .ndf_extraction import NdfOperator, ndf_operator
 from .parameter_maps import FabricMaps, make_maps, save_params
@@ -58,9 +58,8 @@ def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, 
     """Fit one tile (in a worker) and write its checkpoint atomically."""
     y0, y1, x0, x1 = t
     start = time.perf_counter()
-    block = np.asarray(_WORKER["values"][:, y0:y1, x0:x1], dtype=np.float64)  # (N, th, tw, 3)
-    n = block.shape[0]
-    vals = block.reshape(n, -1, 3).transpose(1, 0, 2)
+    block = np.asarray(_WORKER["values"][y0:y1, x0:x1], dtype=np.float64)  # (th, tw, N, 3)
+    vals = block.reshape(-1, block.shape[2], 3)
     res = fit_tile(vals, _WORKER["samples"], _WORKER["op"], _WORKER["options"])
     path = _tile_path(cache, t)
     tmp = path + f".tmp-{os.getpid()}.npz"
@@ -83,6 +82,7 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         "shape": [hdr.count, hdr.height, hdr.width, 3],
         "directions": _directions_hash(hdr.wi, hdr.wo),
         "tile": tile,
+        "layout": "HWN3",
         "options": asdict(options),
     }
     meta_path = os.path.join(cache, "meta.json")
@@ -95,8 +95,11 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         shutil.rmtree(cache, ignore_errors=True)
         os.makedirs(os.path.join(cache, "tiles"), exist_ok=True)
         tmp = values_path + ".tmp.npy"
-        mm = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=tuple(meta["shape"]))
-        load_btf(btf_path, out=mm, progress=progress)
+        n, h, w, _ = meta["shape"]
+        # texel-major (H, W, N, 3): a tile's samples are contiguous, so a worker maps only its tile
+        mm = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(h, w, n, 3))
+        for k0, vals in iter_btf_blocks(btf_path, progress=progress):
+            mm[:, :, k0:k0 + vals.shape[0]] = vals.transpose(1, 2, 0, 3)
         mm.flush()
         del mm
         os.replace(tmp, values_path)

@@ -88,7 +88,11 @@ def read_btf_header(path: str | os.PathLike) -> BtfHeader:
     if path.endswith(".npz"):
         if not os.path.isfile(path):
             raise FileNotFoundError(f"BTF file not found: {path}")
-        with np.load(path) as z:
+        try:
+            z = np.load(path)
+        except Exception as exc:
+            raise ValueError(f"{path}: not a readable .npz file ({exc})") from exc
+        with z:
             for key in ("values", "wi", "wo"):
                 if key not in z.files:
                     raise ValueError(f"{path}: missing array {key!r}; has {sorted(z.files)}")
@@ -157,26 +161,62 @@ def _npz_shape(path: str, key: str) -> tuple[int, ...]:
     return shape
 
 
-def _stream_npz_values(path: str, out: np.ndarray) -> None:
-    """Copy ``values`` of an npz into ``out`` one image at a time (bounded memory), checking NaNs."""
-    import zipfile
+def iter_btf_blocks(path: str | os.PathLike, block: int = 256, progress: bool = False):
+    """Yield ``(start, values[start:start + block])`` float32 blocks of a BTF (bounded memory).
 
-    with zipfile.ZipFile(path) as zf:
-        f, shape, fortran, dtype = _npz_member_header(zf, "values")
-        with f:
-            if fortran:
-                raise ValueError(f"{path}: values must be stored in C order")
-            if not np.issubdtype(dtype, np.floating):
-                raise ValueError(f"{path}: values must be floating point, got {dtype}")
-            per = int(np.prod(shape[1:])) * dtype.itemsize
-            for k in range(shape[0]):
-                buf = f.read(per)
-                if len(buf) != per:
-                    raise ValueError(f"{path}: values is truncated at image {k}")
-                img = np.frombuffer(buf, dtype=dtype).reshape(shape[1:])
-                if not np.all(np.isfinite(img)):
-                    raise ValueError(f"{path}: values[{k}] holds non-finite values (NaN/Inf)")
-                out[k] = img
+    Raises ValueError/FileNotFoundError with the offending file for size mismatches, missing
+    files, non-finite pixels and directions below the horizon.
+    """
+    hdr = read_btf_header(path)
+    h, w = hdr.height, hdr.width
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=hdr.count, desc="read BTF", unit="img")
+    if hdr.images is None:
+        import zipfile
+
+        with zipfile.ZipFile(hdr.source) as zf:
+            f, shape, fortran, dtype = _npz_member_header(zf, "values")
+            with f:
+                if fortran:
+                    raise ValueError(f"{hdr.source}: values must be stored in C order")
+                if not np.issubdtype(dtype, np.floating):
+                    raise ValueError(f"{hdr.source}: values must be floating point, got {dtype}")
+                per = h * w * 3 * dtype.itemsize
+                for k0 in range(0, hdr.count, block):
+                    m = min(block, hdr.count - k0)
+                    buf = f.read(per * m)
+                    if len(buf) != per * m:
+                        raise ValueError(f"{hdr.source}: values is truncated near image {k0}")
+                    vals = np.frombuffer(buf, dtype=dtype).reshape(m, h, w, 3).astype(np.float32)
+                    finite = np.isfinite(vals).all(axis=(1, 2, 3))
+                    if not finite.all():
+                        bad = k0 + int(np.flatnonzero(~finite)[0])
+                        raise ValueError(f"{hdr.source}: values[{bad}] holds non-finite values (NaN/Inf)")
+                    if bar:
+                        bar.update(m)
+                    yield k0, vals
+    else:
+        for k0 in range(0, hdr.count, block):
+            m = min(block, hdr.count - k0)
+            vals = np.empty((m, h, w, 3), dtype=np.float32)
+            for j in range(m):
+                k = k0 + j
+                try:
+                    img = read_exr(hdr.images[k], channels=("R", "G", "B"))
+                except ExrError as exc:
+                    raise ValueError(f"BTF sample {k}: {exc}") from exc
+                if img.shape[:2] != (h, w):
+                    raise ValueError(f"BTF sample {k}: {hdr.images[k]} is {img.shape[1]}x{img.shape[0]} "
+                                     f"(W x H), btf.json says {w}x{h}")
+                vals[j] = img
+                if bar:
+                    bar.update(1)
+            yield k0, vals
+    if bar:
+        bar.close()
 
 
 def load_btf(path: str | os.PathLike, out: np.ndarray | None = None, progress: bool = False) -> Btf:
@@ -192,23 +232,8 @@ def load_btf(path: str | os.PathLike, out: np.ndarray | None = None, progress: b
         out = np.empty(shape, dtype=np.float32)
     elif out.shape != shape:
         raise ValueError(f"output array has shape {out.shape}, BTF needs {shape}")
-    if hdr.images is None:
-        _stream_npz_values(hdr.source, out)
-    else:
-        it = range(hdr.count)
-        if progress:
-            from tqdm import tqdm
-
-            it = tqdm(it, desc="read BTF", unit="img")
-        for k in it:
-            try:
-                img = read_exr(hdr.images[k], channels=("R", "G", "B"))
-            except ExrError as exc:
-                raise ValueError(f"BTF sample {k}: {exc}") from exc
-            if img.shape[:2] != (hdr.height, hdr.width):
-                raise ValueError(f"BTF sample {k}: {hdr.images[k]} is {img.shape[1]}x{img.shape[0]} "
-                                 f"(W x H), btf.json says {hdr.width}x{hdr.height}")
-            out[k] = img
+    for k0, vals in iter_btf_blocks(path, progress=progress):
+        out[k0:k0 + vals.shape[0]] = vals
     return Btf(values=out, wi=hdr.wi, wo=hdr.wo)
 
 

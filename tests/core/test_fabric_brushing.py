@@ -130,3 +130,13 @@ def test_data_driven_states_blend_by_direction():
     assert quat_angle(blend.basis[0, 0], states[1].basis[0, 0]) == pytest.approx(np.radians(22.5 / 2), abs=1e-5)
     with pytest.raises(ValueError, match="8 states"):
         BrushStates(tuple(states[:7]))
+
+
+def test_model_and_brushing_import_without_scipy():
+    """The Blender side (model, parameter maps, brushing) must not need scipy."""
+    import subprocess
+    import sys
+
+    code = ("import sys, material_structures.core.fabric as f; f.brush_fibres; f.sggx_brdf; f.load_params; "
+            "sys.exit(1 if 'scipy' in sys.modules else 0)")
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
