@@ -8,7 +8,9 @@ closure in tests/blender/test_fabric_shader.py):
 
 * point and spot lamps: radiant intensity ``color * power / (4 pi)`` [W/sr] (spot: same intensity
   inside the cone, smoothstep blend at the edge);
-* sun lamps: irradiance ``color * strength`` [W/m^2] on a surface facing the sun.
+* sun lamps: irradiance ``color * strength`` [W/m^2] on a surface facing the sun;
+* area lamps (square, rectangle, disk, ellipse): one-sided Lambertian emitters of radiance
+  ``color * power / (pi * area)``, with half-extent vectors ``Lamp<k>AxisU``, ``Lamp<k>AxisV``.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import math
 from dataclasses import dataclass
 
 MAX_LAMPS = 4
-LAMP_TYPE_CODES = {"POINT": 1, "SUN": 2, "SPOT": 3}
+LAMP_TYPE_CODES = {"POINT": 1, "SUN": 2, "SPOT": 3, "AREA_RECT": 4, "AREA_ELLIPSE": 5}
 
 
 @dataclass(frozen=True)
@@ -30,6 +32,8 @@ class ShaderLamp:
     color: tuple[float, float, float]  # intensity (point/spot) or irradiance (sun)
     spot_cos: float = -1.0
     spot_blend: float = 0.0
+    axis_u: tuple[float, float, float] = (0.0, 0.0, 0.0)  # area lamps: half extents (world)
+    axis_v: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def shader_lamp(
@@ -40,20 +44,46 @@ def shader_lamp(
     direction: tuple[float, float, float],
     spot_size: float = math.pi,
     spot_blend: float = 0.0,
+    area_shape: str = "SQUARE",
+    axis_u: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    axis_v: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> ShaderLamp | None:
-    """Convert Blender lamp settings to :class:`ShaderLamp`; ``None`` for unsupported types."""
+    """Convert Blender lamp settings to :class:`ShaderLamp`; ``None`` for unsupported types.
+
+    For area lamps, ``axis_u``/``axis_v`` are the world-space half extents of the emitter.
+    """
+    if light_type == "AREA":
+        light_type = "AREA_ELLIPSE" if area_shape in {"DISK", "ELLIPSE"} else "AREA_RECT"
     code = LAMP_TYPE_CODES.get(light_type)
     if code is None:
         return None
-    scale = energy if light_type == "SUN" else energy / (4.0 * math.pi)
+    if light_type == "SUN":
+        scale = energy
+    elif light_type.startswith("AREA"):
+        hu, hv = math.sqrt(sum(c * c for c in axis_u)), math.sqrt(sum(c * c for c in axis_v))
+        area = (4.0 if light_type == "AREA_RECT" else math.pi) * hu * hv
+        if area <= 0.0:
+            return None
+        scale = energy / (math.pi * area)
+    else:
+        scale = energy / (4.0 * math.pi)
     rgb = tuple(float(c) * scale for c in color[:3])
     spot_cos = math.cos(spot_size / 2.0) if light_type == "SPOT" else -1.0
     blend = float(spot_blend) if light_type == "SPOT" else 0.0
-    return ShaderLamp(code, tuple(map(float, position)), tuple(map(float, direction)), rgb, spot_cos, blend)
+    return ShaderLamp(
+        code,
+        tuple(map(float, position)),
+        tuple(map(float, direction)),
+        rgb,
+        spot_cos,
+        blend,
+        tuple(map(float, axis_u)),
+        tuple(map(float, axis_v)),
+    )
 
 
 def scene_shader_lamps(scene) -> list:
-    """(object, ShaderLamp) of the scene's visible point/sun/spot lamps, by name, at most MAX_LAMPS."""
+    """(object, ShaderLamp) of the scene's visible point/sun/spot/area lamps, by name, at most MAX_LAMPS."""
     out = []
     for obj in sorted(scene.objects, key=lambda o: o.name):
         if obj.type != "LIGHT" or obj.hide_render:
@@ -61,6 +91,11 @@ def scene_shader_lamps(scene) -> list:
         data = obj.data
         mw = obj.matrix_world
         direction = (-mw.col[2].xyz).normalized()
+        axis_u = axis_v = (0.0, 0.0, 0.0)
+        if data.type == "AREA":
+            size_y = data.size_y if data.shape in {"RECTANGLE", "ELLIPSE"} else data.size
+            axis_u = tuple(mw.col[0].xyz * (data.size / 2.0))
+            axis_v = tuple(mw.col[1].xyz * (size_y / 2.0))
         lamp = shader_lamp(
             data.type,
             data.energy,
@@ -69,6 +104,9 @@ def scene_shader_lamps(scene) -> list:
             tuple(direction),
             getattr(data, "spot_size", math.pi),
             getattr(data, "spot_blend", 0.0),
+            getattr(data, "shape", "SQUARE"),
+            axis_u,
+            axis_v,
         )
         if lamp is not None:
             out.append((obj, lamp))
@@ -89,6 +127,9 @@ def write_lamp_inputs(node, lamps: list[ShaderLamp]) -> None:
             _set(node, f"{prefix}Color", (*lamp.color, 1.0))
             _set(node, f"{prefix}SpotCos", lamp.spot_cos)
             _set(node, f"{prefix}SpotBlend", lamp.spot_blend)
+            if f"{prefix}AxisU" in node.inputs:
+                _set(node, f"{prefix}AxisU", lamp.axis_u)
+                _set(node, f"{prefix}AxisV", lamp.axis_v)
 
 
 def _set(node, name, value) -> None:

@@ -42,6 +42,8 @@ def render_patch_vs_core(
     lamp_position=(0.4, -0.3, 1.2),
     lamp_power=50.0,
     lamp_type="POINT",
+    area_shape="RECTANGLE",
+    area_size=(0.6, 0.3),
     resolution=(24, 24),
     samples=1,
     fast_preview=False,
@@ -68,11 +70,14 @@ def render_patch_vs_core(
     light.energy = lamp_power
     if lamp_type == "SUN":
         light.angle = 0.0
+    elif lamp_type == "AREA":
+        light.shape = area_shape
+        light.size, light.size_y = area_size
     else:
         light.shadow_soft_size = 0.0
     lamp = bpy.data.objects.new("Lamp", light)
     lamp.location = lamp_position
-    if lamp_type == "SUN":
+    if lamp_type in {"SUN", "AREA"}:  # facing the patch centre
         lamp.rotation_euler = Vector(tuple(-np.asarray(lamp_position))).to_track_quat("-Z", "Y").to_euler()
     scene.collection.objects.link(lamp)
     if not fast_preview:
@@ -91,6 +96,11 @@ def render_patch_vs_core(
     pos_rgba = render_to_array(scene)
     mask = pos_rgba[..., 3] > 0.999
     pos = pos_rgba[..., :3].astype(np.float64)
+    wo_px = np.broadcast_to(wo, pos.shape)
+    params = (np.asarray(kd), np.asarray(ks), np.asarray(sigma), np.asarray(quat))
+    if lamp_type == "AREA":
+        ref = _area_lamp_reference(pos, wo_px, params, lamp, light, lamp_power)
+        return rgb, ref, mask
     if lamp_type == "SUN":
         wi = np.broadcast_to(np.asarray(lamp_position) / np.linalg.norm(lamp_position), pos.shape)
         irradiance = lamp_power
@@ -99,10 +109,32 @@ def render_patch_vs_core(
         dist2 = np.sum(d * d, axis=-1, keepdims=True)
         wi = d / np.sqrt(dist2)
         irradiance = lamp_power / (4.0 * math.pi) / dist2
-    wo_px = np.broadcast_to(wo, pos.shape)
-    f = sggx_brdf(wi, wo_px, np.asarray(kd), np.asarray(ks), np.asarray(sigma), np.asarray(quat))
+    f = sggx_brdf(wi, wo_px, *params)
     ref = f * np.maximum(wi[..., 2:3], 0.0) * irradiance
     return rgb, ref, mask
+
+
+def _area_lamp_reference(pos, wo, params, lamp_obj, light, power, n: int = 48):
+    """Eq. 3.9 integrated over an area lamp by an n x n midpoint rule (independent of the shader's
+    jittered sampling): L_o = int f cos_i cos_l L_e / d^2 dA with L_e = P / (pi A)."""
+    mw = np.array(lamp_obj.matrix_world)
+    centre, ex, ey, normal = mw[:3, 3], mw[:3, 0], mw[:3, 1], -mw[:3, 2]
+    hu = light.size / 2.0
+    hv = (light.size_y if light.shape in {"RECTANGLE", "ELLIPSE"} else light.size) / 2.0
+    g = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    x, y = np.meshgrid(g, g, indexing="ij")
+    keep = np.ones_like(x, bool) if light.shape in {"SQUARE", "RECTANGLE"} else (x * x + y * y <= 1.0)
+    pts = centre + (x[keep, None] * hu) * ex + (y[keep, None] * hv) * ey  # (M, 3)
+    area = (4.0 if light.shape in {"SQUARE", "RECTANGLE"} else math.pi) * hu * hv
+    d_a = 4.0 * hu * hv / (n * n)
+    radiance = power / (math.pi * area)
+    d = pts[None, None, :, :] - pos[:, :, None, :]
+    dist2 = np.sum(d * d, axis=-1, keepdims=True)
+    wi = d / np.sqrt(dist2)
+    cos_l = np.maximum(-np.sum(wi * normal, axis=-1, keepdims=True), 0.0)
+    f = sggx_brdf(wi, wo[:, :, None, :], *params)
+    integrand = f * np.maximum(wi[..., 2:3], 0.0) * cos_l / dist2
+    return radiance * d_a * np.sum(integrand, axis=2)
 
 
 def render_maps_vs_core(
