@@ -51,7 +51,7 @@ class RenderSettings:
     spp: int = 4
     max_depth: int = 6  # path vertices (scattering + surface events)
     seed: int = 0
-    chunk: int = 2048  # camera paths per wavefront batch
+    chunk: int = 4096  # camera paths per wavefront batch
     jitter: bool = True
 
 
@@ -105,7 +105,7 @@ class _Tracer:
             if len(act) == 0:
                 break
             tm = None if tmax is None else tmax[act] - tcur[act]
-            tri, _ = cs.caster.first_hit(cur[act], d[act], tm)
+            tri, _ = cs.caster.first_hit(cur[act], d[act], tm, refine=False)
             self.n_casts += len(act)
             hit = tri >= 0
             act_h, tri_h = act[hit], tri[hit]
@@ -132,7 +132,8 @@ class _Tracer:
             cur[rows] = o[rows] + th[go_idx, None] * d[rows]
             tcur[rows] = th[go_idx]
             act = rows
-        return tri_x, t_x, cnt, end_tri, end_t, blocked
+        kmax = int(cnt.max()) if n else 0
+        return tri_x[:, :kmax], t_x[:, :kmax], cnt, end_tri, end_t, blocked
 
     def media_sequence(self, med0, d, tri_x):
         """Medium of each piece between crossings, (n, K + 1)."""
@@ -417,14 +418,21 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                 lw_e[mm] = blend_weight(q_e, cs.spread)
                 dl[mm] = blend_weight_dq(q_e, cs.spread)
                 dqdc[mm] = dq
-            sig_e = cs.sigma_e[mv]
+            # blended scattering coefficient sigma_s = albedo_mix * sigma_t,mix at the vertex
+            # (eq. 5.17-5.21; sigma_t is blended like the albedo so that the estimator is continuous
+            # in the dentin shape and its path-space derivative has no boundary term)
+            mE, mD = cs.med_E[mv], cs.med_D[mv]
+            sE, sD = cs.sigma_e[mE], cs.sigma_e[mD]
+            s_mix = sE * lw_e[:, None] + sD * (1 - lw_e[:, None])
             aE, aD = cs.alb["Ee"][mv], cs.alb["De"][mv]
             a_mix = aE * lw_e[:, None] + aD * (1 - lw_e[:, None])
-            logf[vs] += np.log(sig_e) + np.log(a_mix)
+            logf[vs] += np.log(s_mix) + np.log(a_mix)
             if want:
                 rows = pid[vs]
-                cols = cs.col_sigma[mv][:, None] + np.arange(3)
-                prefix.append((b, rows, cols, _diag(1.0 / sig_e)))  # (N - 1) / sigma_t term of eq. 5.23
+                cols = np.concatenate([cs.col_sigma[mE][:, None] + np.arange(3),
+                                       cs.col_sigma[mD][:, None] + np.arange(3)], axis=1)
+                vals = np.concatenate([_diag(lw_e[:, None] / s_mix), _diag((1 - lw_e[:, None]) / s_mix)], axis=1)
+                prefix.append((b, rows, cols, vals))  # (N - 1) / sigma_t term of eq. 5.23, blended
                 cols = np.concatenate([cs.col_alb["E"][mv][:, None] + np.arange(3),
                                        cs.col_alb["D"][mv][:, None] + np.arange(3)], axis=1)
                 vals = np.concatenate([_diag(lw_e[:, None] / a_mix), _diag((1 - lw_e[:, None]) / a_mix)], axis=1)
@@ -432,7 +440,8 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                 ht = tooth >= 0
                 if np.any(ht):
                     cols = cs.c_col[tooth[ht]][:, None] + np.arange(3)
-                    vals = ((aE - aD)[ht] / a_mix[ht])[:, None, :] * (dl[ht, None] * dqdc[ht])[:, :, None]
+                    dlog = (aE - aD)[ht] / a_mix[ht] + (sE - sD)[ht] / s_mix[ht]
+                    vals = dlog[:, None, :] * (dl[ht, None] * dqdc[ht])[:, :, None]
                     prefix.append((b, rows[ht], cols, vals))  # eq. 5.21 via dl/dq dq/dc
             pe_e, pd_e, mix_e = tr.vertex_phase(mv, lw_e, "e")
             _, _, mix_s = tr.vertex_phase(mv, lw_s, "s")

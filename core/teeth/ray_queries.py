@@ -33,7 +33,9 @@ class RayCaster:
             self._scene = _rtcs.EmbreeScene()
             self._mesh = _EmbreeMesh(self._scene, self.tris.astype(np.float32))
 
-    def first_hit(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def first_hit(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray | None = None,
+                  refine: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Hit triangle (-1 for a miss) and, with ``refine``, the float64 distance from ``o``."""
         n = len(o)
         if n == 0:
             return np.zeros(0, dtype=np.int64), np.zeros(0)
@@ -47,6 +49,8 @@ class RayCaster:
         else:
             tri = self._brute(start, d, tmax)
         t = np.full(n, np.inf)
+        if not refine:
+            return tri, t
         hit = tri >= 0
         if np.any(hit):
             tv = self.tris[tri[hit]]

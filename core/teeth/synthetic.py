@@ -103,3 +103,50 @@ def tooth_masks(scene: TeethScene, cameras: list[Camera], compiled: CompiledScen
             ok &= good
         out.append(ok.reshape(cam.height, cam.width))
     return np.array(out)
+
+
+def render_capture(scene: TeethScene, cameras: list[Camera], lights: list, spp: int = 16,
+                   spp_background: int = 2, seed: int = 12345, max_depth: int = 6, progress=None):
+    """Synthetic capture of ``scene``: masked tooth pixels at ``spp``, the rest at ``spp_background``."""
+    from .capture import Capture
+    from .path_tracer import RenderSettings, render
+
+    cs = CompiledScene(scene)
+    masks = tooth_masks(scene, cameras, cs)
+    h, w = cameras[0].height, cameras[0].width
+    images = np.zeros((len(cameras), len(lights), h, w, 3))
+    for part, (sel, n) in enumerate(((True, spp), (False, spp_background))):
+        if n <= 0:
+            continue
+        pixels = [np.flatnonzero(m.ravel() == sel) for m in masks]
+        for k, l0 in enumerate(range(0, len(lights), 9)):
+            ids = np.arange(l0, min(l0 + 9, len(lights)))
+            res = render(scene, cameras, lights, RenderSettings(n, max_depth, seed + 1000 * part + k),
+                         pixels=pixels, light_ids=ids, compiled=cs)
+            images[:, ids] += res.images
+            if progress is not None:
+                progress(len(ids))
+    return Capture(cameras, lights, images.astype(np.float32), masks)
+
+
+def perturbed_start(scene: TeethScene, seed: int = 0, sigma_factor: float = 0.3, kappa_shift: float = 0.25,
+                    reset_c: bool = True) -> TeethScene:
+    """Start point for recovery tests: sigma_t scaled by exp(+-sigma_factor), kappa shifted by
+    +-kappa_shift (random signs per channel), dentin coefficients reset to 0."""
+    from .parameterisation import albedo_from_kappa, kappa_from_albedo
+    from .scene import VolumeMaterial
+
+    rng = np.random.default_rng(seed)
+    out = scene.copy()
+
+    def perturb(m: VolumeMaterial) -> VolumeMaterial:
+        s = m.sigma_t * np.exp(sigma_factor * rng.choice([-1.0, 1.0], 3))
+        a = albedo_from_kappa(kappa_from_albedo(m.albedo) + kappa_shift * rng.choice([-1.0, 1.0], 3))
+        return VolumeMaterial(s, a, m.g1, m.g2, m.beta)
+
+    for t in out.teeth:
+        t.enamel = perturb(t.enamel)
+        t.dentin = perturb(t.dentin)
+        if reset_c:
+            t.c = np.zeros(3)
+    return out

@@ -6,51 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from material_structures.core.teeth.capture import Camera, PointLight
 from material_structures.core.teeth.distance_derivatives import (
     closest_point_on_triangle,
     point_distance_vertex_derivative,
     ray_distance_vertex_derivative,
     ray_triangle_distance,
 )
-from material_structures.core.teeth.param_vector import ParamLayout, scene_to_vector, vector_to_scene
-from material_structures.core.teeth.path_tracer import RenderSettings, render
-from material_structures.core.teeth.synthetic import make_scene, scene_target
-
-
-def _fd_scene():
-    sc = make_scene(n_teeth=1, resolution=14)
-    t = sc.teeth[0]
-    t.a_t = np.array([[[0.9, 0.85, 0.8], [0.95, 0.9, 0.85]], [[0.8, 0.9, 0.95], [0.7, 0.75, 0.9]]])
-    t.dentin.g1, t.enamel.g2 = 0.3, -0.25
-    sc.blend_spread = 0.8  # wider blend so that the sigmoid terms (eq. 5.19, 5.21) matter
-    tgt = scene_target(sc)
-    cam = Camera.look_at(tgt + [60.0, 280.0, 40.0], tgt, (0, 0, 1), 4.2, 14, 12)
-    lights = [PointLight(tgt + 1000 * np.array(v) / np.linalg.norm(v), [1.0e6, 1.2e6, 0.9e6])
-              for v in ([0.2, 1.0, 0.3], [-0.8, 0.6, 0.1], [0.1, 0.4, -0.9])]
-    return sc, [cam], lights
-
-
-def fd_check(spp=3, max_depth=5, seed=7):
-    sc, cams, lights = _fd_scene()
-    layout = ParamLayout(sc)
-    x0 = scene_to_vector(sc, layout)
-    st = RenderSettings(spp=spp, max_depth=max_depth, seed=seed)
-    rng = np.random.default_rng(3)
-    adj = rng.random((1, len(lights), cams[0].height, cams[0].width, 3))
-    res = render(sc, cams, lights, st, adjoint=adj)
-    g = res.grad
-    fd = np.zeros_like(g)
-    for p in range(layout.size):
-        h = 1e-5 * max(abs(x0[p]), 0.05)
-        vals = []
-        for sgn in (1, -1):
-            x = x0.copy()
-            x[p] += sgn * h
-            img = render(vector_to_scene(sc, x, layout), cams, lights, st, sampling_scene=sc).images
-            vals.append(np.sum(adj * img))
-        fd[p] = (vals[0] - vals[1]) / (2 * h)
-    return layout, g, fd
+from material_structures.core.teeth.gradient_check import fd_check
 
 
 def test_every_gradient_component_matches_central_differences():

@@ -1,0 +1,83 @@
+"""``bench teeth``: path throughput, time per optimisation iteration, gradient FD check and the
+parameter-recovery acceptance fit (2 teeth, 3 cameras at 96 x 64, 54 lights, perturbed start).
+
+Environment: TEETH_BENCH_ITERATIONS (default 80) and TEETH_BENCH_SYNTH_SPP (default 8) size the
+recovery fit; TEETH_BENCH_RECOVERY=0 skips it.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.dentin.albedo", "tooth*.c")
+
+
+def recovery_errors(fit_scene, truth) -> dict:
+    s_err, a_err, c_err = [], [], []
+    for t, g in zip(fit_scene.teeth, truth.teeth, strict=True):
+        for part in ("enamel", "dentin"):
+            mf, mg = getattr(t, part), getattr(g, part)
+            s_err.append(np.abs(mf.sigma_t / mg.sigma_t - 1).max())
+            a_err.append(np.abs(mf.albedo / mg.albedo - 1).max())
+        c_err.append(np.abs(t.c - g.c).max())
+    return {"recovery_sigma_t_rel_err": float(max(s_err)), "recovery_albedo_rel_err": float(max(a_err)),
+            "recovery_dentin_abs_err": float(max(c_err))}
+
+
+def acceptance_setup(synth_spp: int = 8, seed: int = 12345):
+    from material_structures.core.teeth.capture import default_rig
+    from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
+
+    truth = make_scene(n_teeth=2)
+    cams, lights = default_rig(target=scene_target(truth), width=96, height=64, fov_x_deg=4.8)
+    capture = render_capture(truth, cams, lights, spp=synth_spp, spp_background=0, seed=seed)
+    return truth, capture
+
+
+def bench_teeth() -> dict:
+    from material_structures.core.teeth.gradient_check import fd_check
+    from material_structures.core.teeth.optimise import FitSettings, fit, iteration_gradient
+    from material_structures.core.teeth.param_vector import ParamLayout
+    from material_structures.core.teeth.path_tracer import RenderSettings
+    from material_structures.core.teeth.synthetic import perturbed_start
+
+    out: dict = {}
+    layout, g, fd = fd_check()
+    out["fd_max_rel_err"] = float(np.max(np.abs(g - fd) / np.abs(fd)))
+    out["fd_components"] = int(layout.size)
+
+    t0 = time.perf_counter()
+    truth, capture = acceptance_setup(int(os.environ.get("TEETH_BENCH_SYNTH_SPP", "8")))
+    out["synth_seconds"] = time.perf_counter() - t0
+    start = perturbed_start(truth, seed=1)
+    settings = FitSettings(iterations=int(os.environ.get("TEETH_BENCH_ITERATIONS", "80")), lr=0.05,
+                           lr_decay=0.02, spp=1, lights_per_iteration=18, free=RECOVERY_FREE)
+    # throughput: forward pass and forward + gradient pass of one optimisation iteration
+    lay = ParamLayout(start)
+    st = RenderSettings(spp=settings.spp, max_depth=settings.max_depth)
+    ids = np.arange(0, 54, 3)
+    t0 = time.perf_counter()
+    _, _, stats = iteration_gradient(start, capture, ids, st, 0, lay)
+    it_time = time.perf_counter() - t0
+    out["seconds_per_iteration"] = it_time
+    out["iteration_config"] = "2 teeth, 3 cameras 96x64 (masked pixels), 18 of 54 lights, 1 spp, 2 passes"
+    half = stats["path_vertices"] / 2
+    out["path_vertices_per_second"] = {
+        "forward": half / stats["render_seconds"],
+        "forward_and_gradient": half / stats["gradient_seconds"],
+    }
+    out["lights_per_path_vertex"] = len(ids)
+    if os.environ.get("TEETH_BENCH_RECOVERY", "1") != "0":
+        t0 = time.perf_counter()
+        best, log = fit(start, capture, settings)
+        out["recovery_seconds"] = time.perf_counter() - t0
+        out["recovery_iterations"] = len(log)
+        out.update(recovery_errors(best, truth))
+        out["recovery_start"] = recovery_errors(start, truth)
+    return out
+
+
+BENCHMARKS = {"teeth": bench_teeth}

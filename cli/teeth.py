@@ -1,0 +1,147 @@
+"""``teeth``: synthetic captures, appearance fitting and rendering of the teeth model (chapter 5).
+
+    python -m material_structures teeth synth OUT [--teeth 2] [--width 96 --height 64] [--spp 16]
+    python -m material_structures teeth fit CAPTURE_DIR --out FIT_DIR [--iterations 100] [--resume]
+    python -m material_structures teeth render SCENE_JSON CAPTURE_DIR --out DIR
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("teeth", help="teeth appearance model: synthetic captures, fitting, rendering")
+    tsub = p.add_subparsers(dest="teeth_command", metavar="ACTION", required=True)
+
+    s = tsub.add_parser("synth", help="render a synthetic capture of a known ground truth")
+    s.add_argument("out", help="output capture folder (capture.json, images/, masks/, scene.json)")
+    s.add_argument("--teeth", type=int, default=2, help="number of teeth (incisor, canine, premolar, molar)")
+    s.add_argument("--width", type=int, default=96)
+    s.add_argument("--height", type=int, default=64)
+    s.add_argument("--lights", type=int, default=54)
+    s.add_argument("--cameras", type=int, default=3)
+    s.add_argument("--spp", type=int, default=16, help="samples per masked (tooth) pixel")
+    s.add_argument("--spp-background", type=int, default=2, help="samples per other pixel")
+    s.add_argument("--resolution", type=int, default=32, help="tooth mesh resolution")
+    s.add_argument("--seed", type=int, default=12345)
+    s.set_defaults(func=run_synth)
+
+    f = tsub.add_parser("fit", help="fit the appearance model to a capture folder")
+    f.add_argument("capture", help="capture folder with capture.json, images, masks and scene.json")
+    f.add_argument("--out", required=True, help="fit folder: checkpoint.json, loss.json, loss.png, scene_fit.json")
+    f.add_argument("--scene", default=None, help="scene JSON with geometry/start (default CAPTURE/scene.json)")
+    f.add_argument("--init", choices=("literature", "scene", "perturbed"), default="literature",
+                   help="start point: literature-table search (thesis), the scene's values, or a "
+                        "perturbation of them (recovery tests)")
+    f.add_argument("--iterations", type=int, default=100, help='"homogeneous" phase iterations')
+    f.add_argument("--textured-iterations", type=int, default=0, help='"textured" phase iterations')
+    f.add_argument("--texture-size", type=int, default=8)
+    f.add_argument("--lr", type=float, default=0.05)
+    f.add_argument("--lr-decay", type=float, default=0.02)
+    f.add_argument("--spp", type=int, default=1)
+    f.add_argument("--lights-per-iteration", type=int, default=18)
+    f.add_argument("--max-depth", type=int, default=5)
+    f.add_argument("--free", default=None,
+                   help="comma-separated parameter name patterns to optimise (default: all volume, a_t, c)")
+    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--resume", action="store_true", help="continue from FIT_DIR/checkpoint.json")
+    f.add_argument("--no-progress", action="store_true")
+    f.set_defaults(func=run_fit)
+
+    r = tsub.add_parser("render", help="render a scene JSON with the cameras/lights of a capture")
+    r.add_argument("scene")
+    r.add_argument("capture")
+    r.add_argument("--out", required=True)
+    r.add_argument("--spp", type=int, default=16)
+    r.add_argument("--seed", type=int, default=1)
+    r.set_defaults(func=run_render)
+
+
+def run_synth(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..core.teeth.capture import default_rig
+    from ..core.teeth.synthetic import make_scene, render_capture, scene_target
+
+    if args.teeth < 1 or args.width < 4 or args.height < 4 or args.spp < 1:
+        raise ValueError("need --teeth >= 1, --width/--height >= 4 and --spp >= 1")
+    scene = make_scene(n_teeth=args.teeth, resolution=args.resolution)
+    span = max(12.0, 8.6 * args.teeth + 6.0)
+    fov = 2.0 * __import__("math").degrees(__import__("math").atan(0.5 * span / 300.0))
+    cams, lights = default_rig(target=scene_target(scene), width=args.width, height=args.height,
+                               n_lights=args.lights, n_cameras=args.cameras, fov_x_deg=fov)
+    with tqdm(total=2 * len(lights), desc="synth", unit="light-pass") as bar:
+        cap = render_capture(scene, cams, lights, args.spp, args.spp_background, args.seed,
+                             progress=bar.update)
+    cap.save(args.out, scene.to_dict())
+    print(f"wrote {len(cams)} x {len(lights)} images and masks to {args.out}")
+    return 0
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..core.teeth.capture import Capture
+    from ..core.teeth.literature_init import literature_start
+    from ..core.teeth.optimise import DEFAULT_FREE, FitSettings, fit, plot_loss
+    from ..core.teeth.scene import load_scene
+    from ..core.teeth.synthetic import perturbed_start
+
+    cap = Capture.load(args.capture)
+    scene_path = args.scene or os.path.join(args.capture, "scene.json")
+    scene = load_scene(scene_path)
+    if len(cap.cameras) == 0 or len(cap.lights) == 0:
+        raise ValueError("the capture has no cameras or lights")
+    free = tuple(p.strip() for p in args.free.split(",")) if args.free else DEFAULT_FREE
+    fs = FitSettings(iterations=args.iterations, textured_iterations=args.textured_iterations,
+                     texture_size=args.texture_size, lr=args.lr, lr_decay=args.lr_decay, spp=args.spp,
+                     max_depth=args.max_depth, lights_per_iteration=args.lights_per_iteration, seed=args.seed,
+                     free=free)
+    if not args.resume:
+        if args.init == "literature":
+            scene = literature_start(scene, cap)
+        elif args.init == "perturbed":
+            scene = perturbed_start(scene, seed=args.seed)
+    total = fs.iterations + fs.textured_iterations
+    bar = None if args.no_progress else tqdm(total=total, desc="fit", unit="it")
+
+    def progress(entry):
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(loss=f"{entry['loss']:.3e}", best=f"{entry['best_loss']:.3e}", phase=entry["phase"])
+
+    os.makedirs(args.out, exist_ok=True)
+    if args.resume and bar is not None:
+        with open(os.path.join(args.out, "checkpoint.json")) as f:
+            bar.update(len(json.load(f)["log"]))
+    best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress)
+    if bar is not None:
+        bar.close()
+    plot_loss(log, os.path.join(args.out, "loss.png"))
+    print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json, loss.json, loss.png")
+    return 0
+
+
+def run_render(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from ..core.exr_io import write_exr
+    from ..core.teeth.capture import Capture
+    from ..core.teeth.path_tracer import RenderSettings, render
+    from ..core.teeth.scene import load_scene
+
+    scene = load_scene(args.scene)
+    cap = Capture.load(args.capture)
+    os.makedirs(args.out, exist_ok=True)
+    for l0 in range(0, len(cap.lights), 9):
+        ids = np.arange(l0, min(l0 + 9, len(cap.lights)))
+        res = render(scene, cap.cameras, cap.lights, RenderSettings(spp=args.spp, seed=args.seed + l0),
+                     light_ids=ids)
+        for c in range(len(cap.cameras)):
+            for k, li in enumerate(ids):
+                write_exr(os.path.join(args.out, f"cam{c}_light{li}.exr"), res.images[c, k])
+    print(f"wrote {len(cap.cameras) * len(cap.lights)} images to {args.out}")
+    return 0

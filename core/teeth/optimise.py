@@ -1,0 +1,245 @@
+"""Inverse rendering: L2 loss, Adam (eq. 2.38-2.39), best-loss tracking, "homogeneous" then
+"textured" phases, checkpoints and resume (thesis Sec. 5.6-5.7).
+
+Each iteration renders the image C with one seed (pass A), forms d rho / d C = 2 (C - C_ref) / M over
+the masked pixels (L2 loss, eq. 5.7-5.8), and traces the gradient pass with an independent seed
+(pass B), as in the thesis ("two independently seeded rendering passes"). A random subset of the
+lights is used per iteration (stochastic gradient). The physical gradient is mapped to the dual
+domains xi = log sigma_t (eq. 5.24), kappa = log10(1 - albedo) (eq. 5.22) and Adam steps them. The
+parameters with the lowest loss seen are kept ("we keep track of the lowest loss value").
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import os
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .capture import Capture
+from .compiled_scene import CompiledScene
+from .param_vector import (
+    ParamLayout,
+    chain_to_optimiser,
+    from_optimiser,
+    scene_to_vector,
+    to_optimiser,
+    vector_to_scene,
+)
+from .path_tracer import RenderSettings, render
+from .scene import TeethScene
+
+DEFAULT_FREE = ("*.sigma_t", "*.albedo", "*.g1", "*.g2", "*.beta", "*.a_t", "*.c")
+
+
+@dataclass
+class FitSettings:
+    iterations: int = 100  # "homogeneous" phase
+    textured_iterations: int = 0  # "textured" phase (a_t becomes a texture_size^2 texture)
+    texture_size: int = 8
+    lr: float = 0.03
+    b1: float = 0.9
+    b2: float = 0.999
+    eps: float = 1e-8
+    spp: int = 1
+    max_depth: int = 5
+    lights_per_iteration: int = 18
+    seed: int = 0
+    free: tuple = DEFAULT_FREE  # fnmatch patterns of parameter names to optimise
+    checkpoint_every: int = 5
+    lr_decay: float = 0.0  # lr_n = lr / (1 + lr_decay * n)
+
+
+@dataclass
+class Adam:
+    """Adam with bias correction (Kingma and Ba 2014; thesis eq. 2.38-2.39)."""
+
+    lr: float
+    b1: float = 0.9
+    b2: float = 0.999
+    eps: float = 1e-8
+    m: np.ndarray | None = None
+    v: np.ndarray | None = None
+    n: int = 0
+
+    def step(self, y: np.ndarray, g: np.ndarray, lr: float | None = None) -> np.ndarray:
+        if self.m is None:
+            self.m = np.zeros_like(y)
+            self.v = np.zeros_like(y)
+        self.n += 1
+        self.m = self.b1 * self.m + (1 - self.b1) * g
+        self.v = self.b2 * self.v + (1 - self.b2) * g * g
+        mh = self.m / (1 - self.b1**self.n)
+        vh = self.v / (1 - self.b2**self.n)
+        return y - (self.lr if lr is None else lr) * mh / np.sqrt(vh + self.eps)
+
+
+def l2_loss(images: np.ndarray, reference: np.ndarray, masks: np.ndarray) -> tuple[float, np.ndarray]:
+    """rho = mean over masked pixels, lights and channels of (C - C_ref)^2 and d rho / d C."""
+    w = np.broadcast_to(masks[:, None, :, :, None], images.shape).astype(np.float64)
+    m = max(w.sum(), 1.0)
+    diff = (images - reference) * w
+    return float(np.sum(diff * diff) / m), 2.0 * diff / m
+
+
+def free_mask(layout: ParamLayout, patterns) -> np.ndarray:
+    mask = np.zeros(layout.size, dtype=bool)
+    for e in layout.entries:
+        if any(fnmatch.fnmatch(e.name, p) for p in patterns):
+            mask[e.start:e.start + e.size] = True
+    return mask
+
+
+def texture_phase_scene(scene: TeethScene, size: int) -> TeethScene:
+    """Upsample every a_t to a size x size texture (constant), starting the "textured" phase."""
+    out = scene.copy()
+    for t in out.teeth:
+        t.a_t = np.broadcast_to(t.a_t.reshape(-1, 3).mean(axis=0), (size, size, 3)).copy()
+    if out.gums is not None:
+        out.gums.a_t = np.broadcast_to(out.gums.a_t.reshape(-1, 3).mean(axis=0), (size, size, 3)).copy()
+    return out
+
+
+@dataclass
+class FitState:
+    phase: str
+    iteration: int
+    scene: dict
+    y: list
+    adam_m: list | None
+    adam_v: list | None
+    adam_n: int
+    best_loss: float
+    best_scene: dict
+    log: list = field(default_factory=list)
+
+
+def _save_json(path: str, obj) -> None:
+    tmp = f"{path}.tmp"
+    with open(tmp, "w") as f:
+        json.dump(obj, f)
+    os.replace(tmp, path)
+
+
+def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarray, st: RenderSettings,
+                       seed: int, layout: ParamLayout) -> tuple[float, np.ndarray, dict]:
+    """One stochastic loss + gradient evaluation (pass A image, pass B gradient)."""
+    pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
+    cs = CompiledScene(scene, layout=layout)
+    ref = capture.images[:, light_ids].astype(np.float64)
+    sa = RenderSettings(st.spp, st.max_depth, 2 * seed, st.chunk, True)
+    ra = render(scene, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids, compiled=cs)
+    loss, adj = l2_loss(ra.images, ref, capture.masks)
+    sb = RenderSettings(st.spp, st.max_depth, 2 * seed + 1, st.chunk, True)
+    rb = render(scene, capture.cameras, capture.lights, sb, pixels=pixels, light_ids=light_ids, adjoint=adj,
+                compiled=cs)
+    stats = {"path_vertices": ra.stats["path_vertices"] + rb.stats["path_vertices"],
+             "render_seconds": ra.stats["seconds"], "gradient_seconds": rb.stats["seconds"]}
+    return loss, rb.grad, stats
+
+
+def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str | None = None,
+        resume: bool = False, progress: Callable | None = None) -> tuple[TeethScene, list]:
+    """Fit ``scene``'s free parameters to ``capture``; returns (best scene, log).
+
+    With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json``,
+    ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint.
+    """
+    if capture.images is None or capture.masks is None:
+        raise ValueError("the capture needs images and masks to fit")
+    s = settings
+    phases = [("homogeneous", s.iterations)]
+    if s.textured_iterations > 0:
+        phases.append(("textured", s.textured_iterations))
+    st = RenderSettings(spp=s.spp, max_depth=s.max_depth)
+    state: FitState | None = None
+    ckpt = None if out_dir is None else os.path.join(out_dir, "checkpoint.json")
+    if out_dir is not None:
+        os.makedirs(out_dir, exist_ok=True)
+    if resume:
+        if ckpt is None or not os.path.exists(ckpt):
+            raise FileNotFoundError(f"no checkpoint to resume from in {out_dir!r}")
+        with open(ckpt) as f:
+            state = FitState(**json.load(f))
+    log = [] if state is None else state.log
+    best_loss = np.inf if state is None else state.best_loss
+    best_scene = scene if state is None else TeethScene.from_dict(state.best_scene)
+    cur = scene if state is None else TeethScene.from_dict(state.scene)
+    n_l = min(s.lights_per_iteration, len(capture.lights))
+    names = [p for p, _ in phases]
+    start_phase = 0 if state is None else names.index(state.phase)
+    for pi, (phase, n_it) in enumerate(phases):
+        if pi < start_phase:
+            continue
+        start_it = 0
+        if state is not None:
+            start_it = state.iteration
+            layout = ParamLayout(cur)
+            y = np.array(state.y)
+            opt = Adam(s.lr, s.b1, s.b2, s.eps, None if state.adam_m is None else np.array(state.adam_m),
+                       None if state.adam_v is None else np.array(state.adam_v), state.adam_n)
+            state = None
+        else:
+            if phase == "textured":
+                cur = texture_phase_scene(best_scene, s.texture_size)
+                best_scene = texture_phase_scene(best_scene, s.texture_size)
+            layout = ParamLayout(cur)
+            y = to_optimiser(scene_to_vector(cur, layout), layout)
+            opt = Adam(s.lr, s.b1, s.b2, s.eps)
+        free = free_mask(layout, s.free)
+        if not free.any():
+            raise ValueError(f"no parameter matches the free patterns {s.free!r}")
+        for it in range(start_it, n_it):
+            t0 = time.perf_counter()
+            rng = np.random.default_rng([s.seed, pi, it])
+            light_ids = np.sort(rng.choice(len(capture.lights), n_l, replace=False))
+            x = from_optimiser(y, layout)
+            cur = vector_to_scene(cur, x, layout)
+            loss, g_phys, stats = iteration_gradient(cur, capture, light_ids, st,
+                                                     s.seed * 100003 + 10007 * pi + it, layout)
+            if loss < best_loss:
+                best_loss = loss
+                best_scene = cur.copy()
+            g = chain_to_optimiser(g_phys, y, layout)
+            g[~free] = 0.0
+            lr = s.lr / (1.0 + s.lr_decay * it)
+            y_new = opt.step(y, g, lr)
+            y = np.where(free, y_new, y)
+            entry = {"phase": phase, "iteration": it, "loss": loss, "best_loss": best_loss,
+                     "seconds": time.perf_counter() - t0, "lights": light_ids.tolist(), **stats}
+            log.append(entry)
+            if progress is not None:
+                progress(entry)
+            last = it == n_it - 1
+            if out_dir is not None and ((it + 1) % s.checkpoint_every == 0 or last):
+                cur_scene = vector_to_scene(cur, from_optimiser(y, layout), layout)
+                _save_json(ckpt, asdict(FitState(phase, it + 1, cur_scene.to_dict(), y.tolist(),
+                                                 opt.m.tolist(), opt.v.tolist(), opt.n, best_loss,
+                                                 best_scene.to_dict(), log)))
+                _save_json(os.path.join(out_dir, "loss.json"), {"log": log, "settings": asdict(s)})
+                _save_json(os.path.join(out_dir, "scene_fit.json"), best_scene.to_dict())
+        cur = vector_to_scene(cur, from_optimiser(y, layout), layout)
+    return best_scene, log
+
+
+def plot_loss(log: list, path: str) -> None:
+    """Loss per iteration (and best loss) as a PNG, like the thesis' Fig. 5.14-5.16."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    it = np.arange(len(log))
+    ax.semilogy(it, [e["loss"] for e in log], label="loss (L2)")
+    ax.semilogy(it, [e["best_loss"] for e in log], label="best loss")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("loss")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
