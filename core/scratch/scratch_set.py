@@ -168,7 +168,9 @@ def make_scratch_set(
     The query radius is ``max_footprint_um + 4 sigma``: footprints with a semi-major axis up to
     ``max_footprint_um`` are evaluated exactly. The cell size defaults to half the query radius.
     """
-    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    seg = np.asarray(segments, dtype=np.float64)
+    if seg.ndim != 2 or seg.shape[1] != 4:
+        raise ValueError(f"segments must have shape (M, 4) = x0, y0, x1, y1; got {seg.shape}")
     m = seg.shape[0]
     q = float(max_footprint_um) + 4.0 * float(sigma_um)
     c = float(cell_size_um) if cell_size_um is not None else 0.5 * q
