@@ -226,13 +226,22 @@ def levenberg_marquardt(s: Samples, values: np.ndarray, quat: np.ndarray, sigma:
     ks, kd_, cost = optimal_albedos(_trial_moments(kd, u, quat, y), ee, ey, yy)
     lam = np.full(t, 1e-2) if lam0 is None else np.array(lam0, dtype=np.float64)
     active = np.ones(t, dtype=bool)
+    # converged to the float32 precision floor of the model evaluation: nothing left to gain
+    floor = 1e-12 * yy.sum(axis=1)
+    # B^T B and B^T Y only change where a step was accepted: cache them per texel
+    m_all, by_all = np.empty((t, 7, 7)), np.empty((t, 7, 3))
+    stale = np.ones(t, dtype=bool)
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007
         idx = np.flatnonzero(active)
         if idx.size == 0:
             break
         ya = y[idx]
-        m, by = _normal_moments(kd, u[idx], quat[idx], ya)
+        upd = idx[stale[idx]]
+        if upd.size:
+            m_all[upd], by_all[upd] = _normal_moments(kd, u[upd], quat[upd], y[upd])
+            stale[upd] = False
+        m, by = m_all[idx], by_all[idx]
         ksa, kda = ks[idx], kd_[idx]
         # gradient of 0.5 * sum r^2 w.r.t. theta: sum_c ks_c (ks_c M_tG + kd_c M_tE - (B^T Y)_tc)
         grad = (np.sum(ksa * ksa, 1)[:, None] * m[:, :5, 5] + np.sum(ksa * kda, 1)[:, None] * m[:, :5, 6]
@@ -261,8 +270,9 @@ def levenberg_marquardt(s: Samples, values: np.ndarray, quat: np.ndarray, sigma:
         ai = idx[acc]
         u[ai], quat[ai], ks[ai], kd_[ai], cost[ai] = (u_new[acc], q_new[acc], ks_new[acc], kd_new[acc],
                                                       cost_new[acc])
+        stale[ai] = True
         lam[idx] = np.where(acc, np.maximum(la * 0.3, 1e-7), la * 4.0)
         rel = (old - cost_new) / np.maximum(old, 1e-300)
-        done = (acc & (rel < tol)) | (lam[idx] > 1e8) | (old <= 1e-30)
+        done = (acc & (rel < tol)) | (lam[idx] > 1e8) | (cost[idx] <= floor[idx])
         active[idx[done]] = False
     return LmResult(quat=quat, sigma=np.exp(u), ks=ks, kd=kd_, cost=0.5 * cost, iterations=it, lam=lam)
