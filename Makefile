@@ -8,14 +8,15 @@ STAMP := $(VENV)/.material-structures-stamp
 CSTAMP := $(CVENV)/.material-structures-stamp
 PYTEST_JOBS ?=
 
-.PHONY: setup setup-compat test test-all test-compat lint demo build bench refs clean help
+.PHONY: setup setup-compat test test-all test-compat lint demo library build bench refs clean help
 
 help:
 	@echo "make demo        set up and render the sample library into out/"
 	@echo "make test        set up and run lint + the default test suite (Blender 5.2 LTS)"
 	@echo "make test-all    also the slow suites (-m slow)"
 	@echo "make test-compat Blender-side smoke tests on Blender 4.5 LTS (CPython 3.11)"
-	@echo "make build       installable extension zip in dist/"
+	@echo "make library     (re)build the artist asset library in samples/library"
+	@echo "make build       installable extension zip in dist/ (includes the asset library)"
 	@echo "make bench       every benchmark into bench/results/NAME.json"
 	@echo "make refs        regenerate the render-regression reference EXRs (deliberately)"
 
@@ -42,8 +43,13 @@ test-compat: $(CSTAMP)
 
 demo: $(STAMP)
 	$(PY) -m material_structures demo --out out
+	$(PY) -m material_structures library build
+
+library: $(STAMP)
+	$(PY) -m material_structures library build
 
 build: $(STAMP)
+	@test -f samples/library/material_structures_library.blend || $(PY) -m material_structures library build
 	$(PY) -m material_structures build --out dist
 
 bench: $(STAMP)

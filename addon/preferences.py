@@ -15,6 +15,7 @@ class MS_Preferences(bpy.types.AddonPreferences):
         layout = self.layout
         layout.label(text="Material Structures: pile fabric, scratched metal, teeth (Cycles + OSL)")
         layout.operator("material_structures.setup_cycles_osl", icon="SHADING_RENDERED")
+        layout.operator("material_structures.register_asset_library", icon="ASSET_MANAGER")
 
 
 CLASSES: list[type] = [MS_Preferences]

@@ -11,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-SUBCOMMANDS = ("render", "build", "bench", "demo", "fabric", "scratch", "teeth")
+SUBCOMMANDS = ("render", "build", "bench", "demo", "library", "fabric", "scratch", "teeth")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -11,7 +11,7 @@ import time
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="render the sample library into out/ with a contact sheet")
     p.add_argument("--out", default="out", help="output folder (default: out)")
-    p.add_argument("--only", nargs="*", default=None, help="render only these scenes")
+    p.add_argument("--only", nargs="*", default=None, help="render only these scenes / library materials")
     p.add_argument("--scale", type=float, default=1.0, help="resolution scale factor")
     p.set_defaults(func=run)
 
@@ -26,23 +26,37 @@ def run(args: argparse.Namespace) -> int:
     from ..render.contact_sheet import contact_sheet
     from .render import save_image
 
-    names = args.only or library.available_scenes()
-    unknown = sorted(set(names) - set(library.available_scenes()))
-    if unknown:
-        raise ValueError(f"unknown scene(s) {unknown}; available: {library.available_scenes()}")
+    # Every library material on the standard preview stage, then the showcase scenes.
+    items = [("material", n) for n in library.available_materials()] + [
+        ("scene", n) for n in library.available_scenes()
+    ]
+    if args.only:
+        known = {n for _, n in items}
+        unknown = sorted(set(args.only) - known)
+        if unknown:
+            raise ValueError(f"unknown scene(s)/material(s) {unknown}; available: {sorted(known)}")
+        items = [it for it in items if it[1] in args.only]
     os.makedirs(args.out, exist_ok=True)
     workdir = os.path.join(args.out, "work")
     images, labels = [], []
     start = time.monotonic()
-    for name in tqdm(names, desc="rendering library", unit="scene", file=sys.stderr):
-        entry = library.SCENES[name]
-        res = tuple(max(8, int(round(v * args.scale))) for v in entry.resolution)
-        rgba = library.render_library_scene(name, workdir, res, None, os.path.join(args.out, f"{name}.exr"))
-        save_image(os.path.join(args.out, f"{name}.png"), rgba)
+    for kind, name in tqdm(items, desc="rendering library", unit="image", file=sys.stderr):
+        slug = "".join(c.lower() if c.isalnum() else "-" for c in name).strip("-")
+        exr = os.path.join(args.out, f"{kind}-{slug}.exr")
+        if kind == "material":
+            res = tuple(max(8, int(round(v * args.scale))) for v in (160, 120))
+            rgba = library.render_material_preview(name, workdir, res, 16, exr)
+            label = f"{library.MATERIALS[name].catalog.split('/')[0]}: {library.MATERIALS[name].label}"
+        else:
+            entry = library.SCENES[name]
+            res = tuple(max(8, int(round(v * args.scale))) for v in entry.resolution)
+            rgba = library.render_library_scene(name, workdir, res, None, exr)
+            label = entry.label
+        save_image(exr[:-4] + ".png", rgba)
         images.append(rgba)
-        labels.append(entry.label)
+        labels.append(label)
     sheet = contact_sheet(images, labels)
     sheet_path = os.path.join(args.out, "library.png")
     sheet.save(sheet_path)
-    print(f"{len(names)} scenes in {time.monotonic() - start:.1f} s -> {sheet_path}")
+    print(f"{len(items)} images in {time.monotonic() - start:.1f} s -> {sheet_path}")
     return 0

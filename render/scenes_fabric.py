@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .library import LibraryScene, register_scene
+from .library import LibraryMaterial, LibraryScene, register_material, register_scene
 from .stage import add_studio_stage
 
 MAP_SIZE = 256
@@ -29,13 +29,13 @@ def _preset_maps(preset: str, size: int = MAP_SIZE, seed: int = 0):
     )
 
 
-def _fabric_object(obj, maps, name, scene, strokes=()):
-    """Give ``obj`` a mapped fabric material; ``strokes``: list of (uv points, BrushSettings)."""
+def _mapped_material(maps, name, scene, strokes=(), btf_frame=False):
+    """A mapped fabric material; ``strokes``: list of (uv points, BrushSettings) brushed into it."""
     from ..addon.fabric.brushing import BrushSession
     from ..addon.fabric.maps import maps_to_images
     from ..addon.fabric.material import create_fabric_material
 
-    images = maps_to_images(maps, name, btf_frame=False)
+    images = maps_to_images(maps, name, btf_frame=btf_frame)
     if strokes:
         session = BrushSession(images)
         for points, settings in strokes:
@@ -44,11 +44,82 @@ def _fabric_object(obj, maps, name, scene, strokes=()):
                 session.segment(a, b, settings)
             session.end_stroke()
         session.flush()
-    mat = create_fabric_material(name, maps=images, scene=scene)
+        session.pack()
+    return create_fabric_material(name, maps=images, scene=scene)
+
+
+def _wear(obj, mat):
     obj.data.materials.append(mat)
     for poly in obj.data.polygons:
         poly.use_smooth = True
-    return mat
+
+
+def velvet_material(scene, workdir: str = ""):
+    """Velvet with three combed strokes (the pile turned by the brushing tool)."""
+    from ..addon.fabric.brushing import BrushSettings
+
+    t = np.linspace(0.0, 1.0, 40)
+    comb = BrushSettings(mode="COMB", radius=0.06, strength=1.0, fibre_length=2.0)
+    strokes = [
+        (np.stack([0.05 + 0.9 * t, 0.62 + 0.05 * np.sin(9 * t)], -1), comb),
+        (np.stack([0.95 - 0.9 * t, 0.72 + 0.04 * np.sin(7 * t)], -1), comb),
+        (np.stack([0.3 + 0.02 * np.sin(5 * t), 0.52 + 0.4 * t], -1), comb),
+    ]
+    return _mapped_material(_preset_maps("VELVET"), "Velvet (brushed)", scene, strokes)
+
+
+def corduroy_material(scene, workdir: str = ""):
+    """Corduroy: ridges (wales) across u, the pile leaning to either flank of each ridge."""
+    from ..addon.fabric.presets import tilted_quat
+    from ..core.fabric.parameter_maps import make_maps
+
+    maps = _preset_maps("CORDUROY", seed=1)
+    u = (np.arange(MAP_SIZE) + 0.5) / MAP_SIZE
+    phase = (u * 24.0) % 1.0
+    lean = np.where(phase < 0.5, 1.0, -1.0) * 25.0 * np.abs(np.sin(np.pi * phase * 2.0))
+    quats = np.stack([tilted_quat(abs(a), 0.0 if a >= 0 else 180.0) for a in lean])
+    basis = np.broadcast_to(quats[None, :, :], (MAP_SIZE, MAP_SIZE, 4))
+    groove = (np.abs(phase - 0.5) > 0.42)[None, :, None]
+    kd = np.where(groove, maps.kd * 0.5, maps.kd)
+    maps = make_maps(kd=kd, ks=maps.ks, sigma=maps.sigma, basis=basis)
+    return _mapped_material(maps, "Corduroy", scene)
+
+
+def plush_material(scene, workdir: str = ""):
+    """Plush: 30 degree pile whose lean direction varies smoothly (clumps)."""
+    from scipy.ndimage import zoom
+
+    from ..addon.fabric.presets import tilted_quat
+    from ..core.fabric.parameter_maps import make_maps
+
+    maps = _preset_maps("PLUSH", seed=2)
+    rng = np.random.default_rng(7)
+    coarse = np.radians(rng.uniform(0.0, 360.0, size=(8, 8)))
+    c, s = (zoom(f(coarse), MAP_SIZE / 8, order=1, mode="grid-wrap", grid_mode=True) for f in (np.cos, np.sin))
+    az = np.degrees(np.arctan2(s, c))
+    quats = np.stack([tilted_quat(30.0, a) for a in az.ravel()]).reshape(MAP_SIZE, MAP_SIZE, 4)
+    maps = make_maps(kd=maps.kd, ks=maps.ks, sigma=maps.sigma, basis=quats)
+    return _mapped_material(maps, "Plush", scene)
+
+
+def fitted_material(scene, workdir: str):
+    """Fitted from a synthetic BTF (16 x 16 texels, 12 x 12 light-view pairs) with the core fitter,
+    then imported like any fit folder (basis converted from the BTF frame)."""
+    import os
+
+    from ..core.fabric.btf_fitter import fit_btf
+    from ..core.fabric.btf_io import save_btf
+    from ..core.fabric.synthetic_btf import light_view_pairs, render_btf, synthetic_maps
+
+    fit_dir = os.path.join(workdir, "synthetic-fabric-fit")
+    if not os.path.isfile(os.path.join(fit_dir, "params.json")):
+        truth = synthetic_maps(16, 16, seed=11)
+        wi, wo = light_view_pairs(12, 12)
+        btf_path = save_btf(os.path.join(workdir, "synthetic-fabric.npz"), render_btf(truth, wi, wo), wi, wo)
+        fit_btf(btf_path, fit_dir, tile=16, workers=1, progress=False, keep_cache=False)
+    from ..addon.fabric.maps import load_fit_folder
+
+    return _mapped_material(load_fit_folder(fit_dir), "Fitted Satin (synthetic BTF)", scene, btf_frame=True)
 
 
 def _key_lamp(scene, location=(2.5, -2.0, 3.0), power=900.0):
@@ -73,20 +144,11 @@ def _finish(scene):
 def build_velvet_cushion(scene, workdir: str) -> None:
     import bpy
 
-    from ..addon.fabric.brushing import BrushSettings
-
     add_studio_stage(scene, target=(0.0, 0.0, 0.35))
     bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0.0, 0.0, 0.38), segments=64, ring_count=32)
     cushion = bpy.context.active_object
     cushion.scale = (1.15, 1.15, 0.38)
-    t = np.linspace(0.0, 1.0, 40)
-    comb = BrushSettings(mode="COMB", radius=0.06, strength=1.0, fibre_length=2.0)
-    strokes = [
-        (np.stack([0.05 + 0.9 * t, 0.62 + 0.05 * np.sin(9 * t)], -1), comb),
-        (np.stack([0.95 - 0.9 * t, 0.72 + 0.04 * np.sin(7 * t)], -1), comb),
-        (np.stack([0.3 + 0.02 * np.sin(5 * t), 0.52 + 0.4 * t], -1), comb),
-    ]
-    _fabric_object(cushion, _preset_maps("VELVET"), "Velvet Cushion", scene, strokes)
+    _wear(cushion, velvet_material(scene))
     _key_lamp(scene)
     _finish(scene)
 
@@ -94,25 +156,11 @@ def build_velvet_cushion(scene, workdir: str) -> None:
 def build_corduroy_bolster(scene, workdir: str) -> None:
     import bpy
 
-    from ..addon.fabric.presets import tilted_quat
-
     add_studio_stage(scene, target=(0.0, 0.0, 0.5))
     bpy.ops.mesh.primitive_cylinder_add(radius=0.5, depth=2.2, location=(0.0, 0.0, 0.5), vertices=96)
     bolster = bpy.context.active_object
     bolster.rotation_euler = (0.0, math.radians(90.0), math.radians(25.0))
-    maps = _preset_maps("CORDUROY", seed=1)
-    # Wales: ridges across u; the pile leans to either flank of each ridge.
-    u = (np.arange(MAP_SIZE) + 0.5) / MAP_SIZE
-    phase = (u * 24.0) % 1.0
-    lean = np.where(phase < 0.5, 1.0, -1.0) * 25.0 * np.abs(np.sin(np.pi * phase * 2.0))
-    quats = np.stack([tilted_quat(abs(a), 0.0 if a >= 0 else 180.0) for a in lean])
-    basis = np.broadcast_to(quats[None, :, :], (MAP_SIZE, MAP_SIZE, 4))
-    groove = (np.abs(phase - 0.5) > 0.42)[None, :, None]
-    kd = np.where(groove, maps.kd * 0.5, maps.kd)
-    from ..core.fabric.parameter_maps import make_maps
-
-    maps = make_maps(kd=kd, ks=maps.ks, sigma=maps.sigma, basis=basis)
-    _fabric_object(bolster, maps, "Corduroy Bolster", scene)
+    _wear(bolster, corduroy_material(scene))
     _key_lamp(scene, location=(1.5, -2.5, 2.8))
     _finish(scene)
 
@@ -120,23 +168,9 @@ def build_corduroy_bolster(scene, workdir: str) -> None:
 def build_plush_ball(scene, workdir: str) -> None:
     import bpy
 
-    from ..addon.fabric.presets import tilted_quat
-    from ..core.fabric.parameter_maps import make_maps
-
     add_studio_stage(scene, target=(0.0, 0.0, 0.7))
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.75, location=(0.0, 0.0, 0.75), segments=64, ring_count=32)
-    ball = bpy.context.active_object
-    maps = _preset_maps("PLUSH", seed=2)
-    rng = np.random.default_rng(7)
-    # Clumps: the pile leans 30 degrees toward a direction that varies smoothly over the surface.
-    from scipy.ndimage import zoom
-
-    coarse = np.radians(rng.uniform(0.0, 360.0, size=(8, 8)))
-    c, s = (zoom(f(coarse), MAP_SIZE / 8, order=1, mode="grid-wrap", grid_mode=True) for f in (np.cos, np.sin))
-    az = np.degrees(np.arctan2(s, c))
-    quats = np.stack([tilted_quat(30.0, a) for a in az.ravel()]).reshape(MAP_SIZE, MAP_SIZE, 4)
-    maps = make_maps(kd=maps.kd, ks=maps.ks, sigma=maps.sigma, basis=quats)
-    _fabric_object(ball, maps, "Plush Ball", scene)
+    _wear(bpy.context.active_object, plush_material(scene))
     _key_lamp(scene, location=(2.0, -2.5, 3.2))
     _finish(scene)
 
@@ -144,3 +178,26 @@ def build_plush_ball(scene, workdir: str) -> None:
 register_scene(LibraryScene("fabric-velvet", "Velvet cushion (brushed)", build_velvet_cushion, samples=16))
 register_scene(LibraryScene("fabric-corduroy", "Corduroy bolster (wales)", build_corduroy_bolster, samples=16))
 register_scene(LibraryScene("fabric-plush", "Plush ball (clumped pile)", build_plush_ball, samples=16))
+
+register_material(
+    LibraryMaterial(
+        "Velvet (brushed)",
+        "Velvet",
+        "Fabric/Velvet",
+        velvet_material,
+        "SGGX pile fabric (thesis eq. 3.9), combed with the brushing tool",
+    )
+)
+register_material(
+    LibraryMaterial("Corduroy", "Corduroy", "Fabric/Corduroy", corduroy_material, "Anisotropic pile along wales")
+)
+register_material(LibraryMaterial("Plush", "Plush", "Fabric/Plush", plush_material, "Long pile leaning 30 degrees"))
+register_material(
+    LibraryMaterial(
+        "Fitted Satin (synthetic BTF)",
+        "Fitted from BTF",
+        "Fabric/Fitted",
+        fitted_material,
+        "Parameter maps fitted by the BTF fitter from a synthetic measurement",
+    )
+)

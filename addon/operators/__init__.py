@@ -1,5 +1,5 @@
 """Operators (``bl_idname`` under ``material_structures.``)."""
 
-from . import fabric, fabric_brush, scene_setup
+from . import asset_library, fabric, fabric_brush, scene_setup
 
-CLASSES: list[type] = [*scene_setup.CLASSES, *fabric.CLASSES, *fabric_brush.CLASSES]
+CLASSES: list[type] = [*scene_setup.CLASSES, *asset_library.CLASSES, *fabric.CLASSES, *fabric_brush.CLASSES]

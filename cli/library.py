@@ -1,0 +1,34 @@
+"""``library``: build the artist material library (Blender asset library) into ``samples/library``."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DEFAULT_DIR = os.path.join(ROOT, "samples", "library")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("library", help="build the material asset library (samples/library)")
+    p.add_argument("action", choices=["build", "list"], help="build the .blend + catalogs + previews, or list")
+    p.add_argument("--out", default=DEFAULT_DIR, help="library folder (default: samples/library)")
+    p.add_argument("--preview-size", type=int, default=128)
+    p.add_argument("--samples", type=int, default=16)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..render.session import prepare_user_resources
+
+    prepare_user_resources()
+    from ..render.library import MATERIALS, available_materials
+
+    if args.action == "list":
+        for name in available_materials():
+            print(f"{MATERIALS[name].catalog:28s} {name}")
+        return 0
+    from ..render.asset_library import build_asset_library
+
+    print(build_asset_library(args.out, args.preview_size, args.samples))
+    return 0

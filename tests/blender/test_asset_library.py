@@ -1,0 +1,61 @@
+"""The artist material library: asset-marked materials, catalogs, previews, registration."""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+import pytest
+
+pytest.importorskip("PIL")
+
+
+@pytest.fixture(scope="module")
+def built_library(tmp_path_factory, addon_module):
+    from material_structures.render.asset_library import build_asset_library
+
+    folder = str(tmp_path_factory.mktemp("library"))
+    path = build_asset_library(folder, preview_size=24, samples=1, progress=False)
+    return folder, path
+
+
+def test_library_holds_every_material_as_an_asset(built_library):
+    from material_structures.render.asset_library import catalog_uuid
+    from material_structures.render.library import MATERIALS, available_materials
+
+    folder, path = built_library
+    names = available_materials()
+    assert len(names) >= 3
+    with bpy.data.libraries.load(path, assets_only=True) as (src, dst):
+        stored = list(src.materials)
+        assert sorted(stored) == sorted(names)
+        dst.materials = list(stored)
+    cats = open(os.path.join(folder, "blender_assets.cats.txt")).read()
+    for name, mat in zip(stored, dst.materials, strict=True):
+        entry = MATERIALS[name]
+        assert mat.asset_data is not None
+        assert mat.asset_data.catalog_id == catalog_uuid(entry.catalog)
+        assert f"{catalog_uuid(entry.catalog)}:{entry.catalog}:" in cats
+        assert mat.preview is not None and tuple(mat.preview.image_size) == (24, 24)
+        for node in mat.node_tree.nodes:  # maps travel inside the library file
+            if node.type == "TEX_IMAGE":
+                assert node.image.packed_file is not None
+        slug = "".join(c.lower() if c.isalnum() else "-" for c in name).strip("-")
+        assert os.path.isfile(os.path.join(folder, "previews", slug + ".png"))
+
+
+def test_register_operator_adds_the_library(built_library, monkeypatch):
+    from material_structures.addon.operators import asset_library as op_module
+
+    folder, _ = built_library
+    module = next(
+        m
+        for n, m in __import__("sys").modules.items()
+        if n.endswith("addon.operators.asset_library") and m is not op_module and hasattr(m, "LIBRARY_DIR")
+    )
+    monkeypatch.setattr(module, "LIBRARY_DIR", folder)
+    assert bpy.ops.material_structures.register_asset_library() == {"FINISHED"}
+    libs = bpy.context.preferences.filepaths.asset_libraries
+    assert any(os.path.normpath(lib.path) == os.path.normpath(folder) for lib in libs)
+    assert bpy.ops.material_structures.register_asset_library() == {"FINISHED"}  # idempotent
+    assert sum(os.path.normpath(lib.path) == os.path.normpath(folder) for lib in libs) == 1
