@@ -1,0 +1,43 @@
+"""``fabric material PARAMS_DIR``: a .blend with the fitted fabric as a Cycles material (and a preview)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+
+def add_material_parser(fsub) -> None:
+    m = fsub.add_parser("material", help="create the SGGX Fabric material from a fit folder (.blend, preview)")
+    m.add_argument("params_dir", help="fit output folder (params.json + kd/ks/sigma/basis EXR maps)")
+    m.add_argument("--out", default=None, help="output .blend (default: PARAMS_DIR/fabric.blend)")
+    m.add_argument("--render", default=None, help="also render a shader-ball preview to this .png/.exr")
+    m.add_argument("--samples", type=int, default=16)
+    m.set_defaults(func=run_material)
+
+
+def run_material(args: argparse.Namespace) -> int:
+    from ..render.session import prepare_user_resources
+
+    prepare_user_resources()
+    import bpy
+
+    from ..addon.operators.fabric import import_fit_material
+    from ..render import configure_cycles, dark_world, render_to_array, reset_scene
+    from ..render.library import build_preview_scene
+
+    params_dir = os.path.abspath(args.params_dir)
+    scene = reset_scene()
+    configure_cycles(scene, resolution=(320, 240), samples=args.samples)
+    dark_world(scene)
+    mat = import_fit_material(params_dir, scene)
+    build_preview_scene(scene, mat)
+    out = os.path.abspath(args.out or os.path.join(params_dir, "fabric.blend"))
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    if args.render:
+        from .render import save_image
+
+        save_image(args.render, render_to_array(scene))
+        print(args.render)
+    bpy.ops.wm.save_as_mainfile(filepath=out, compress=True)
+    print(out)
+    return 0
