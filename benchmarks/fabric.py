@@ -12,6 +12,7 @@ Environment knobs for quick runs: ``FABRIC_BENCH_SIZE`` (texels per side, defaul
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -124,6 +125,8 @@ def bench_fit() -> dict:
         if rc != 0:
             raise RuntimeError(f"fabric fit exited with {rc}")
         fit = load_params(out)
+        with open(os.path.join(out, "params.json")) as f:
+            fit_cost = json.load(f)["fit"]["median_cost"]
         hwi, hwo = light_view_pairs(16, 16, rotation=0.9)
         ref = render_btf(maps, hwi, hwo)
         pred = predict_btf(fit, hwi, hwo)
@@ -154,6 +157,8 @@ def bench_fit() -> dict:
         "speedup_vs_per_texel_lsq": round(loop_total / seconds, 1),
         "per_texel_lsq_seconds_per_texel": round(lsq_s, 3),
         "per_texel_lsq_extrapolated_seconds": round(loop_total, 1),
+        "per_texel_lsq_median_cost": lsq_cost,
+        "fit_median_cost": fit_cost,
         "peak_rss_gb": round(rss / 2**30, 3),
         "peak_pss_gb": round(pss / 2**30, 3),
         "texels": size * size,

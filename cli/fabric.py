@@ -42,7 +42,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--views", type=int, default=16)
     s.add_argument("--theta-max", type=float, default=75.0, help="largest light/view zenith angle (deg)")
     s.add_argument("--rotation", type=float, default=0.0, help="azimuth offset of the direction sets (rad)")
-    s.add_argument("--noise", type=float, default=0.0, help="relative Gaussian noise (0.05 = 5 %%)")
+    s.add_argument("--noise", type=float, default=0.0, help="Gaussian noise level (0.05 = 5 %%)")
+    s.add_argument("--noise-kind", choices=("relative", "peak"), default="relative",
+                   help="multiplicative noise, or additive noise scaled by each texel's peak value")
     s.add_argument("--max-tilt", type=float, default=30.0, help="largest fibre tilt (deg)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--gt-out", default=None, help="also write the ground-truth parameter folder here")
@@ -86,7 +88,8 @@ def run_synth(args: argparse.Namespace) -> int:
 
     maps = synthetic_maps(args.height, args.width, seed=args.seed, max_tilt_deg=args.max_tilt)
     wi, wo = light_view_pairs(args.lights, args.views, args.theta_max, args.rotation)
-    save_btf(args.out, render_btf(maps, wi, wo, noise=args.noise, seed=args.seed + 1), wi, wo)
+    save_btf(args.out, render_btf(maps, wi, wo, noise=args.noise, seed=args.seed + 1,
+                                        noise_kind=args.noise_kind), wi, wo)
     if args.gt_out:
         save_params(args.gt_out, maps, extra={"synthetic": vars(args) | {"func": None}})
     print(args.out)

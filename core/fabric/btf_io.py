@@ -275,7 +275,8 @@ def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Directions ``(wi, wo)`` from a ``btf.json`` (images need not exist) or a ``.npz``."""
     path = os.fspath(path)
     if path.endswith(".npz"):
-        return read_btf_header(path).wi, read_btf_header(path).wo
+        hdr = read_btf_header(path)
+        return hdr.wi, hdr.wo
     _, jpath = _json_path(path)
     if not os.path.isfile(jpath):
         raise FileNotFoundError(f"directions file not found: {jpath}")

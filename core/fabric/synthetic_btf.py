@@ -67,9 +67,14 @@ def synthetic_maps(height: int, width: int, seed: int = 0, max_tilt_deg: float =
 
 
 def render_btf(maps: FabricMaps, wi: np.ndarray, wo: np.ndarray, noise: float = 0.0, seed: int = 0,
-               out: np.ndarray | None = None, chunk: int = 64) -> np.ndarray:
-    """BTF values ``(N, H, W, 3)`` float32 = ``f_r cos(theta_i)`` of the maps; ``noise`` is the relative
-    standard deviation of multiplicative Gaussian noise (0.05 = 5 %), clipped at zero."""
+               out: np.ndarray | None = None, chunk: int = 64, noise_kind: str = "relative") -> np.ndarray:
+    """BTF values ``(N, H, W, 3)`` float32 = ``f_r cos(theta_i)`` of the maps.
+
+    ``noise_kind="relative"``: multiplicative Gaussian noise, ``v (1 + noise * n)`` (0.05 = 5 %);
+    ``"peak"``: additive Gaussian noise with standard deviation ``noise`` times the texel's largest
+    value over the given directions. Results are clipped at zero."""
+    if noise_kind not in ("relative", "peak"):
+        raise ValueError(f"noise_kind must be 'relative' or 'peak', got {noise_kind!r}")
     wi = np.asarray(wi, dtype=np.float64)
     wo = np.asarray(wo, dtype=np.float64)
     h, w = maps.shape
@@ -86,7 +91,14 @@ def render_btf(maps: FabricMaps, wi: np.ndarray, wo: np.ndarray, noise: float = 
         for y in range(0, h, rows):
             sl = slice(y, y + rows)
             vals = sggx_btf_value(dirs_i, dirs_o, kd[:, sl], ks[:, sl], sg[:, sl], bq[:, sl])
-            if noise > 0:
+            if noise > 0 and noise_kind == "relative":
                 vals = np.maximum(vals * (1.0 + noise * rng.standard_normal(vals.shape)), 0.0)
             out[k:k + chunk, sl] = vals
+    if noise > 0 and noise_kind == "peak":
+        peak = np.zeros((h, w, 1), dtype=np.float32)
+        for k in range(0, n, chunk):
+            peak = np.maximum(peak, out[k:k + chunk].max(axis=(0, 3))[..., None])
+        for k in range(0, n, chunk):
+            blk = out[k:k + chunk]
+            out[k:k + chunk] = np.maximum(blk + noise * peak * rng.standard_normal(blk.shape), 0.0)
     return out
