@@ -33,6 +33,27 @@ def _direction(theta_deg: float, phi_deg: float) -> np.ndarray:
     return np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
 
 
+def _look_from(cam, wo) -> None:
+    """Place an orthographic camera 5 units away along ``wo``, looking at the origin."""
+    from mathutils import Vector
+
+    cam.location = tuple(5.0 * wo)
+    cam.rotation_euler = Vector(tuple(-wo)).to_track_quat("-Z", "Y").to_euler()
+
+
+def _position_pass(scene, plane) -> np.ndarray:
+    """The plane re-rendered with emission = shading position; alpha = coverage. (H, W, 4)."""
+    pos_mat = new_material("Position")
+    tree = pos_mat.node_tree
+    geo = tree.nodes.new("ShaderNodeNewGeometry")
+    em = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(geo.outputs["Position"], em.inputs["Color"])
+    tree.links.new(em.outputs[0], material_output(pos_mat).inputs["Surface"])
+    plane.data.materials[0] = pos_mat
+    scene.render.film_transparent = True
+    return render_to_array(scene)
+
+
 def render_patch_vs_core(
     kd=(0.05, 0.03, 0.02),
     ks=(0.7, 0.4, 0.3),
@@ -61,11 +82,7 @@ def render_patch_vs_core(
     group_node.inputs["FastPreview"].default_value = 1 if fast_preview else 0
     plane = add_textured_plane(scene, 1.0, mat)
     wo = _direction(*view)
-    cam = add_orthographic_camera(scene, ortho_scale=0.7)
-    cam.location = tuple(5.0 * wo)
-    from mathutils import Vector
-
-    cam.rotation_euler = Vector(tuple(-wo)).to_track_quat("-Z", "Y").to_euler()
+    _look_from(add_orthographic_camera(scene, ortho_scale=0.7), wo)
     light = bpy.data.lights.new("Lamp", lamp_type)
     light.energy = lamp_power
     if lamp_type == "SUN":
@@ -78,22 +95,15 @@ def render_patch_vs_core(
     lamp = bpy.data.objects.new("Lamp", light)
     lamp.location = lamp_position
     if lamp_type in {"SUN", "AREA"}:  # facing the patch centre
+        from mathutils import Vector
+
         lamp.rotation_euler = Vector(tuple(-np.asarray(lamp_position))).to_track_quat("-Z", "Y").to_euler()
     scene.collection.objects.link(lamp)
     if not fast_preview:
         sync_fabric_lamps(scene)
     rgb = render_to_array(scene)[..., :3]
 
-    # Shading positions of the same pixels: the plane re-rendered with emission = position.
-    pos_mat = new_material("Position")
-    tree = pos_mat.node_tree
-    geo = tree.nodes.new("ShaderNodeNewGeometry")
-    em = tree.nodes.new("ShaderNodeEmission")
-    tree.links.new(geo.outputs["Position"], em.inputs["Color"])
-    tree.links.new(em.outputs[0], material_output(pos_mat).inputs["Surface"])
-    plane.data.materials[0] = pos_mat
-    scene.render.film_transparent = True  # alpha = coverage: pixels fully on the patch
-    pos_rgba = render_to_array(scene)
+    pos_rgba = _position_pass(scene, plane)  # shading positions of the same pixels
     mask = pos_rgba[..., 3] > 0.999
     pos = pos_rgba[..., :3].astype(np.float64)
     wo_px = np.broadcast_to(wo, pos.shape)
@@ -158,11 +168,7 @@ def render_maps_vs_core(
     mat = create_fabric_material("Mapped", maps=images, scene=scene)
     plane = add_textured_plane(scene, 1.0, mat)
     wo = _direction(*view)
-    cam = add_orthographic_camera(scene, ortho_scale=0.7)
-    cam.location = tuple(5.0 * wo)
-    from mathutils import Vector
-
-    cam.rotation_euler = Vector(tuple(-wo)).to_track_quat("-Z", "Y").to_euler()
+    _look_from(add_orthographic_camera(scene, ortho_scale=0.7), wo)
     light = bpy.data.lights.new("Lamp", "POINT")
     light.energy = lamp_power
     light.shadow_soft_size = 0.0
@@ -172,15 +178,7 @@ def render_maps_vs_core(
     sync_fabric_lamps(scene)
     rgb = render_to_array(scene)[..., :3]
 
-    pos_mat = new_material("Position")
-    tree = pos_mat.node_tree
-    geo = tree.nodes.new("ShaderNodeNewGeometry")
-    em = tree.nodes.new("ShaderNodeEmission")
-    tree.links.new(geo.outputs["Position"], em.inputs["Color"])
-    tree.links.new(em.outputs[0], material_output(pos_mat).inputs["Surface"])
-    plane.data.materials[0] = pos_mat
-    scene.render.film_transparent = True
-    pos_rgba = render_to_array(scene)
+    pos_rgba = _position_pass(scene, plane)
     pos = pos_rgba[..., :3].astype(np.float64)
     h, w = maps.shape
     u, v = pos[..., 0] + 0.5, pos[..., 1] + 0.5
