@@ -112,7 +112,7 @@ def circular_polish(
     n_scratches: int,
     patch_size_um: ArrayLike = (20000.0, 20000.0),
     *,
-    radius_um: tuple[float, float] = (2000.0, 15000.0),
+    radius_um: tuple[float, float] | None = None,
     arc_rad: tuple[float, float] = (0.2, 1.5),
     centre_um: ArrayLike | None = None,
     width_um: tuple[float, float] = THESIS_RANGE_UM,
@@ -121,9 +121,14 @@ def circular_polish(
     seed: int = 0,
     **index_kw,
 ) -> ScratchSet:
-    """Circular polishing marks: arcs of circles around one centre (default: the patch centre)."""
+    """Circular polishing marks: arcs of circles around one centre (default: the patch centre).
+
+    ``radius_um`` defaults to (0.05, 0.7) x the patch's smaller side.
+    """
     rng = np.random.default_rng(seed)
     ps = np.asarray(patch_size_um, dtype=np.float64)
+    if radius_um is None:
+        radius_um = (0.05 * ps.min(), 0.7 * ps.min())
     c = ps / 2 if centre_um is None else np.asarray(centre_um, dtype=np.float64)
     lines = []
     for _ in range(int(n_scratches)):

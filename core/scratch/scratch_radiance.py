@@ -101,7 +101,7 @@ def shade_scratch_pairs(
     seg: np.ndarray,
     width_um: np.ndarray,
     depth_um: np.ndarray,
-    lam_um: np.ndarray,
+    lam_um: np.ndarray,  # (L,) or (P, L) in um
     sigma_um: float,
     si: str = "series",
     footprint_rule: str = "chords",
@@ -125,8 +125,9 @@ def shade_scratch_pairs(
     # selected footprint rule, only for pairs whose specular line meets the light
     l_rho = scratch_weighted_length(p0, p1, x, J, J_inv, sigma_um, "thesis", setup)
     rho = scratch_footprint_density(width_um, l_rho, s_b, on_seg, area, sigma_um)
-    lam = lam_um[None, :]
-    P, L = x.shape[0], lam_um.size
+    P = x.shape[0]
+    lam = np.broadcast_to(lam_um if lam_um.ndim == 2 else lam_um[None, :], (P, lam_um.shape[-1]))
+    L = lam.shape[1]
     dsq = scratch_depth_term_sq(depth_um[:, None], lam)  # (P, L)
     w = width_um[:, None]
     rad = np.zeros((P, L))
@@ -149,7 +150,8 @@ def shade_scratch_pairs(
     live = live[eta_p[live] > 0]
     if live.size == 0:
         return rad, rho, rho_cons
-    amp = w[live] ** 2 * dsq[live] * eta_p[live, None] / (coherence_area(sigma_um) * lam * lam)  # (P', L)
+    lam_l = lam[live]
+    amp = w[live] ** 2 * dsq[live] * eta_p[live, None] / (coherence_area(sigma_um) * lam_l * lam_l)  # (P', L)
     wo_l = wo[live]
     if kind in ("sphere", "polygon"):
         if kind == "sphere":
@@ -161,7 +163,7 @@ def shade_scratch_pairs(
         ip, ik = np.nonzero(z1 > z0)  # non-empty (pair, interval) entries only
         if ip.size:
             bl = band_limited_integral(
-                z0[ip, ik][:, None], z1[ip, ik][:, None], w[live][ip], lam, sigma_um, si
+                z0[ip, ik][:, None], z1[ip, ik][:, None], w[live][ip], lam_l[ip], sigma_um, si
             )  # (E, L)
             nb = np.zeros((live.size, L))
             for j in range(L):
@@ -170,11 +172,11 @@ def shade_scratch_pairs(
     else:  # directional: BRDF at the light direction times E cos(theta_i)
         wi = light_geom["direction"][live]
         t3, b3 = scratch_frame(t2[live])
-        k = 2 * np.pi / lam
+        k = 2 * np.pi / lam_l
         xi1 = np.einsum("pi,pi->p", wi + wo_l, t3)[:, None]
         xi2 = np.einsum("pi,pi->p", wi + wo_l, b3)[:, None]
         cos_i = np.maximum(wi[:, 2], 0.0)[:, None]
-        ang = np.sinc(w[live] * xi2 / lam) ** 2 * np.exp(-((sigma_um * k * xi1) ** 2))
+        ang = np.sinc(w[live] * xi2 / lam_l) ** 2 * np.exp(-((sigma_um * k * xi1) ** 2))
         rad[live] = amp * ang * cos_i * light_geom["scale"][live][:, None]
     return rad, rho, rho_cons
 

@@ -337,3 +337,32 @@ def analytic_radiance_config(cfg: dict, si: str = "series", footprint_rule: str 
         footprint_rule=footprint_rule,
     )
     return float(res.spectral[0, 0])
+
+
+def analytic_radiance_configs(cfgs: list[dict], si: str = "series", footprint_rule: str = "chords") -> np.ndarray:
+    """Vectorised :func:`analytic_radiance_config` over many configurations (one call per light type)."""
+    from .scratch_radiance import shade_scratch_pairs
+
+    out = np.zeros(len(cfgs))
+    groups: dict[tuple, list[int]] = {}
+    for i, c in enumerate(cfgs):
+        key = ("sphere",) if isinstance(c["light"], SphereLight) else ("polygon", len(c["light"].vertices))
+        groups.setdefault(key, []).append(i)
+    for key, idx in groups.items():
+        pc = np.concatenate([np.full(len(cfgs[i]["segments"]), i) for i in idx])
+        seg = np.concatenate([np.asarray(cfgs[i]["segments"], float) for i in idx])
+        w = np.concatenate([cfgs[i]["width_um"] for i in idx])
+        d = np.concatenate([cfgs[i]["depth_um"] for i in idx])
+        J = np.stack([np.asarray(cfgs[i]["J"], float) for i in pc])
+        wo = np.stack([np.asarray(cfgs[i]["wo"], float) for i in pc])
+        lam = np.array([[cfgs[i]["lam_nm"] / 1000.0] for i in pc])
+        if key[0] == "sphere":
+            geom = {"kind": "sphere", "center": np.stack([np.asarray(cfgs[i]["light"].center, float) for i in pc]),
+                    "radius": np.array([float(cfgs[i]["light"].radius) for i in pc])}
+        else:
+            geom = {"kind": "polygon", "vertices": np.stack([np.asarray(cfgs[i]["light"].vertices, float) for i in pc])}
+        li = np.array([float(np.mean(cfgs[i]["light"].radiance)) for i in pc])
+        rad, _, _ = shade_scratch_pairs(np.zeros((len(pc), 2)), J, wo, geom, seg, w, d, lam,
+                                        float(cfgs[idx[0]].get("sigma_um", 60.0)), si, footprint_rule)
+        out += np.bincount(pc, weights=rad[:, 0] * li, minlength=len(cfgs))
+    return out
