@@ -119,6 +119,28 @@ def test_parabolic_map_roundtrip_and_solid_angle():
     assert np.sum(parabolic_solid_angle(xy)[inside]) / n**2 == pytest.approx(2 * np.pi, rel=2e-3)
 
 
+def test_eq_3_11_estimator_normalisation_against_quadrature():
+    """For a constant BTF f = 1 the stratified MC estimate of eq. 3.11 is the fraction of incident
+    directions whose mirror direction about h stays above the horizon: compare every map cell
+    with a midpoint quadrature of that fraction."""
+    wi, wo = light_view_pairs(24, 24, theta_max_deg=89.5)
+    op = ndf_operator(wi, wo, resolution=12, strata=24, max_distance=10.0)
+    est = op.apply(np.ones((len(wi), 1)))[:, 0]
+    nt, nph = 200, 400
+    t = (np.arange(nt) + 0.5) / nt * np.pi / 2
+    p = (np.arange(nph) + 0.5) / nph * 2 * np.pi
+    tt, pp = np.meshgrid(t, p, indexing="ij")
+    w = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
+    da = (np.sin(tt) * (np.pi / 2 / nt) * (2 * np.pi / nph)).ravel()
+    inside = np.flatnonzero(op.valid)
+    assert inside.size > 60
+    for c in inside:
+        h = op.directions[c]
+        mirror_z = 2 * (w @ h) * h[2] - w[:, 2]
+        ref = np.sum(da * (mirror_z > 0)) / (2 * np.pi)
+        assert est[c] == pytest.approx(ref, abs=0.03)
+
+
 def test_eq_3_16_recovers_projected_areas_from_exact_ndf():
     """With D_BTF = the SGGX NDF on the full hemisphere, eq. 3.13-3.16 return the true basis and
     sigma ratios (int_{Omega+} |w_k . h| D dh = sigma(w_k))."""
