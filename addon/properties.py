@@ -6,6 +6,7 @@ import bpy
 
 from .fabric.properties import CLASSES as FABRIC_CLASSES
 from .fabric.properties import MS_FabricBrushSettings
+from .teeth import properties as teeth_properties
 
 
 class MS_SceneSettings(bpy.types.PropertyGroup):
@@ -18,12 +19,14 @@ class MS_SceneSettings(bpy.types.PropertyGroup):
 
 
 # Feature property groups first: MS_SceneSettings points at them.
-CLASSES: list[type] = [*FABRIC_CLASSES, MS_SceneSettings]
+CLASSES: list[type] = [*FABRIC_CLASSES, *teeth_properties.CLASSES, MS_SceneSettings]
 
 
 def register_pointers() -> None:
     bpy.types.Scene.material_structures = bpy.props.PointerProperty(type=MS_SceneSettings)
+    teeth_properties.register_pointers()
 
 
 def unregister_pointers() -> None:
+    teeth_properties.unregister_pointers()
     del bpy.types.Scene.material_structures

@@ -1,0 +1,258 @@
+"""Node groups "Enamel", "Dentin", "Gingiva" and the materials built on them (thesis Sec. 5.5).
+
+* Surface (enamel, gums): OSL script ``cycles_osl/ms_enamel_boundary.osl``, the thin dielectric
+  boundary of eq. 5.1-5.2: Fresnel mirror reflection F plus straight (non-bending) transmission
+  a_t (1 - F) through a ``transparent`` closure; eta 1.631 (enamel) / 1.33 (gums).
+* Volume (all three): absorption + two-lobe Henyey-Greenstein scattering (eq. 5.3-5.4) from built-in
+  nodes, so it is homogeneous for Cycles: sigma_s = albedo sigma_t split over two Volume Scatter nodes
+  mixed by beta, sigma_a = (1 - albedo) sigma_t from a Volume Absorption node (weight (1 - Color)
+  Density, fed with Color = 1 - sigma_a, Density = 1).
+* Units: sigma_t is in 1/mm like the core; the group input "mm per Unit" converts to Blender units
+  (1000 for a scene in metres, 1 when one Blender unit is one millimetre).
+* The enamel shell carries a face attribute ``ms_inner`` (1 on the faces that close it around the
+  dentin core): those faces are fully transparent (index-matched interface, eq. 5.5).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ...render.session import ensure_bundled_paths, osl_shader_path
+
+MARKER = "material_structures_teeth"
+SCRIPT_NODE = "Enamel Boundary"
+INNER_ATTRIBUTE = "ms_inner"
+
+ETA_ENAMEL = 1.631
+ETA_GUMS = 1.33
+
+# Typical defaults (synthetic ground truth of core.teeth.synthetic, within the literature ranges).
+DEFAULTS = {
+    "Enamel": {"sigma_t": (0.9, 1.1, 1.4), "albedo": (0.97, 0.96, 0.94), "g1": 0.6, "g2": -0.2, "beta": 0.85,
+               "eta": ETA_ENAMEL},
+    "Dentin": {"sigma_t": (2.2, 2.6, 3.2), "albedo": (0.93, 0.85, 0.72), "g1": 0.5, "g2": -0.1, "beta": 0.8},
+    "Gingiva": {"sigma_t": (1.5, 2.5, 2.5), "albedo": (0.9, 0.55, 0.5), "g1": 0.7, "g2": -0.1, "beta": 0.9,
+                "eta": ETA_GUMS},
+}
+GROUP_NAMES = tuple(DEFAULTS)
+SURFACE_GROUPS = ("Enamel", "Gingiva")
+
+
+def _group_inputs(kind: str) -> list[tuple]:
+    d = DEFAULTS[kind]
+    rows = [
+        # sigma_t is a vector: colour socket values are clamped to [0, 1] in the UI, sigma_t is not
+        ("Sigma_t", "NodeSocketVector", d["sigma_t"], 1e-3, 1e3),
+        ("Albedo", "NodeSocketColor", (*d["albedo"], 1.0), None, None),
+        ("G1", "NodeSocketFloat", d["g1"], -0.95, 0.95),
+        ("G2", "NodeSocketFloat", d["g2"], -0.95, 0.95),
+        ("Beta", "NodeSocketFloat", d["beta"], 0.0, 1.0),
+    ]
+    if kind in SURFACE_GROUPS:
+        rows += [("At", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None),
+                 ("Eta", "NodeSocketFloat", d["eta"], 1.0, 3.0)]
+    rows.append(("mm per Unit", "NodeSocketFloat", 1000.0, 1e-6, 1e9))
+    return rows
+
+
+def _load_boundary_script(tree, scene):
+    ensure_bundled_paths()
+    scene.render.engine = "CYCLES"
+    scene.cycles.shading_system = True
+    node = tree.nodes.new("ShaderNodeScript")
+    node.name = node.label = SCRIPT_NODE
+    node.mode = "EXTERNAL"
+    node.filepath = osl_shader_path("ms_enamel_boundary")
+    node.update()
+    missing = [s for s in ("Eta", "At", "Inner") if s not in node.inputs]
+    if missing or "BSDF" not in node.outputs:
+        raise RuntimeError(f"enamel boundary shader did not compile or lacks sockets {missing}")
+    return node
+
+
+def _volume_subgraph(group, gin):
+    """sigma_t, albedo, g1, g2, beta -> two-lobe HG scattering + absorption (returns the shader socket)."""
+    nodes, links = group.nodes, group.links
+    st = nodes.new("ShaderNodeVectorMath")
+    st.operation = "SCALE"
+    links.new(gin.outputs["Sigma_t"], st.inputs[0])
+    links.new(gin.outputs["mm per Unit"], st.inputs["Scale"])
+    ss = nodes.new("ShaderNodeVectorMath")
+    ss.operation = "MULTIPLY"
+    links.new(gin.outputs["Albedo"], ss.inputs[0])
+    links.new(st.outputs[0], ss.inputs[1])
+    sa = nodes.new("ShaderNodeVectorMath")
+    sa.operation = "SUBTRACT"
+    links.new(st.outputs[0], sa.inputs[0])
+    links.new(ss.outputs[0], sa.inputs[1])
+    one_minus = nodes.new("ShaderNodeVectorMath")
+    one_minus.operation = "SUBTRACT"
+    one_minus.inputs[0].default_value = (1.0, 1.0, 1.0)
+    links.new(sa.outputs[0], one_minus.inputs[1])
+    lobes = []
+    for gname in ("G1", "G2"):
+        sc = nodes.new("ShaderNodeVolumeScatter")
+        if hasattr(sc, "phase"):
+            sc.phase = "HENYEY_GREENSTEIN"
+        links.new(ss.outputs[0], sc.inputs["Color"])
+        sc.inputs["Density"].default_value = 1.0
+        links.new(gin.outputs[gname], sc.inputs["Anisotropy"])
+        lobes.append(sc)
+    mix = nodes.new("ShaderNodeMixShader")  # (1 - Fac) shader 1 + Fac shader 2 = beta HG(g1) + (1 - beta) HG(g2)
+    links.new(gin.outputs["Beta"], mix.inputs["Fac"])
+    links.new(lobes[1].outputs[0], mix.inputs[1])
+    links.new(lobes[0].outputs[0], mix.inputs[2])
+    ab = nodes.new("ShaderNodeVolumeAbsorption")
+    links.new(one_minus.outputs[0], ab.inputs["Color"])
+    ab.inputs["Density"].default_value = 1.0
+    add = nodes.new("ShaderNodeAddShader")
+    links.new(mix.outputs[0], add.inputs[0])
+    links.new(ab.outputs[0], add.inputs[1])
+    for i, n in enumerate((st, ss, sa, one_minus)):
+        n.location = (-300 + 180 * i, -300)
+    lobes[0].location, lobes[1].location, ab.location = (450, -200), (450, -400), (450, -600)
+    mix.location, add.location = (650, -300), (850, -300)
+    return add.outputs[0]
+
+
+def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
+    """The shared node group ``kind`` ("Enamel", "Dentin" or "Gingiva"), created once per file."""
+    if kind not in DEFAULTS:
+        raise ValueError(f"unknown teeth node group {kind!r}; use one of {', '.join(GROUP_NAMES)}")
+    scene = scene or bpy.context.scene
+    group = bpy.data.node_groups.get(kind)
+    if group is not None and group.get(MARKER):
+        return group
+    group = bpy.data.node_groups.new(kind, "ShaderNodeTree")
+    group[MARKER] = kind
+    for name, socket_type, default, lo, hi in _group_inputs(kind):
+        sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
+        sock.default_value = default
+        if lo is not None:
+            sock.min_value, sock.max_value = lo, hi
+    if kind in SURFACE_GROUPS:
+        group.interface.new_socket("Surface", in_out="OUTPUT", socket_type="NodeSocketShader")
+    group.interface.new_socket("Volume", in_out="OUTPUT", socket_type="NodeSocketShader")
+    nodes, links = group.nodes, group.links
+    gin = nodes.new("NodeGroupInput")
+    gout = nodes.new("NodeGroupOutput")
+    gin.location, gout.location = (-600, 0), (1100, 0)
+    if kind in SURFACE_GROUPS:
+        script = _load_boundary_script(group, scene)
+        attr = nodes.new("ShaderNodeAttribute")
+        attr.attribute_type = "GEOMETRY"
+        attr.attribute_name = INNER_ATTRIBUTE
+        links.new(gin.outputs["Eta"], script.inputs["Eta"])
+        links.new(gin.outputs["At"], script.inputs["At"])
+        links.new(attr.outputs["Fac"], script.inputs["Inner"])
+        links.new(script.outputs["BSDF"], gout.inputs["Surface"])
+        script.location, attr.location = (200, 200), (-300, 250)
+    links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
+    return group
+
+
+def new_teeth_material(kind: str, name: str | None = None, scene=None, volume=None, a_t=None,
+                       mm_per_unit: float = 1000.0) -> bpy.types.Material:
+    """A material on the ``kind`` group; ``volume`` is a core ``VolumeMaterial`` (defaults otherwise)."""
+    group = ensure_group(kind, scene)
+    mat = bpy.data.materials.new(name or kind)
+    if mat.node_tree is None:  # 4.5
+        mat.use_nodes = True
+    mat[MARKER] = kind
+    mat.cycles.emission_sampling = "NONE"
+    tree = mat.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (400, 0)
+    node = tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.name = node.label = kind
+    if kind in SURFACE_GROUPS:
+        tree.links.new(node.outputs["Surface"], out.inputs["Surface"])
+    tree.links.new(node.outputs["Volume"], out.inputs["Volume"])
+    node.inputs["mm per Unit"].default_value = mm_per_unit
+    mat.diffuse_color = (*[min(1.0, x) for x in DEFAULTS[kind]["albedo"]], 1.0)  # solid-view colour
+    if volume is not None:
+        set_volume(mat, volume)
+    if a_t is not None:
+        set_a_t(mat, a_t)
+    return mat
+
+
+def group_node(mat):
+    if mat is None or mat.node_tree is None:
+        return None
+    return next((n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree is not None
+                 and n.node_tree.get(MARKER)), None)
+
+
+def set_volume(mat, volume) -> None:
+    """Write a core ``VolumeMaterial`` (sigma_t [1/mm], albedo, g1, g2, beta) into the material."""
+    node = group_node(mat)
+    if node is None:
+        raise ValueError(f"material {mat.name!r} has no teeth node group")
+    node.inputs["Sigma_t"].default_value = tuple(float(x) for x in volume.sigma_t)
+    node.inputs["Albedo"].default_value = (*(float(x) for x in volume.albedo), 1.0)
+    node.inputs["G1"].default_value = float(volume.g1)
+    node.inputs["G2"].default_value = float(volume.g2)
+    node.inputs["Beta"].default_value = float(volume.beta)
+    mat.diffuse_color = (*(float(x) for x in volume.albedo), 1.0)
+
+
+def get_volume(mat) -> dict:
+    node = group_node(mat)
+    return {"sigma_t": list(node.inputs["Sigma_t"].default_value),
+            "albedo": list(node.inputs["Albedo"].default_value)[:3],
+            "g1": node.inputs["G1"].default_value, "g2": node.inputs["G2"].default_value,
+            "beta": node.inputs["Beta"].default_value}
+
+
+def set_a_t(mat, a_t) -> None:
+    """a_t as a constant colour (1 x 1 texture) or a packed float image on the UV map (H x W)."""
+    node = group_node(mat)
+    tex = np.asarray(a_t, dtype=np.float64)
+    if tex.ndim == 1:
+        tex = tex.reshape(1, 1, -1)
+    tree = mat.node_tree
+    for old in [n for n in tree.nodes if n.type == "TEX_IMAGE" and n.name == "a_t"]:
+        tree.nodes.remove(old)
+    if tex.shape[:2] == (1, 1):
+        node.inputs["At"].default_value = (*(float(x) for x in tex[0, 0, :3]), 1.0)
+        return
+    h, w = tex.shape[:2]
+    image = bpy.data.images.new(f"{mat.name} a_t", w, h, alpha=False, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    rgba = np.ones((h, w, 4), dtype=np.float32)
+    rgba[:, :, :3] = tex[:, :, :3]  # row 0 = v = 0, Blender's bottom row: the core's convention
+    image.pixels.foreach_set(rgba.ravel())
+    image.pack()
+    img = tree.nodes.new("ShaderNodeTexImage")
+    img.name = img.label = "a_t"
+    img.image = image
+    img.interpolation = "Linear"
+    img.extension = "REPEAT"
+    uv = tree.nodes.new("ShaderNodeUVMap")
+    tree.links.new(uv.outputs["UV"], img.inputs["Vector"])
+    tree.links.new(img.outputs["Color"], node.inputs["At"])
+    img.location, uv.location = (-300, 0), (-500, 0)
+
+
+def new_cavity_material(albedo, name: str = "Oral Cavity") -> bpy.types.Material:
+    """Opaque Lambertian proxy of the oral-cavity walls (Sec. 5.5.3)."""
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    mat[MARKER] = "Cavity"
+    tree = mat.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    bsdf = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (*(float(x) for x in albedo), 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.0
+    tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    out.location = (300, 0)
+    mat.diffuse_color = (*(float(x) for x in albedo), 1.0)
+    return mat

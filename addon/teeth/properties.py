@@ -1,0 +1,111 @@
+"""Per-object tooth settings (``Object.ms_tooth``): saved in the .blend, undone with it.
+
+The dentin coefficients c (eq. 5.5) are the values of the enamel object's settings; changing one
+writes the shape-key values of both the dentin core and the enamel shell's inner surface, so the
+viewport mesh follows immediately. ``fitted`` keeps the last fit's coefficients (applied on demand).
+Slider range: the optimiser's clamp range of c (core.teeth.param_vector.RANGES["c"], +-0.8: one unit
+moves the extreme dentin points by 1 mm, see core.teeth.dentin_blend_shapes.canonical_modes).
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from ...core.teeth.dentin_blend_shapes import MODE_NAMES
+from ...core.teeth.param_vector import RANGES
+
+C_MIN, C_MAX = RANGES["c"]
+ROLE_ITEMS = [("NONE", "None", ""), ("ENAMEL", "Enamel", "enamel shell of a tooth"),
+              ("DENTIN", "Dentin", "dentin core of a tooth"), ("GUMS", "Gums", "gingiva"),
+              ("CAVITY", "Oral Cavity", "oral-cavity proxy")]
+
+
+def owner(obj):
+    """The enamel object that owns the tooth settings of ``obj`` (itself, or its partner)."""
+    if obj is None or not hasattr(obj, "ms_tooth"):
+        return None
+    st = obj.ms_tooth
+    if st.role == "ENAMEL":
+        return obj
+    if st.role == "DENTIN" and st.partner is not None and st.partner.ms_tooth.role == "ENAMEL":
+        return st.partner
+    return None
+
+
+def _apply_keys(obj, values) -> None:
+    keys = obj.data.shape_keys if obj is not None and obj.type == "MESH" else None
+    if keys is None:
+        return
+    for name, v in zip(MODE_NAMES, values, strict=True):
+        kb = keys.key_blocks.get(name)
+        if kb is not None and abs(kb.value - v) > 0.0:
+            kb.value = v
+
+
+def _update_coefficients(self, context) -> None:
+    obj = self.id_data
+    values = (self.buccal, self.proximal, self.occlusal)
+    _apply_keys(obj, values)
+    if self.partner is not None:
+        _apply_keys(self.partner, values)
+
+
+def _coefficient(name: str, desc: str):
+    return bpy.props.FloatProperty(name=name, description=desc, default=0.0, min=C_MIN, max=C_MAX,
+                                   soft_min=C_MIN, soft_max=C_MAX, step=1, precision=3,
+                                   update=_update_coefficients)
+
+
+class MS_ToothSettings(bpy.types.PropertyGroup):
+    role: bpy.props.EnumProperty(name="Role", items=ROLE_ITEMS, default="NONE")
+    kind: bpy.props.StringProperty(name="Tooth Type", default="")
+    tooth_name: bpy.props.StringProperty(name="Tooth Name", description="name of the tooth in the core scene / fits")
+    partner: bpy.props.PointerProperty(name="Partner", type=bpy.types.Object,
+                                       description="the dentin core of an enamel shell, and vice versa")
+    mm_per_unit: bpy.props.FloatProperty(name="mm per Unit", default=1000.0, min=1e-6)
+    buccal: _coefficient("Buccal", "dentin blend mode along the buccolingual axis (c_1, eq. 5.5)")
+    proximal: _coefficient("Proximal", "dentin blend mode along the mesiodistal axis (c_2, eq. 5.5)")
+    occlusal: _coefficient("Occlusal", "dentin blend mode along the tooth axis (c_3, eq. 5.5)")
+    fitted: bpy.props.FloatVectorProperty(name="Fitted c", size=3, default=(0.0, 0.0, 0.0),
+                                          description="dentin coefficients of the last fit")
+    has_fit: bpy.props.BoolProperty(name="Has Fit", default=False)
+    fit_source: bpy.props.StringProperty(name="Fit Source", default="", subtype="FILE_PATH")
+
+    def coefficients(self) -> tuple[float, float, float]:
+        return (self.buccal, self.proximal, self.occlusal)
+
+    def set_coefficients(self, c) -> None:
+        self.buccal, self.proximal, self.occlusal = (float(x) for x in c)
+        _update_coefficients(self, None)
+
+
+class MS_TeethFitSettings(bpy.types.PropertyGroup):
+    """Scene-wide settings of the fitting operator (``Scene.ms_teeth_fit``)."""
+
+    capture_dir: bpy.props.StringProperty(name="Capture", subtype="DIR_PATH",
+                                          description="capture folder (capture.json, images/, masks/, scene.json)")
+    out_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH",
+                                      description="fit folder: log, loss plot, checkpoint, scene_fit.json")
+    iterations: bpy.props.IntProperty(name="Iterations", default=40, min=1, max=100000)
+    init: bpy.props.EnumProperty(name="Start", items=[("literature", "Literature", "literature-table search"),
+                                                       ("scene", "Scene", "the capture's scene.json values"),
+                                                       ("perturbed", "Perturbed", "perturbed scene values")],
+                                 default="literature")
+    lights_per_iteration: bpy.props.IntProperty(name="Lights / Iteration", default=18, min=1, max=1000)
+    running: bpy.props.BoolProperty(name="Running", default=False, options={"SKIP_SAVE"})
+    progress: bpy.props.FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
+                                      options={"SKIP_SAVE"})
+    status: bpy.props.StringProperty(name="Status", default="", options={"SKIP_SAVE"})
+
+
+CLASSES: list[type] = [MS_ToothSettings, MS_TeethFitSettings]
+
+
+def register_pointers() -> None:
+    bpy.types.Object.ms_tooth = bpy.props.PointerProperty(type=MS_ToothSettings)
+    bpy.types.Scene.ms_teeth_fit = bpy.props.PointerProperty(type=MS_TeethFitSettings)
+
+
+def unregister_pointers() -> None:
+    del bpy.types.Scene.ms_teeth_fit
+    del bpy.types.Object.ms_tooth

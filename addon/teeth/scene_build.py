@@ -1,0 +1,176 @@
+"""Core ``TeethScene`` / capture rig <-> Blender objects, and applying fit results.
+
+Units: core millimetres; ``mm_per_unit`` = 1000 for a scene in metres, 1 when a Blender unit is a mm.
+Point lights: core radiant intensity I gives irradiance I / r^2; a Blender point lamp of power P gives
+P / (4 pi d^2) (measured, platform notes), so P = 4 pi I / mm_per_unit^2 (d in Blender units).
+Cameras: OpenCV pinhole (K, R, t) -> perspective camera with sensor width 36, focal length
+fx 36 / W, principal point as lens shift; the box pixel filter of the core -> Cycles 'BOX' filter, width 1.
+"""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from .geometry import build_tooth_pair, make_mesh
+from .materials import new_cavity_material, new_teeth_material, set_a_t, set_volume
+
+
+def build_teeth_scene(ts, collection=None, mm_per_unit: float = 1000.0, prefix: str = "", smooth: bool = False):
+    """Create the teeth (enamel + dentin pairs), gums and oral-cavity proxy of a core ``TeethScene``.
+
+    Returns ``{"teeth": [(enamel, dentin), ...], "gums": obj | None, "cavity": obj | None}``.
+    """
+    collection = collection or bpy.context.scene.collection
+    out = {"teeth": [], "gums": None, "cavity": None}
+    s = 1.0 / mm_per_unit
+    for t in ts.teeth:
+        name = f"{prefix}{t.name}"
+        em = new_teeth_material("Enamel", f"Enamel {name}", volume=t.enamel, a_t=t.a_t, mm_per_unit=mm_per_unit)
+        em.node_tree.nodes["Enamel"].inputs["Eta"].default_value = float(t.eta)
+        dm = new_teeth_material("Dentin", f"Dentin {name}", volume=t.dentin, mm_per_unit=mm_per_unit)
+        pair = build_tooth_pair(name, t.enamel_mesh, t.dentin_shape, t.c, em, dm, collection, mm_per_unit,
+                                kind=t.kind, tooth_name=t.name, smooth=smooth)
+        out["teeth"].append(pair)
+    if ts.gums is not None:
+        g = ts.gums
+        mat = new_teeth_material("Gingiva", f"{prefix}Gingiva", volume=g.material, a_t=g.a_t, mm_per_unit=mm_per_unit)
+        mat.node_tree.nodes["Gingiva"].inputs["Eta"].default_value = float(g.eta)
+        me = make_mesh(f"{prefix}Gums", g.mesh.vertices, g.mesh.faces, g.mesh.corner_uv,
+                       np.zeros(len(g.mesh.faces)))
+        me.materials.append(mat)
+        obj = bpy.data.objects.new(f"{prefix}Gums", me)
+        obj.scale = (s, s, s)
+        obj.ms_tooth.role = "GUMS"
+        collection.objects.link(obj)
+        out["gums"] = obj
+    if ts.cavity is not None:
+        c = ts.cavity
+        me = make_mesh(f"{prefix}Oral Cavity", c.mesh.vertices, c.mesh.faces, c.mesh.corner_uv)
+        me.materials.append(new_cavity_material(c.albedo, f"{prefix}Oral Cavity"))
+        obj = bpy.data.objects.new(f"{prefix}Oral Cavity", me)
+        obj.scale = (s, s, s)
+        obj.ms_tooth.role = "CAVITY"
+        collection.objects.link(obj)
+        out["cavity"] = obj
+    return out
+
+
+def add_camera(scene, cam, mm_per_unit: float = 1000.0, name: str = "Teeth Camera"):
+    """A Blender camera matching a core ``Camera`` (OpenCV pinhole); sets the render resolution."""
+    data = bpy.data.cameras.new(name)
+    data.type = "PERSP"
+    data.sensor_fit = "HORIZONTAL"
+    data.sensor_width = 36.0
+    w, h = cam.width, cam.height
+    fx, fy, cx, cy = cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]
+    if abs(fx - fy) > 1e-6 * fx:
+        raise ValueError("only square pixels (fx == fy) are supported")
+    data.lens = fx * 36.0 / w
+    data.shift_x = -(cx - 0.5 * w) / w
+    data.shift_y = (cy - 0.5 * h) / w
+    data.clip_start = 1.0 / mm_per_unit
+    data.clip_end = 1e5 / mm_per_unit
+    obj = bpy.data.objects.new(name, data)
+    scene.collection.objects.link(obj)
+    rot = cam.R.T @ np.diag([1.0, -1.0, -1.0])  # camera-to-world, Blender camera looks down -z, y up
+    m = np.eye(4)
+    m[:3, :3] = rot
+    m[:3, 3] = cam.center / mm_per_unit
+    obj.matrix_world = Matrix(m.tolist())
+    scene.camera = obj
+    scene.render.resolution_x, scene.render.resolution_y = w, h
+    scene.render.resolution_percentage = 100
+    scene.render.pixel_aspect_x = scene.render.pixel_aspect_y = 1.0
+    return obj
+
+
+def add_point_light(scene, light, mm_per_unit: float = 1000.0, name: str = "Teeth Light"):
+    """A point lamp matching a core ``PointLight`` (RGB intensity -> colour x power, radius 0)."""
+    inten = np.asarray(light.intensity, dtype=np.float64)
+    peak = float(inten.max())
+    data = bpy.data.lights.new(name, "POINT")
+    data.energy = 4.0 * math.pi * peak / mm_per_unit**2
+    data.color = tuple(float(x) for x in inten / max(peak, 1e-30))
+    data.shadow_soft_size = 0.0
+    if hasattr(data, "use_soft_falloff"):
+        data.use_soft_falloff = False
+    obj = bpy.data.objects.new(name, data)
+    obj.location = tuple(float(x) for x in np.asarray(light.position) / mm_per_unit)
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def tooth_objects(scene=None) -> dict:
+    """``{tooth_name: enamel object}`` for every enamel shell in the scene."""
+    scene = scene or bpy.context.scene
+    return {o.ms_tooth.tooth_name: o for o in scene.objects if o.ms_tooth.role == "ENAMEL"}
+
+
+def apply_fit(ts, scene=None, source: str = "", set_current: bool = True) -> list[str]:
+    """Write a fitted core ``TeethScene`` into the matching teeth (by tooth name): materials, a_t, the
+    fitted dentin coefficients (and, with ``set_current``, the shape-key values). Returns the names applied."""
+    scene = scene or bpy.context.scene
+    objs = tooth_objects(scene)
+    done = []
+    for t in ts.teeth:
+        enamel = objs.get(t.name)
+        if enamel is None:
+            continue
+        st = enamel.ms_tooth
+        em = enamel.active_material
+        if em is not None:
+            set_volume(em, t.enamel)
+            set_a_t(em, t.a_t)
+        dentin = st.partner
+        if dentin is not None and dentin.active_material is not None:
+            set_volume(dentin.active_material, t.dentin)
+        for o in (enamel, dentin):
+            if o is not None:
+                o.ms_tooth.fitted = tuple(float(x) for x in t.c)
+                o.ms_tooth.has_fit = True
+                o.ms_tooth.fit_source = source
+        if set_current:
+            st.set_coefficients(t.c)
+        done.append(t.name)
+    if ts.gums is not None:
+        gums = next((o for o in scene.objects if o.ms_tooth.role == "GUMS"), None)
+        if gums is not None and gums.active_material is not None:
+            set_volume(gums.active_material, ts.gums.material)
+            set_a_t(gums.active_material, ts.gums.a_t)
+    if ts.cavity is not None:
+        cav = next((o for o in scene.objects if o.ms_tooth.role == "CAVITY"), None)
+        if cav is not None and cav.active_material is not None:
+            node = next((n for n in cav.active_material.node_tree.nodes if n.type == "BSDF_DIFFUSE"), None)
+            if node is not None:
+                node.inputs["Color"].default_value = (*(float(x) for x in ts.cavity.albedo), 1.0)
+    return done
+
+
+def configure_teeth_cycles(scene, samples: int, seed: int = 0, bounces: int = 256) -> None:
+    """Cycles settings under which the Cycles render and the core path tracer estimate the same integral:
+    CPU + OSL, box pixel filter of width 1 (the core's), no clamping, no light culling, no caustic
+    filtering, bounce limits high enough that truncation is negligible, denoising off."""
+    from ...render import configure_cycles
+
+    configure_cycles(scene, (scene.render.resolution_x, scene.render.resolution_y), samples, seed)
+    cyc = scene.cycles
+    cyc.pixel_filter_type = "BOX"
+    cyc.filter_width = 1.0
+    cyc.max_bounces = bounces
+    cyc.diffuse_bounces = bounces
+    cyc.glossy_bounces = bounces
+    cyc.transmission_bounces = bounces
+    cyc.volume_bounces = bounces
+    cyc.transparent_max_bounces = bounces
+    cyc.sample_clamp_direct = 0.0
+    cyc.sample_clamp_indirect = 0.0
+    cyc.light_sampling_threshold = 0.0
+    cyc.caustics_reflective = True
+    cyc.caustics_refractive = True
+    cyc.blur_glossy = 0.0
+    if hasattr(cyc, "use_light_tree"):
+        cyc.use_light_tree = False
