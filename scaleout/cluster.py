@@ -1,0 +1,33 @@
+"""Connecting to a Dask cluster, or starting a local one sized to the machine."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, n_workers: int | None = None, threads_per_worker: int = 1):
+    """``Client`` for ``scheduler`` (``tcp://host:8786``) or a local cluster of ``n_workers`` processes.
+
+    The local default has one single-threaded worker process per core, so numpy's own threads do
+    not oversubscribe the machine.
+    """
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        client = Client(scheduler)
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n_workers = n_workers or os.cpu_count() or 1
+    with LocalCluster(
+        n_workers=n_workers,
+        threads_per_worker=threads_per_worker,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=40,
+    ) as cluster, Client(cluster) as client:
+        yield client

@@ -1,0 +1,101 @@
+"""Fabric BTF fitting on Dask: one task per texel tile.
+
+The client prepares the fit cache once (``core.fabric.btf_fitter``: the texel-major BTF memory map
+and the NDF operator) in the output folder, which must be on storage the workers share; each
+task maps only its tile, fits it and writes the tile's checkpoint atomically. Finished tiles are
+never recomputed (a rerun or a resumed client skips them), a task lost with a killed worker is
+rerun elsewhere, and every tile fit is deterministic, so the result equals a local run bit for
+bit. The final assembly and post-processing are the local fitter's own (``fit_btf`` with every
+tile already done).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+
+from ..core.fabric import btf_fitter
+from ..core.fabric.tile_fit import FitOptions
+
+_INIT_LOCK = threading.Lock()
+
+
+def _fit_tile_task(tile: tuple[int, int, int, int], cache: str, init_args: tuple) -> tuple:
+    """Runs on a worker: load the shared inputs once per worker process, fit one tile."""
+    with _INIT_LOCK:
+        if btf_fitter._WORKER.get("_init_key") != init_args[0]:
+            btf_fitter._init_worker(*init_args)
+            btf_fitter._WORKER["_init_key"] = init_args[0]
+    return btf_fitter._fit_one(tile, cache)
+
+
+def fit_btf_dask(
+    btf_path: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    client=None,
+    scheduler: str | None = None,
+    n_workers: int | None = None,
+    tile: int = 20,
+    options: FitOptions | None = None,
+    progress: bool = True,
+    keep_cache: bool = True,
+):
+    """Fit a BTF with tiles as Dask tasks; returns ``(maps, stats)`` like ``fit_btf``.
+
+    ``client``: an existing ``distributed.Client``; else ``scheduler`` (address) or a local
+    cluster of ``n_workers`` processes.
+    """
+    from ..scaleout.cluster import dask_client
+
+    btf_path, out_dir = os.path.abspath(os.fspath(btf_path)), os.path.abspath(os.fspath(out_dir))
+    options = options or FitOptions()
+    os.makedirs(out_dir, exist_ok=True)
+    hdr, cache, values_path = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress)
+    tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
+    todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
+    init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
+    if todo:
+        if client is not None:
+            _run_tiles(client, todo, cache, init_args, progress, len(tiles))
+        else:
+            with dask_client(scheduler, n_workers) as own:
+                _run_tiles(own, todo, cache, init_args, progress, len(tiles))
+    # Every tile is checkpointed now: the local fitter only assembles and post-processes.
+    maps, stats = btf_fitter.fit_btf(
+        btf_path, out_dir, tile=tile, workers=1, options=options, progress=False, keep_cache=keep_cache
+    )
+    stats["tiles_fitted_this_run"] = len(todo)
+    stats["scheduler"] = scheduler or ("client" if client is not None else "local")
+    return maps, stats
+
+
+def _asdict(options: FitOptions) -> dict:
+    from dataclasses import asdict
+
+    return asdict(options)
+
+
+def _run_tiles(client, todo, cache, init_args, progress, total) -> None:
+    from distributed import as_completed
+
+    [shared] = client.scatter([init_args], broadcast=True)  # directions etc. sent once, not per task
+    futures = client.map(
+        _fit_tile_task,
+        todo,
+        cache=cache,
+        init_args=shared,
+        key=[f"fabric-tile-{t[0]}-{t[2]}-{os.path.basename(os.path.dirname(cache))}" for t in todo],
+        retries=3,
+    )
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, initial=total - len(todo), desc="fit tiles (dask)", unit="tile", file=sys.stderr)
+    for future in as_completed(futures):
+        future.result()  # raises the task's error, if any
+        if bar:
+            bar.update(1)
+    if bar:
+        bar.close()
