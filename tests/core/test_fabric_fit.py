@@ -222,6 +222,19 @@ def test_lm_recovers_parameters_from_perturbed_start():
     assert np.allclose(res.kd, maps.kd.reshape(-1, 3), atol=1e-3)
 
 
+def test_fit_tile_degenerate_texels():
+    """Purely diffuse and black texels: k_d recovered exactly (closed form kd/pi * cos_i), no NaNs."""
+    from material_structures.core.fabric.tile_fit import fit_tile
+
+    wi, wo = light_view_pairs(16, 16)
+    s = Samples.make(wi, wo)
+    kd = np.array([[0.3, 0.2, 0.1], [0.0, 0.0, 0.0]])
+    vals = (kd[:, None, :] / np.pi) * wi[None, :, 2:3]
+    res = fit_tile(vals, s, ndf_operator(wi, wo))
+    assert np.all(np.isfinite(res.quat)) and np.all(np.isfinite(res.sigma))
+    assert np.allclose(res.kd, kd, atol=1e-6) and np.allclose(res.ks, 0.0, atol=1e-6)
+
+
 # ---------------------------------------------------------------- post-processing
 
 
