@@ -176,7 +176,7 @@ def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int =
         "btf": os.path.abspath(btf_path), "samples": hdr.count, "tile": tile, "workers": workers,
         "tiles": len(tiles), "tiles_fitted_this_run": len(todo), "options": asdict(options),
         "seconds_load": round(t_loaded - t_start, 3), "seconds_fit": round(t_fit - t_loaded, 3),
-        "mean_iterations": float(np.mean(iters)) if iters else None,
+        "mean_lm_iterations_per_tile": float(np.mean(iters)) if iters else None,  # all stages
         "median_cost": float(np.median(cost)), "flip_regions": int(labels.max()),
     }
     save_params(out_dir, maps, extra={"fit": stats})

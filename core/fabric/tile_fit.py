@@ -86,8 +86,10 @@ def fit_tile(values: np.ndarray, samples: Samples, op: NdfOperator, options: Fit
     res = levenberg_marquardt(ss, np.concatenate([vs] * k), np.concatenate(qs), np.concatenate(sgs),
                               max_iter=opt.start_iter)
     pick = np.argmin(res.cost.reshape(k, t), axis=0) * t + np.arange(t)
+    n_start = res.iterations
     res = levenberg_marquardt(ss, vs, res.quat[pick], res.sigma[pick], max_iter=opt.coarse_iter,
                               lam0=res.lam[pick])
+    res.iterations += n_start
     if len(sub) < n:
         res2 = levenberg_marquardt(samples, values, res.quat, res.sigma, max_iter=opt.fine_iter,
                                    lam0=np.maximum(res.lam, 1e-4))
