@@ -4,6 +4,7 @@
     python -m material_structures fabric eval PARAMS_DIR --directions btf.json --out DIR
     python -m material_structures fabric synth --out BTF_DIR [--gt-out PARAMS_DIR] [--noise 0.05]
     python -m material_structures fabric score PRED_BTF REF_BTF
+    python -m material_structures fabric ndf BTF --texel X Y --out ndf.exr
 """
 
 from __future__ import annotations
@@ -50,6 +51,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--gt-out", default=None, help="also write the ground-truth parameter folder here")
     s.set_defaults(func=run_synth)
 
+    n = fsub.add_parser("ndf", help="write one texel's extracted NDF (eq. 3.11) as a parabolic map EXR (eq. 3.12)")
+    n.add_argument("btf", help="BTF folder, btf.json or .npz")
+    n.add_argument("--texel", type=int, nargs=2, metavar=("X", "Y"), default=(0, 0))
+    n.add_argument("--resolution", type=int, default=64)
+    n.add_argument("--out", required=True, help="output .exr")
+    n.set_defaults(func=run_ndf)
+
     c = fsub.add_parser("score", help="PSNR of a predicted BTF against a reference BTF")
     c.add_argument("pred")
     c.add_argument("ref")
@@ -92,6 +100,24 @@ def run_synth(args: argparse.Namespace) -> int:
                                         noise_kind=args.noise_kind), wi, wo)
     if args.gt_out:
         save_params(args.gt_out, maps, extra={"synthetic": vars(args) | {"func": None}})
+    print(args.out)
+    return 0
+
+
+def run_ndf(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from ..core.exr_io import write_exr
+    from ..core.fabric.btf_io import iter_btf_blocks, read_btf_header
+    from ..core.fabric.ndf_extraction import ndf_operator
+
+    hdr = read_btf_header(args.btf)
+    x, y = args.texel
+    if not (0 <= x < hdr.width and 0 <= y < hdr.height):
+        raise ValueError(f"texel ({x}, {y}) is outside the {hdr.width}x{hdr.height} BTF")
+    f = np.concatenate([vals[:, y, x].mean(axis=1) for _, vals in iter_btf_blocks(args.btf)])
+    op = ndf_operator(hdr.wi, hdr.wo, resolution=args.resolution)
+    write_exr(args.out, op.to_image(op.apply(f / hdr.wi[:, 2])[:, 0]).astype(np.float32))
     print(args.out)
     return 0
 

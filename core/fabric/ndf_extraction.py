@@ -51,6 +51,12 @@ class NdfOperator:
         """NDF per texel from BRDF values ``f`` of shape (N, ...) -> (cells, ...)."""
         return self.A @ f.reshape(f.shape[0], -1)
 
+    def to_image(self, ndf: np.ndarray) -> np.ndarray:
+        """One texel's NDF ``(cells,)`` as the parabolic map image ``(res, res)`` of eq. 3.12
+        (row = y', column = x'); cells without data are 0."""
+        img = np.where(self.valid, np.asarray(ndf, dtype=np.float64), 0.0)
+        return img.reshape(self.resolution, self.resolution)
+
 
 def ndf_operator(wi: np.ndarray, wo: np.ndarray, resolution: int = 24, strata: int = 12,
                  max_distance: float = 0.3, seed: int = 0) -> NdfOperator:

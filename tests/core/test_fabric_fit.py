@@ -336,6 +336,15 @@ def test_cli_fit_eval_score(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["psnr_db"] > 60  # ground truth reproduces itself
     assert main(["fabric", "score", str(tmp_path / "fit.npz"), hold]) == 0
     assert json.loads(capsys.readouterr().out)["psnr_db"] >= 30
+    assert main(["fabric", "ndf", btf, "--texel", "2", "3", "--resolution", "32",
+                 "--out", str(tmp_path / "ndf.exr")]) == 0
+    from material_structures.core.exr_io import read_exr
+
+    img = read_exr(tmp_path / "ndf.exr")[..., 0]
+    gt = load_params(tmp_path / "gt")
+    z = quat_to_matrix(gt.basis[3, 2].astype(np.float64))[:, 2]  # the NDF peaks at the z axis
+    peak = np.unravel_index(np.argmax(img), img.shape)
+    assert np.allclose(np.array([peak[1], peak[0]]) + 0.5, parabolic_coords(z) * 32, atol=2.5)
     desc = json.loads((tmp_path / "fit" / "params.json").read_text())
     assert set(desc["maps"]) == {"kd", "ks", "sigma", "basis"}
     assert main(["fabric", "fit", str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 2
