@@ -7,6 +7,9 @@ import bpy
 # (label, operator bl_idname, operator kwargs) shown under Add > Material Structures in the shader editor.
 MENU_ENTRIES: list[tuple[str, str, dict]] = [
     ("SGGX Fabric", "material_structures.fabric_add_group_node", {}),
+    ("Enamel", "material_structures.teeth_add_enamel_node", {}),
+    ("Dentin", "material_structures.teeth_add_dentin_node", {}),
+    ("Gingiva", "material_structures.teeth_add_gingiva_node", {}),
 ]
 
 

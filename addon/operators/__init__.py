@@ -1,5 +1,11 @@
 """Operators (``bl_idname`` under ``material_structures.``)."""
 
-from . import asset_library, fabric, fabric_brush, scene_setup
+from . import asset_library, fabric, fabric_brush, scene_setup, teeth
 
-CLASSES: list[type] = [*scene_setup.CLASSES, *asset_library.CLASSES, *fabric.CLASSES, *fabric_brush.CLASSES]
+CLASSES: list[type] = [
+    *scene_setup.CLASSES,
+    *asset_library.CLASSES,
+    *fabric.CLASSES,
+    *fabric_brush.CLASSES,
+    *teeth.CLASSES,
+]

@@ -100,9 +100,17 @@ def cross_check(spp_cycles: int = 256, spp_core: int = 64, n_teeth: int = 2, wid
     t0 = time.perf_counter()
     cyc = render_cycles(ts, cam, light, spp_cycles, bounces=max_depth)
     t1 = time.perf_counter()
-    core = render_core(ts, cam, light, spp_core, max_depth=max_depth)
+    # two independent halves: their average is the reference, their difference measures its own MC noise
+    half = max(1, spp_core // 2)
+    core_a = render_core(ts, cam, light, half, seed=1, max_depth=max_depth)
+    core_b = render_core(ts, cam, light, half, seed=2, max_depth=max_depth)
+    core = 0.5 * (core_a + core_b)
     t2 = time.perf_counter()
     out = compare(cyc, core, region)
+    noise = compare(core_a, core_b, region)  # relative difference of two half-estimates
+    # error of the full core estimate ~ half-vs-half difference / 2
+    out["core_noise_mean_colour_rel"] = 0.5 * noise["mean_colour_rel_err"]
+    out["core_noise_median_px_rel"] = 0.5 * noise["median_px_rel_err"]
     out.update({"cycles_seconds": t1 - t0, "core_seconds": t2 - t1, "spp_cycles": spp_cycles, "spp_core": spp_core,
                 "width": width, "height": height, "max_depth": max_depth})
     return out, cyc, core, region

@@ -1,0 +1,319 @@
+"""Teeth operators: tooth pairs from templates or meshes, dentin coefficients, node groups, fitting."""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+
+from ..teeth.materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
+from ..teeth.properties import owner
+
+TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar", "Premolar", ""),
+               ("molar", "Molar", "")]
+
+_JOB = {"job": None}  # the one background fit of this Blender session
+
+
+def _mm_per_unit(scene) -> float:
+    """Millimetres per Blender unit from the scene's unit scale (metres by default: 1000)."""
+    return 1000.0 * float(scene.unit_settings.scale_length or 1.0)
+
+
+class MS_OT_teeth_add_tooth(bpy.types.Operator):
+    """Add a tooth: enamel shell + dentin core with the buccal/proximal/occlusal dentin modes as shape keys"""
+
+    bl_idname = "material_structures.teeth_add_tooth"
+    bl_label = "Add Tooth"
+    bl_options = {"REGISTER", "UNDO"}
+
+    source: bpy.props.EnumProperty(name="Source", items=[
+        ("TEMPLATE", "Template", "procedural tooth template"),
+        ("MESH", "Active Mesh", "the active closed mesh is the enamel surface (z = tooth axis, crown up)")],
+        default="TEMPLATE")
+    kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="incisor")
+    resolution: bpy.props.IntProperty(name="Resolution", default=40, min=8, max=256)
+    smooth: bpy.props.BoolProperty(name="Smooth Shading", default=True)
+
+    def execute(self, context):
+        from ...core.teeth.tooth_mesh import make_tooth
+        from ..teeth.geometry import build_tooth_pair, tooth_from_mesh_object
+
+        scene = context.scene
+        mm = _mm_per_unit(scene)
+        try:
+            if self.source == "MESH":
+                src = context.active_object
+                if src is None or src.type != "MESH":
+                    self.report({"ERROR"}, "Select a closed mesh object (the enamel surface)")
+                    return {"CANCELLED"}
+                enamel, dentin = tooth_from_mesh_object(src, mm_per_unit=mm)
+                name, kind = src.name, "custom"
+            else:
+                geo = make_tooth(self.kind, resolution=self.resolution)
+                enamel, dentin = geo.enamel, geo.dentin
+                name, kind = self.kind.title(), self.kind
+            em = new_teeth_material("Enamel", f"Enamel {name}", scene=scene, mm_per_unit=mm)
+            dm = new_teeth_material("Dentin", f"Dentin {name}", scene=scene, mm_per_unit=mm)
+            e_obj, d_obj = build_tooth_pair(name, enamel, dentin, (0.0, 0.0, 0.0), em, dm,
+                                            context.collection or scene.collection, mm, kind=kind,
+                                            smooth=self.smooth)
+        except (ValueError, RuntimeError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        if self.source == "MESH":
+            e_obj.matrix_world = src.matrix_world @ e_obj.matrix_world
+            if context.view_layer.objects.get(src.name) is not None:
+                src.hide_set(True)
+        else:
+            e_obj.location = scene.cursor.location
+        for o in context.selected_objects:
+            o.select_set(False)
+        e_obj.select_set(True)
+        context.view_layer.objects.active = e_obj
+        return {"FINISHED"}
+
+
+class MS_OT_teeth_set_dentin(bpy.types.Operator):
+    """Set the dentin blend coefficients (buccal, proximal, occlusal) of the active tooth"""
+
+    bl_idname = "material_structures.teeth_set_dentin"
+    bl_label = "Set Dentin Shape"
+    bl_options = {"REGISTER", "UNDO"}
+
+    coefficients: bpy.props.FloatVectorProperty(name="c", size=3, default=(0.0, 0.0, 0.0), min=-0.8, max=0.8)
+
+    def execute(self, context):
+        obj = owner(context.active_object)
+        if obj is None:
+            self.report({"ERROR"}, "The active object is not a tooth (enamel shell or dentin core)")
+            return {"CANCELLED"}
+        obj.ms_tooth.set_coefficients(self.coefficients)
+        return {"FINISHED"}
+
+
+class MS_OT_teeth_apply_fitted(bpy.types.Operator):
+    """Set the dentin sliders to the coefficients of the last fit"""
+
+    bl_idname = "material_structures.teeth_apply_fitted"
+    bl_label = "Apply Fitted Coefficients"
+    bl_options = {"REGISTER", "UNDO"}
+
+    all_teeth: bpy.props.BoolProperty(name="All Teeth", default=False)
+
+    def execute(self, context):
+        objs = ([o for o in context.scene.objects if o.ms_tooth.role == "ENAMEL"] if self.all_teeth
+                else [owner(context.active_object)])
+        objs = [o for o in objs if o is not None and o.ms_tooth.has_fit]
+        if not objs:
+            self.report({"ERROR"}, "No fitted coefficients on the selected tooth (run a fit first)")
+            return {"CANCELLED"}
+        for o in objs:
+            o.ms_tooth.set_coefficients(tuple(o.ms_tooth.fitted))
+        return {"FINISHED"}
+
+
+def _group_op(kind: str):
+    class _Op(bpy.types.Operator):
+        __doc__ = f"Add the {kind} node group (thesis Sec. 5.5) to the edited material"
+        bl_idname = f"material_structures.teeth_add_{kind.lower()}_node"
+        bl_label = kind
+        bl_options = {"REGISTER", "UNDO"}
+
+        @classmethod
+        def poll(cls, context):
+            space = context.space_data
+            return space is not None and space.type == "NODE_EDITOR" and space.edit_tree is not None
+
+        def execute(self, context):
+            tree = context.space_data.edit_tree
+            group = ensure_group(kind, context.scene)
+            for node in tree.nodes:
+                node.select = False
+            node = tree.nodes.new("ShaderNodeGroup")
+            node.node_tree = group
+            node.label = kind
+            node.select = True
+            tree.nodes.active = node
+            if context.space_data.id is not None and hasattr(context.space_data.id, "keys"):
+                context.space_data.id[MARKER] = kind
+            return {"FINISHED"}
+
+    _Op.__name__ = f"MS_OT_teeth_add_{kind.lower()}_node"
+    return _Op
+
+
+GROUP_OPERATORS = [_group_op(k) for k in GROUP_NAMES]
+
+
+def apply_fit_file(context, path: str) -> list[str]:
+    from ...core.teeth.scene import load_scene
+    from ..teeth.scene_build import apply_fit
+
+    return apply_fit(load_scene(path), context.scene, source=path)
+
+
+class MS_OT_teeth_apply_fit_file(bpy.types.Operator):
+    """Write a fitted scene (scene_fit.json) into the teeth materials and dentin shape keys (matched by name)"""
+
+    bl_idname = "material_structures.teeth_apply_fit_file"
+    bl_label = "Apply Fit Result"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: bpy.props.StringProperty(subtype="FILE_PATH")
+    filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        if not os.path.isfile(self.filepath):
+            self.report({"ERROR"}, f"file not found: {self.filepath}")
+            return {"CANCELLED"}
+        try:
+            done = apply_fit_file(context, self.filepath)
+        except (ValueError, KeyError, OSError) as exc:
+            self.report({"ERROR"}, f"cannot apply {self.filepath}: {exc}")
+            return {"CANCELLED"}
+        if not done:
+            self.report({"WARNING"}, "No tooth in this scene matches the fitted teeth' names")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Applied the fit to {', '.join(done)}")
+        return {"FINISHED"}
+
+
+class MS_OT_teeth_fit(bpy.types.Operator):
+    """Fit the teeth model to a capture folder in a background process, then apply the result"""
+
+    bl_idname = "material_structures.teeth_fit"
+    bl_label = "Fit Teeth to Capture"
+    bl_options = {"REGISTER", "UNDO"}
+
+    _timer = None
+
+    def _start(self, context):
+        from ..teeth.fit_job import FitJob
+
+        fs = context.scene.ms_teeth_fit
+        capture = bpy.path.abspath(fs.capture_dir)
+        out = bpy.path.abspath(fs.out_dir) if fs.out_dir else os.path.join(capture, "fit")
+        if _JOB["job"] is not None and _JOB["job"].poll() == "RUNNING":
+            self.report({"ERROR"}, "A teeth fit is already running")
+            return None
+        try:
+            job = FitJob(capture, out, fs.iterations, fs.init, fs.lights_per_iteration).start()
+        except (FileNotFoundError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return None
+        _JOB["job"] = job
+        fs.running, fs.progress, fs.status = True, 0.0, "starting"
+        return job
+
+    def _finish(self, context, job, state):
+        fs = context.scene.ms_teeth_fit
+        fs.running = False
+        fs.progress = job.progress
+        if state == "FINISHED":
+            done = apply_fit_file(context, job.result_path)
+            fs.status = f"done: applied to {', '.join(done) or 'no matching tooth'}; log {job.log_path}"
+            self.report({"INFO"}, f"Teeth fit finished; loss plot {job.loss_plot}")
+            return {"FINISHED"}
+        fs.status = f"{state.lower()}: see {job.log_path}"
+        self.report({"WARNING" if state == "CANCELLED" else "ERROR"}, f"Teeth fit {state.lower()}: {job.last_line}")
+        return {"CANCELLED"}
+
+    def execute(self, context):  # blocking (scripts, tests, headless)
+        job = self._start(context)
+        if job is None:
+            return {"CANCELLED"}
+        return self._finish(context, job, job.wait())
+
+    def invoke(self, context, event):
+        job = self._start(context)
+        if job is None:
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.5, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, 1000)
+        return {"RUNNING_MODAL"}
+
+    def _cleanup(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        job = _JOB["job"]
+        if job is None:
+            self._cleanup(context)
+            return {"CANCELLED"}
+        if event.type == "ESC":
+            job.cancel()
+        if event.type in {"TIMER", "ESC"}:
+            state = job.poll()
+            fs = context.scene.ms_teeth_fit
+            fs.progress = job.progress
+            fs.status = job.status_text()
+            context.window_manager.progress_update(int(1000 * job.progress))
+            if context.workspace is not None:
+                context.workspace.status_text_set(job.status_text())
+            for area in context.screen.areas if context.screen else ():
+                area.tag_redraw()
+            if state != "RUNNING":
+                self._cleanup(context)
+                return self._finish(context, job, state)
+        return {"PASS_THROUGH"}
+
+
+class MS_OT_teeth_fit_cancel(bpy.types.Operator):
+    """Cancel the running teeth fit (its checkpoint is kept: fit again with --resume to continue)"""
+
+    bl_idname = "material_structures.teeth_fit_cancel"
+    bl_label = "Cancel Fit"
+
+    def execute(self, context):
+        job = _JOB["job"]
+        if job is None or job.poll() != "RUNNING":
+            self.report({"WARNING"}, "No teeth fit is running")
+            return {"CANCELLED"}
+        job.cancel()
+        return {"FINISHED"}
+
+
+class MS_OT_teeth_import_scene(bpy.types.Operator):
+    """Import a core teeth scene (scene.json / scene_fit.json): teeth pairs, gums and oral-cavity proxy"""
+
+    bl_idname = "material_structures.teeth_import_scene"
+    bl_label = "Import Teeth Scene"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: bpy.props.StringProperty(subtype="FILE_PATH")
+    filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        from ...core.teeth.scene import load_scene
+        from ..teeth.scene_build import build_teeth_scene
+
+        try:
+            ts = load_scene(self.filepath)
+        except (OSError, ValueError, KeyError) as exc:
+            self.report({"ERROR"}, f"cannot read {self.filepath}: {exc}")
+            return {"CANCELLED"}
+        build_teeth_scene(ts, context.collection or context.scene.collection, _mm_per_unit(context.scene),
+                          smooth=True)
+        return {"FINISHED"}
+
+
+CLASSES: list[type] = [MS_OT_teeth_add_tooth, MS_OT_teeth_set_dentin, MS_OT_teeth_apply_fitted,
+                       *GROUP_OPERATORS, MS_OT_teeth_apply_fit_file, MS_OT_teeth_fit, MS_OT_teeth_fit_cancel,
+                       MS_OT_teeth_import_scene]

@@ -1,0 +1,59 @@
+"""Sidebar panel "Teeth": add teeth, edit the dentin shape (live shape keys), fit to a capture."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..teeth.properties import owner
+
+
+class VIEW3D_PT_material_structures_teeth(bpy.types.Panel):
+    bl_label = "Teeth"
+    bl_idname = "VIEW3D_PT_material_structures_teeth"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Material Structures"
+
+    def draw(self, context):
+        layout = self.layout
+        row = layout.row(align=True)
+        row.operator("material_structures.teeth_add_tooth", text="Add Tooth", icon="ADD").source = "TEMPLATE"
+        row.operator("material_structures.teeth_add_tooth", text="From Mesh", icon="MESH_DATA").source = "MESH"
+        layout.operator("material_structures.teeth_import_scene", icon="IMPORT")
+        obj = owner(context.active_object)
+        if obj is None:
+            layout.label(text="Select a tooth to edit its dentin", icon="INFO")
+        else:
+            st = obj.ms_tooth
+            box = layout.box()
+            box.label(text=f"{st.tooth_name} ({st.kind or 'tooth'}): dentin shape", icon="SHAPEKEY_DATA")
+            col = box.column(align=True)
+            col.prop(st, "buccal", slider=True)
+            col.prop(st, "proximal", slider=True)
+            col.prop(st, "occlusal", slider=True)
+            if st.has_fit:
+                f = st.fitted
+                box.label(text=f"Fitted c: {f[0]:+.3f} {f[1]:+.3f} {f[2]:+.3f}")
+            row = box.row()
+            row.enabled = st.has_fit
+            row.operator("material_structures.teeth_apply_fitted", icon="CHECKMARK")
+        fs = context.scene.ms_teeth_fit
+        box = layout.box()
+        box.label(text="Fit to capture", icon="MOD_LENGTH")
+        box.prop(fs, "capture_dir")
+        box.prop(fs, "out_dir")
+        row = box.row(align=True)
+        row.prop(fs, "iterations")
+        row.prop(fs, "lights_per_iteration", text="Lights")
+        box.prop(fs, "init")
+        if fs.running:
+            box.prop(fs, "progress", slider=True)
+            box.operator("material_structures.teeth_fit_cancel", icon="CANCEL")
+        else:
+            box.operator("material_structures.teeth_fit", icon="PLAY")
+            box.operator("material_structures.teeth_apply_fit_file", icon="FILE_TICK")
+        if fs.status:
+            box.label(text=fs.status)
+
+
+CLASSES: list[type] = [VIEW3D_PT_material_structures_teeth]

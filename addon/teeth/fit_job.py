@@ -1,0 +1,147 @@
+"""The core fit (``python -m material_structures teeth fit ...``) as a background process.
+
+Blender stays responsive: the fit runs in its own interpreter, its output (tqdm progress on stderr,
+messages on stdout) is read by a thread into ``OUT/fit_log.txt`` and parsed for the iteration count and
+loss; ``cancel()`` terminates the process (the core's checkpoint lets ``--resume`` continue). When it
+finishes the CLI has written ``scene_fit.json``, ``loss.json`` and ``loss.png`` into OUT.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import threading
+
+_PROGRESS = re.compile(r"(\d+)/(\d+)")
+_LOSS = re.compile(r"loss=([0-9.eE+-]+)")
+
+
+def package_parent() -> str:
+    """The folder that holds the ``material_structures`` package (this checkout or the extension)."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    return os.path.dirname(root)
+
+
+def python_executable() -> str:
+    """The interpreter for the fit: ``MS_PYTHON`` if set, else this process's (``bpy`` module: the venv)."""
+    return os.environ.get("MS_PYTHON") or sys.executable
+
+
+def fit_command(capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
+                lights_per_iteration: int = 18, extra: list[str] | None = None) -> list[str]:
+    return [python_executable(), "-m", "material_structures", "teeth", "fit", capture_dir, "--out", out_dir,
+            "--iterations", str(int(iterations)), "--init", init, "--lights-per-iteration",
+            str(int(lights_per_iteration)), *(extra or [])]
+
+
+class FitJob:
+    """One background fit. ``poll()`` -> state; ``cancel()``; ``result_path`` once finished."""
+
+    def __init__(self, capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
+                 lights_per_iteration: int = 18, extra: list[str] | None = None):
+        if not os.path.isfile(os.path.join(capture_dir, "capture.json")):
+            raise FileNotFoundError(f"no capture.json in {capture_dir!r}")
+        self.capture_dir, self.out_dir = capture_dir, out_dir
+        self.iterations = int(iterations)
+        self.cmd = fit_command(capture_dir, out_dir, iterations, init, lights_per_iteration, extra)
+        self.proc: subprocess.Popen | None = None
+        self.done_iterations = 0
+        self.loss: float | None = None
+        self.last_line = ""
+        self.cancelled = False
+        self._lock = threading.Lock()
+        self._threads: list[threading.Thread] = []
+        self.log_path = os.path.join(out_dir, "fit_log.txt")
+
+    def start(self) -> FitJob:
+        os.makedirs(self.out_dir, exist_ok=True)
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join([package_parent(), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        self._log = open(self.log_path, "w", encoding="utf-8")
+        self._log.write("$ " + " ".join(self.cmd) + "\n")
+        self._log.flush()
+        self.proc = subprocess.Popen(self.cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                                     cwd=package_parent())
+        for stream in (self.proc.stdout, self.proc.stderr):
+            t = threading.Thread(target=self._read, args=(stream,), daemon=True)
+            t.start()
+            self._threads.append(t)
+        return self
+
+    def _read(self, stream) -> None:
+        buf = b""
+        while True:
+            chunk = stream.read1(4096) if hasattr(stream, "read1") else stream.read(4096)
+            if not chunk:
+                break
+            buf += chunk
+            parts = re.split(rb"[\r\n]", buf)
+            buf = parts.pop()
+            for raw in parts:
+                self._line(raw.decode("utf-8", "replace"))
+        if buf:
+            self._line(buf.decode("utf-8", "replace"))
+
+    def _line(self, line: str) -> None:
+        line = line.strip()
+        if not line:
+            return
+        with self._lock:
+            self._log.write(line + "\n")
+            self._log.flush()
+            self.last_line = line
+            if line.startswith("fit"):
+                m = _PROGRESS.search(line)
+                if m:
+                    self.done_iterations = int(m.group(1))
+                m = _LOSS.search(line)
+                if m:
+                    self.loss = float(m.group(1))
+
+    @property
+    def progress(self) -> float:
+        return min(1.0, self.done_iterations / max(self.iterations, 1))
+
+    def poll(self) -> str:
+        """'RUNNING', 'FINISHED', 'CANCELLED' or 'FAILED'."""
+        if self.proc is None:
+            return "RUNNING"
+        rc = self.proc.poll()
+        if rc is None:
+            return "RUNNING"
+        for t in self._threads:
+            t.join(timeout=5)
+        if not self._log.closed:
+            self._log.close()
+        if self.cancelled:
+            return "CANCELLED"
+        return "FINISHED" if rc == 0 and os.path.isfile(self.result_path) else "FAILED"
+
+    def wait(self, timeout: float | None = None) -> str:
+        if self.proc is not None:
+            self.proc.wait(timeout=timeout)
+        return self.poll()
+
+    def cancel(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.cancelled = True
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+
+    @property
+    def result_path(self) -> str:
+        return os.path.join(self.out_dir, "scene_fit.json")
+
+    @property
+    def loss_plot(self) -> str:
+        return os.path.join(self.out_dir, "loss.png")
+
+    def status_text(self) -> str:
+        loss = "" if self.loss is None else f", loss {self.loss:.3e}"
+        return f"Teeth fit: iteration {self.done_iterations}/{self.iterations}{loss} (Esc cancels)"
