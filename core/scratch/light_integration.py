@@ -214,6 +214,7 @@ def specular_line_intervals_polygon(
     V = np.asarray(vertices, dtype=np.float64)
     U = V / np.linalg.norm(V, axis=-1, keepdims=True)
     ne = np.cross(U, np.roll(U, -1, axis=1))  # (P, V, 3) edge great-circle normals
+    ne = np.broadcast_to(ne, (t.shape[0],) + ne.shape[1:])
     orient = np.sign(_dot(U[:, 0], np.cross(U[:, 1], U[:, 2])))
     orient = np.where(orient == 0, 1.0, orient)
     r0, r1 = _circle_roots(

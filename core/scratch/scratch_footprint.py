@@ -38,9 +38,16 @@ from numpy.typing import ArrayLike
 from .scratch_model_terms import coherence_area
 
 
-def footprint_matrix(footprint: ArrayLike, n: int) -> np.ndarray:
-    """Normalise a footprint spec to (n, 2, 2): scalar radius, (n,) radii, (2, 2) or (n, 2, 2) J."""
+def footprint_matrix(footprint: ArrayLike, n: int, allow_shared: bool = False) -> np.ndarray:
+    """Normalise a footprint spec to (n, 2, 2): scalar radius, (n,) radii, (2, 2) or (n, 2, 2) J.
+
+    With ``allow_shared`` a footprint common to all points is returned as (1, 2, 2).
+    """
     f = np.asarray(footprint, dtype=np.float64)
+    if allow_shared and f.ndim == 0:
+        return (float(f) * np.eye(2))[None]
+    if allow_shared and f.shape == (2, 2):
+        return f[None].copy()
     if f.ndim == 0 or (f.ndim == 1 and f.shape[0] == n):
         r = np.broadcast_to(f, (n,))
         J = np.zeros((n, 2, 2))
@@ -98,7 +105,7 @@ def scratch_contained_length(p0: ArrayLike, p1: ArrayLike, x: ArrayLike, J_inv: 
 
 
 FOOTPRINT_RULES = ("thesis", "chords")
-GAUSS_CUTOFF = 3.5  # the across-scratch integral is truncated at +-3.5 s (weight e^{-12.25})
+GAUSS_CUTOFF = 2.5  # the across-scratch integral is truncated at +-2.5 s (tail 2e-4)
 
 
 def footprint_half_width(J: ArrayLike, direction: ArrayLike) -> np.ndarray:
@@ -156,12 +163,12 @@ def scratch_weighted_length(
     rule: str = "chords",
     setup=None,
     n_nodes: int = 6,
-    cutoff: float = 3.5,
+    cutoff: float = GAUSS_CUTOFF,
 ) -> np.ndarray:
     """int_{A_P} exp(-s_b(x')^2 / s^2) dx' / (s sqrt(pi)) for segments p0-p1 (see module note).
 
     ``rule="thesis"`` returns l_contained (eq. 4.14). ``"chords"`` integrates over the offset v across
-    the scratch: [v0 - 3.5 s, v0] and [v0, v0 + 3.5 s] (``cutoff`` = 3.5), each clipped to the footprint's extent
+    the scratch: [v0 - 2.5 s, v0] and [v0, v0 + 2.5 s] (``cutoff``), each clipped to the footprint's extent
     [-V, V], with a 6-node Gauss-Legendre rule in theta, v = V sin(theta) (the substitution removes
     the square-root behaviour of the chord length at the rim). Each node is one line-ellipse
     intersection of the segment shifted across itself (2 ``n_nodes`` per segment).

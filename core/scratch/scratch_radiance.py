@@ -45,7 +45,10 @@ from .light_integration import (
     specular_line_intervals_sphere,
 )
 from .scratch_footprint import (
+    GAUSS_CUTOFF,
     _chord_setup,
+    footprint_alpha,
+    footprint_area,
     footprint_matrix,
     footprint_semi_major,
     scratch_footprint_density,
@@ -53,7 +56,7 @@ from .scratch_footprint import (
     scratch_weighted_length,
 )
 from .scratch_model_terms import coherence_area, scratch_depth_term_sq
-from .scratch_set import ScratchSet
+from .scratch_set import REACH_SIGMAS, ScratchSet
 
 
 @dataclass
@@ -78,9 +81,10 @@ def resolve_wavelengths(wavelengths_nm) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def _per_point(a: ArrayLike, n: int, tail: tuple[int, ...], name: str) -> np.ndarray:
+    """(n,) + tail array, or (1,) + tail when the value is shared by all points (broadcasts)."""
     a = np.asarray(a, dtype=np.float64)
     if a.shape == tail:
-        return np.broadcast_to(a, (n,) + tail)
+        return a[None]
     if a.shape == (n,) + tail:
         return a
     raise ValueError(f"{name} must have shape {tail} or {(n,) + tail}; got {a.shape}")
@@ -114,7 +118,7 @@ def shade_scratch_pairs(
     det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
     J_inv = np.stack([np.stack([J[:, 1, 1], -J[:, 0, 1]], -1), np.stack([-J[:, 1, 0], J[:, 0, 0]], -1)], 1)
     J_inv = J_inv / det[:, None, None]
-    area = np.pi * np.abs(det)
+    area = np.broadcast_to(np.pi * np.abs(det), (x.shape[0],))
     setup = _chord_setup(p0, p1, x, J, J_inv)
     length, v0 = setup[6], setup[7]
     t2 = (p1 - p0) / length[:, None]
@@ -128,38 +132,35 @@ def shade_scratch_pairs(
     P = x.shape[0]
     lam = np.broadcast_to(lam_um if lam_um.ndim == 2 else lam_um[None, :], (P, lam_um.shape[-1]))
     L = lam.shape[1]
-    dsq = scratch_depth_term_sq(depth_um[:, None], lam)  # (P, L)
     w = width_um[:, None]
     rad = np.zeros((P, L))
     rho_cons = None
     kind = light_geom["kind"]
-    if need_conserving or kind not in ("sphere", "polygon"):
+    z0 = z1 = None
+    if kind == "sphere":
+        z0, z1 = specular_line_intervals_sphere(t2, wo, light_geom["center"], light_geom["radius"])
+    elif kind == "polygon":
+        z0, z1 = specular_line_intervals_polygon(t2, wo, light_geom["vertices"])
+    if need_conserving or z0 is None:
         live = np.arange(P)
     else:  # area lights: only pairs whose specular line meets the light can radiate
-        if kind == "sphere":
-            z0, z1 = specular_line_intervals_sphere(t2, wo, light_geom["center"], light_geom["radius"])
-        else:
-            z0, z1 = specular_line_intervals_polygon(t2, wo, light_geom["vertices"])
         live = np.flatnonzero(np.any(z1 > z0, axis=1))
     sub = tuple(a[live] for a in setup)
     l_eta = scratch_weighted_length(p0[live], p1[live], x[live], None, None, sigma_um, footprint_rule, sub)
-    eta_p = np.zeros(P)
-    eta_p[live] = scratch_footprint_phase_sq(l_eta, s_b[live], on_seg[live], area[live], sigma_um)
+    eta_l = scratch_footprint_phase_sq(l_eta, s_b[live], on_seg[live], area[live], sigma_um)
     if need_conserving:
-        rho_cons = w * dsq * eta_p[:, None] / (2 * np.sqrt(np.pi) * sigma_um * coherence_area(sigma_um))
-    live = live[eta_p[live] > 0]
+        dsq_all = scratch_depth_term_sq(depth_um[:, None], lam)
+        rho_cons = w * dsq_all * eta_l[:, None] / (2 * np.sqrt(np.pi) * sigma_um * coherence_area(sigma_um))
+    keep = eta_l > 0
+    live, eta_l = live[keep], eta_l[keep]
     if live.size == 0:
         return rad, rho, rho_cons
     lam_l = lam[live]
-    amp = w[live] ** 2 * dsq[live] * eta_p[live, None] / (coherence_area(sigma_um) * lam_l * lam_l)  # (P', L)
-    wo_l = wo[live]
-    if kind in ("sphere", "polygon"):
-        if kind == "sphere":
-            z0, z1 = specular_line_intervals_sphere(
-                t2[live], wo_l, light_geom["center"][live], light_geom["radius"][live]
-            )
-        else:
-            z0, z1 = specular_line_intervals_polygon(t2[live], wo_l, light_geom["vertices"][live])
+    dsq = scratch_depth_term_sq(depth_um[live, None], lam_l)
+    amp = w[live] ** 2 * dsq * eta_l[:, None] / (coherence_area(sigma_um) * lam_l * lam_l)  # (P', L)
+    wo_l = _take(wo, live)
+    if z0 is not None:
+        z0, z1 = z0[live], z1[live]
         ip, ik = np.nonzero(z1 > z0)  # non-empty (pair, interval) entries only
         if ip.size:
             bl = band_limited_integral(
@@ -170,14 +171,14 @@ def shade_scratch_pairs(
                 nb[:, j] = np.bincount(ip, weights=bl[:, j], minlength=live.size)
             rad[live] = amp * nb
     else:  # directional: BRDF at the light direction times E cos(theta_i)
-        wi = light_geom["direction"][live]
+        wi = _take(light_geom["direction"], live)
         t3, b3 = scratch_frame(t2[live])
         k = 2 * np.pi / lam_l
         xi1 = np.einsum("pi,pi->p", wi + wo_l, t3)[:, None]
         xi2 = np.einsum("pi,pi->p", wi + wo_l, b3)[:, None]
         cos_i = np.maximum(wi[:, 2], 0.0)[:, None]
         ang = np.sinc(w[live] * xi2 / lam_l) ** 2 * np.exp(-((sigma_um * k * xi1) ** 2))
-        rad[live] = amp * ang * cos_i * light_geom["scale"][live][:, None]
+        rad[live] = amp * ang * cos_i * _take(light_geom["scale"], live)[:, None]
     return rad, rho, rho_cons
 
 
@@ -185,7 +186,9 @@ def _light_geometry(light, n: int) -> tuple[dict, np.ndarray | float]:
     """Per-point light arrays and the light's spectral scale (radiance or irradiance)."""
     if isinstance(light, SphereLight):
         c = _per_point(light.center, n, (3,), "SphereLight.center")
-        r = np.broadcast_to(np.asarray(light.radius, dtype=np.float64), (n,))
+        r = np.asarray(light.radius, dtype=np.float64).reshape(-1)
+        if r.size not in (1, n):
+            raise ValueError(f"SphereLight.radius must be a scalar or have {n} values")
         if np.any(r <= 0):
             raise ValueError("SphereLight.radius must be > 0")
         return {"kind": "sphere", "center": c, "radius": r}, light.radiance
@@ -198,7 +201,7 @@ def _light_geometry(light, n: int) -> tuple[dict, np.ndarray | float]:
     if isinstance(light, DirectionalLight):
         dvec = _per_point(light.direction, n, (3,), "DirectionalLight.direction")
         dvec = dvec / np.linalg.norm(dvec, axis=-1, keepdims=True)
-        return {"kind": "directional", "direction": dvec, "scale": np.ones(n)}, light.irradiance
+        return {"kind": "directional", "direction": dvec, "scale": np.ones(1)}, light.irradiance
     if isinstance(light, PointLight):
         pvec = _per_point(light.position, n, (3,), "PointLight.position")
         dist = np.linalg.norm(pvec, axis=-1)
@@ -206,8 +209,13 @@ def _light_geometry(light, n: int) -> tuple[dict, np.ndarray | float]:
     raise ValueError(f"unsupported light type {type(light).__name__}")
 
 
+def _take(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """a[idx] for per-point arrays; shared (leading size 1) arrays are returned as they are."""
+    return a if a.shape[0] == 1 else a[idx]
+
+
 def _gather(geom: dict, idx: np.ndarray) -> dict:
-    return {k: (v if k == "kind" else np.asarray(v)[idx]) for k, v in geom.items()}
+    return {k: (v if k == "kind" else _take(np.asarray(v), idx)) for k, v in geom.items()}
 
 
 def scratch_radiance_pairs(
@@ -236,7 +244,7 @@ def scratch_radiance_pairs(
     x = np.asarray(points_um, dtype=np.float64).reshape(-1, 2)
     n = x.shape[0]
     lam_nm, M = resolve_wavelengths(wavelengths_nm)
-    J = footprint_matrix(footprint, n)
+    J = footprint_matrix(footprint, n, allow_shared=True)
     wo = _per_point(wo, n, (3,), "wo")
     geom, scale = _light_geometry(light, n)
     li = _spectral(scale, lam_nm.size)
@@ -246,7 +254,7 @@ def scratch_radiance_pairs(
     width_um = np.broadcast_to(np.asarray(width_um, dtype=np.float64), (seg.shape[0],))
     depth_um = np.broadcast_to(np.asarray(depth_um, dtype=np.float64), (seg.shape[0],))
     rad, rho, rho_c = shade_scratch_pairs(
-        x[pp], J[pp], wo[pp], _gather(geom, pp), seg[ps], width_um[ps], depth_um[ps], lam_nm / 1000.0,
+        x[pp], _take(J, pp), _take(wo, pp), _gather(geom, pp), seg[ps], width_um[ps], depth_um[ps], lam_nm / 1000.0,
         sigma_um, si, footprint_rule, energy == "conserving",
     )
     return _accumulate(n, pp, rad * li, rho, rho_c, lam_nm, M, energy, int(pp.size))
@@ -306,13 +314,14 @@ def scratch_radiance(
     x = np.asarray(points_um, dtype=np.float64).reshape(-1, 2)
     n = x.shape[0]
     lam_nm, M = resolve_wavelengths(wavelengths_nm)
-    J = footprint_matrix(footprint, n)
-    reach = s.query_radius_um - 4.0 * sigma
+    J = footprint_matrix(footprint, n, allow_shared=True)
+    reach = s.query_radius_um - REACH_SIGMAS * sigma
     if reach <= 0:
-        raise ValueError("the scratch set's query radius is below 4 sigma; rebuild its index with this sigma")
+        raise ValueError("the scratch set's query radius is below 3.5 sigma; rebuild its index with this sigma")
     amax = footprint_semi_major(J)
     shrink = np.where(amax > reach, reach / np.maximum(amax, 1e-300), 1.0)
     J = J * shrink[:, None, None]
+    alpha = footprint_alpha(footprint_area(J), sigma)
     wo = _per_point(wo, n, (3,), "wo")
     geom, scale = _light_geometry(light, n)
     li = _spectral(scale, lam_nm.size)
@@ -324,7 +333,8 @@ def scratch_radiance(
     ctx = {
         "s": s, "xw": xw, "J": J, "wo": wo, "geom": geom, "li": li, "lam_nm": lam_nm, "sigma": sigma,
         "si": si, "footprint_rule": footprint_rule, "conserving": energy == "conserving",
-        "reach": amax * shrink + 3.5 * sigma, "cnt": s.grid_count[iy, ix], "off": s.grid_offset[iy, ix],
+        "reach": amax * shrink + np.where(alpha < 1.0, REACH_SIGMAS, GAUSS_CUTOFF) * sigma,
+        "cnt": s.grid_count[iy, ix], "off": s.grid_offset[iy, ix],
         "chunk": int(chunk_points),
     }
     workers = max(1, min(int(workers), n // max(1, chunk_points) or 1))
@@ -383,15 +393,16 @@ def _walk_block(ctx: dict, a0: int, b0: int):
         start = np.cumsum(cnt) - cnt
         within = np.arange(tot) - np.repeat(start, cnt)
         sg = s.cell_segments[np.repeat(ctx["off"][a:b], cnt) + within]
-        # cull pairs that cannot contribute: farther than the footprint's semi-major axis + 3.5 sigma
+        # cull pairs that cannot contribute: farther than the footprint's semi-major axis + 2.5 sigma
+        # (3.5 sigma for footprints below 2 A_C, where rho_C's wider Gaussian matters)
         seg = s.segments[sg]
         xp = xw[pp]
-        keep = _point_segment_distance_fast(xp, seg) <= ctx["reach"][pp]
+        keep = _point_segment_distance_fast(xp, seg) <= _take(ctx["reach"], pp)
         if not np.any(keep):
             continue
         pp, sg, seg, xp = pp[keep], sg[keep], seg[keep], xp[keep]
         rad, rho, rc = shade_scratch_pairs(
-            xp, J[pp], wo[pp], _gather(geom, pp), seg, s.width_um[sg], s.depth_um[sg], lam_nm / 1000.0,
+            xp, _take(J, pp), _take(wo, pp), _gather(geom, pp), seg, s.width_um[sg], s.depth_um[sg], lam_nm / 1000.0,
             sigma, ctx["si"], ctx["footprint_rule"], ctx["conserving"],
         )
         n_pairs += int(pp.size)

@@ -8,7 +8,7 @@ is stored so that files stay forward compatible.
 Grid index: the patch [0, Px] x [0, Py] is cut into nx x ny square cells of side ``cell_size_um``.
 Cell (ix, iy) covers [ix c, (ix+1) c) x [iy c, (iy+1) c) and lists every segment that comes within
 ``query_radius_um`` of the cell. A shaded point therefore only walks the list of its own cell, as
-long as its footprint's semi-major axis plus 4 sigma stays below the query radius (the evaluator
+long as its footprint's semi-major axis plus 3.5 sigma stays below the query radius (the evaluator
 shrinks larger footprints to that size). Lists are stored CSR-style: ``cell_segments`` holds segment
 indices cell after cell (row-major, iy * nx + ix), ``grid_offset``/``grid_count`` (ny, nx) give each
 cell's slice.
@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 PROFILE_RECTANGULAR = 0
 KNOWN_PROFILES = (PROFILE_RECTANGULAR,)
 MAX_TABLE_INDEX = 2**24  # integers stored in float32 tables are exact below this
+REACH_SIGMAS = 3.5  # scratches farther than the footprint + 3.5 sigma contribute nothing
 
 
 @dataclass
@@ -108,8 +109,8 @@ def build_grid_index(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """CSR grid index: (grid_offset (ny, nx), grid_count (ny, nx), cell_segments (K,)).
 
-    A segment is listed in a cell when it comes within ``query_radius_um`` of the cell (tested
-    conservatively against the cell's circumscribed disk).
+    A segment is listed in a cell when it comes within ``query_radius_um`` of the cell's square
+    (exact segment-square distance).
     """
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     ps = np.asarray(patch_size_um, dtype=np.float64)
@@ -129,17 +130,41 @@ def build_grid_index(
     local = np.arange(rep.size) - np.repeat(np.cumsum(n) - n, n)
     ix = ix0[rep] + local % wx[rep]
     iy = iy0[rep] + local // wx[rep]
-    # keep cells whose centre is within r + half diagonal of the segment
-    cx = (ix + 0.5) * c
-    cy = (iy + 0.5) * c
-    dist = point_segment_distance(np.stack([cx, cy], -1), seg[rep, :2], seg[rep, 2:])
-    keep = dist <= r + c * np.sqrt(0.5)
+    keep = segment_rect_distance(seg[rep], ix * c, iy * c, c) <= r
     rep, cell = rep[keep], (iy * nx + ix)[keep]
     order = np.argsort(cell, kind="stable")
     cell_segments = rep[order]
     count = np.bincount(cell, minlength=nx * ny)
     offset = np.cumsum(count) - count
     return offset.reshape(ny, nx), count.reshape(ny, nx), cell_segments
+
+
+def segment_rect_distance(seg: np.ndarray, x0: np.ndarray, y0: np.ndarray, size: float) -> np.ndarray:
+    """Distance between segments (P, 4) and the squares [x0, x0 + size] x [y0, y0 + size] (0 if they meet)."""
+    p0, p1 = seg[:, :2], seg[:, 2:]
+    lo = np.stack([x0, y0], -1)
+    hi = lo + size
+    # endpoints to the square
+    d0 = np.linalg.norm(np.maximum(np.maximum(lo - p0, p0 - hi), 0.0), axis=-1)
+    d1 = np.linalg.norm(np.maximum(np.maximum(lo - p1, p1 - hi), 0.0), axis=-1)
+    dist = np.minimum(d0, d1)
+    # square corners to the segment
+    for cx, cy in ((lo[:, 0], lo[:, 1]), (hi[:, 0], lo[:, 1]), (lo[:, 0], hi[:, 1]), (hi[:, 0], hi[:, 1])):
+        dist = np.minimum(dist, point_segment_distance(np.stack([cx, cy], -1), p0, p1))
+    # a segment crossing the square (Liang-Barsky slab test)
+    d = p1 - p0
+    t0 = np.zeros(len(seg))
+    t1 = np.ones(len(seg))
+    ok = np.ones(len(seg), dtype=bool)
+    for k in (0, 1):
+        par = d[:, k] == 0
+        ok &= ~(par & ((p0[:, k] < lo[:, k]) | (p0[:, k] > hi[:, k])))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta = (lo[:, k] - p0[:, k]) / d[:, k]
+            tb = (hi[:, k] - p0[:, k]) / d[:, k]
+        t0 = np.where(par, t0, np.maximum(t0, np.minimum(ta, tb)))
+        t1 = np.where(par, t1, np.minimum(t1, np.maximum(ta, tb)))
+    return np.where(ok & (t0 <= t1), 0.0, dist)
 
 
 def point_segment_distance(x: ArrayLike, p0: ArrayLike, p1: ArrayLike) -> np.ndarray:
@@ -165,14 +190,14 @@ def make_scratch_set(
 ) -> ScratchSet:
     """Assemble and index a scratch set.
 
-    The query radius is ``max_footprint_um + 4 sigma``: footprints with a semi-major axis up to
+    The query radius is ``max_footprint_um + 3.5 sigma``: footprints with a semi-major axis up to
     ``max_footprint_um`` are evaluated exactly. The cell size defaults to half the query radius.
     """
     seg = np.asarray(segments, dtype=np.float64)
     if seg.ndim != 2 or seg.shape[1] != 4:
         raise ValueError(f"segments must have shape (M, 4) = x0, y0, x1, y1; got {seg.shape}")
     m = seg.shape[0]
-    q = float(max_footprint_um) + 4.0 * float(sigma_um)
+    q = float(max_footprint_um) + REACH_SIGMAS * float(sigma_um)
     c = float(cell_size_um) if cell_size_um is not None else 0.5 * q
     ps = np.asarray(patch_size_um, dtype=np.float64).reshape(2)
     off, cnt, cs = build_grid_index(seg, ps, c, q)
