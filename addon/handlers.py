@@ -34,6 +34,10 @@ HANDLERS = [
     (bpy.app.handlers.render_pre, on_render_pre),
 ]
 
+from .scratch.handlers import SCRATCH_HANDLERS  # noqa: E402  (scratched metal: lamps, table cache)
+
+HANDLERS += SCRATCH_HANDLERS
+
 
 def register_handlers() -> None:
     for handler_list, fn in HANDLERS:

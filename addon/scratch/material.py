@@ -1,0 +1,238 @@
+"""The "Scratched Metal" node groups and materials (thesis ch. 4 in Cycles).
+
+One node group per scratch set, ``Scratched Metal (<set>)``: inside, an OSL script node
+(``cycles_osl/ms_scratch_metal.osl``) gives the base metal closure weighted by (1 - rho_P) and the
+scratch term through emission; a Texture Coordinate node feeds the UV map (its ray differentials
+give the pixel footprint) and a Tangent node the scratch plane's x axis. The set's tables reach the
+shader as an EXR cache folder (``tables.py``) and lamps through ``Lamp<k>*`` inputs that
+:func:`sync_scratch_lamps` keeps current (depsgraph/render_pre handlers). Lamps stay linked to the
+object: the base closure sees them (and the world) as usual; only the scratch term is computed here.
+
+Lamp units (``addon/lamp_sync.py``): point/spot lamps of power P give intensity P/(4 pi); with a
+radius r > 0 they are sphere lights of radiance P/(4 pi^2 r^2); sun lamps give irradiance S; area
+lamps (one-sided) have radiance P/(pi A), disks/ellipses as equal-area 16-gons.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from ...render.session import ensure_bundled_paths, osl_flip_t, osl_shader_path
+from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
+from .tables import PROP, extract_tables, load_stored_set, store_scratch_set
+
+SHADER = "ms_scratch_metal"
+SCRIPT_NODE = "Scratch Shader"
+MARKER = "material_structures_scratch"
+GROUP_PREFIX = "Scratched Metal"
+
+# (socket name, socket type, default, min, max); the OSL input of the same name takes it.
+GROUP_INPUTS = [
+    ("BaseColor", "NodeSocketColor", (0.91, 0.92, 0.92, 1.0), None, None),
+    ("EdgeTint", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None),
+    ("Roughness", "NodeSocketFloat", 0.08, 0.0, 1.0),
+    ("Coherence", "NodeSocketFloat", 60.0, 1.0, 500.0),
+    ("Intensity", "NodeSocketFloat", 1.0, 0.0, 1000.0),
+    ("Spectral", "NodeSocketInt", 0, 0, 1),
+    ("Tiling", "NodeSocketFloat", 1.0, 1e-3, 1e4),
+    ("FootprintScale", "NodeSocketFloat", 0.5, 1e-3, 10.0),
+    ("Debug", "NodeSocketInt", 0, 0, 2),
+]
+
+
+def _load_script(tree, scene):
+    ensure_bundled_paths()
+    scene.render.engine = "CYCLES"
+    scene.cycles.shading_system = True
+    node = tree.nodes.new("ShaderNodeScript")
+    node.name = node.label = SCRIPT_NODE
+    node.mode = "EXTERNAL"
+    node.filepath = osl_shader_path(SHADER)
+    node.update()
+    need = [n for n, *_ in GROUP_INPUTS] + ["UV", "Tangent", "TableDir", "Lamp1Type", "Lamp1Radius"]
+    missing = [s for s in need if s not in node.inputs]
+    if missing or "Scratch" not in node.outputs:
+        raise RuntimeError(f"scratched-metal shader did not compile or lacks sockets {missing}")
+    return node
+
+
+def group_name(set_name: str) -> str:
+    return f"{GROUP_PREFIX} ({set_name})"
+
+
+def ensure_scratch_group(scratch_set, set_name: str, scene=None) -> bpy.types.ShaderNodeTree:
+    """The node group of scratch set ``set_name`` (created or updated; the set is packed in the file)."""
+    scene = scene or bpy.context.scene
+    meta = store_scratch_set(scratch_set, set_name)
+    group = bpy.data.node_groups.get(group_name(set_name))
+    if group is None or not group.get(MARKER):
+        group = bpy.data.node_groups.new(group_name(set_name), "ShaderNodeTree")
+        group[MARKER] = 1
+        for name, socket_type, default, lo, hi in GROUP_INPUTS:
+            sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
+            sock.default_value = default
+            if lo is not None:
+                sock.min_value, sock.max_value = lo, hi
+        group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+        nodes, links = group.nodes, group.links
+        gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+        script = _load_script(group, scene)
+        texco = nodes.new("ShaderNodeTexCoord")
+        tangent = nodes.new("ShaderNodeTangent")
+        tangent.direction_type = "UV_MAP"
+        add = nodes.new("ShaderNodeAddShader")
+        for name, *_ in GROUP_INPUTS:
+            links.new(gin.outputs[name], script.inputs[name])
+        links.new(texco.outputs["UV"], script.inputs["UV"])
+        links.new(tangent.outputs["Tangent"], script.inputs["Tangent"])
+        links.new(script.outputs["BSDF"], add.inputs[0])
+        links.new(script.outputs["Scratch"], add.inputs[1])
+        links.new(add.outputs[0], gout.inputs["Shader"])
+        gin.location, script.location, texco.location = (-500, 0), (-150, 0), (-500, -300)
+        tangent.location, add.location, gout.location = (-500, -500), (150, 0), (350, 0)
+    group[PROP] = meta
+    group.interface.items_tree["Coherence"].default_value = meta["sigma_um"]
+    sync_group_tables(group, scratch_set)
+    return group
+
+
+def script_node(group):
+    return next(n for n in group.nodes if n.type == "SCRIPT" and "TableDir" in n.inputs)
+
+
+def sync_group_tables(group, scratch_set=None) -> str:
+    """Extract the group's set to the EXR cache if needed and point the shader at it."""
+    meta = group[PROP]
+    s = scratch_set if scratch_set is not None else load_stored_set(meta)
+    folder = extract_tables(s)
+    node = script_node(group)
+    vals = {
+        "TableDir": folder,
+        "HasTables": 1,
+        "GridNX": int(meta["grid_nx"]),
+        "GridNY": int(meta["grid_ny"]),
+        "SegRows": max(1, -(-int(meta["n_segments"]) // 1024)),
+        "CellRows": max(1, -(-int(meta["n_cells_entries"]) // 1024)),
+        "PatchX": float(meta["patch_size_um"][0]),
+        "PatchY": float(meta["patch_size_um"][1]),
+        "CellSize": float(meta["cell_size_um"]),
+        "QueryRadius": float(meta["query_radius_um"]),
+        "FlipT": osl_flip_t(),
+        "GridAlpha": 0 if bpy.app.version[0] < 5 else 1,
+    }
+    for key, v in vals.items():
+        if node.inputs[key].default_value != v:
+            node.inputs[key].default_value = v
+    return folder
+
+
+def scratch_groups():
+    return [g for g in bpy.data.node_groups if g.get(MARKER) and g.get(PROP) is not None]
+
+
+def ensure_tables_extracted() -> int:
+    """Re-extract every scratch set whose cache folder is missing (after loading a file); count."""
+    import os
+
+    n = 0
+    for g in scratch_groups():
+        node = script_node(g)
+        if not os.path.isfile(os.path.join(node.inputs["TableDir"].default_value, "meta.exr")):
+            sync_group_tables(g)
+            n += 1
+    return n
+
+
+def create_scratched_metal(
+    name: str,
+    scratch_set,
+    set_name: str | None = None,
+    base_color=(0.91, 0.92, 0.92),
+    roughness: float = 0.08,
+    intensity: float = 1.0,
+    spectral: bool = False,
+    tiling: float = 1.0,
+    scene=None,
+) -> bpy.types.Material:
+    """A material on the scratch set's group, with an EEVEE/viewport fallback (Principled metal)."""
+    scene = scene or bpy.context.scene
+    group = ensure_scratch_group(scratch_set, set_name or name, scene)
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:  # 4.5
+        mat.use_nodes = True
+    mat[MARKER] = 1
+    tree = mat.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    gnode = tree.nodes.new("ShaderNodeGroup")
+    gnode.node_tree = group
+    gnode.name = gnode.label = GROUP_PREFIX
+    gnode.inputs["BaseColor"].default_value = (*base_color[:3], 1.0)
+    gnode.inputs["Roughness"].default_value = roughness
+    gnode.inputs["Intensity"].default_value = intensity
+    gnode.inputs["Spectral"].default_value = 1 if spectral else 0
+    gnode.inputs["Tiling"].default_value = tiling
+    gnode.inputs["Coherence"].default_value = float(scratch_set.sigma_um)
+    out_cycles = tree.nodes.new("ShaderNodeOutputMaterial")
+    out_cycles.target = "CYCLES"
+    tree.links.new(gnode.outputs["Shader"], out_cycles.inputs["Surface"])
+    out_cycles.location = (400, 100)
+    bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (*base_color[:3], 1.0)
+    bsdf.inputs["Metallic"].default_value = 1.0
+    bsdf.inputs["Roughness"].default_value = max(roughness, 0.15)
+    out_eevee = tree.nodes.new("ShaderNodeOutputMaterial")
+    out_eevee.target = "EEVEE"
+    tree.links.new(bsdf.outputs[0], out_eevee.inputs["Surface"])
+    bsdf.location, out_eevee.location = (0, -400), (400, -400)
+    out_cycles.is_active_output = True
+    mat.cycles.emission_sampling = "NONE"
+    sync_scratch_lamps(scene)
+    return mat
+
+
+def group_node(mat):
+    """The scratched-metal group node of a material (None if it has none)."""
+    if mat is None or mat.node_tree is None:
+        return None
+    return next((n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree is not None
+                 and n.node_tree.get(MARKER)), None)
+
+
+def scratch_script_nodes():
+    for g in scratch_groups():
+        yield script_node(g)
+
+
+def scene_scratch_lamps(scene):
+    """ShaderLamps of the scene plus each point/spot lamp's radius (sphere lights)."""
+    out = []
+    for obj, lamp in scene_shader_lamps(scene):
+        radius = float(getattr(obj.data, "shadow_soft_size", 0.0)) if obj.data.type in {"POINT", "SPOT"} else 0.0
+        out.append((obj, lamp, radius))
+    return out
+
+
+def sync_scratch_lamps(scene, update_matrices: bool = True) -> int:
+    """Copy the scene's lamps (and the world approximation) into every scratched-metal shader."""
+    nodes = list(scratch_script_nodes())
+    if not nodes:
+        return 0
+    if update_matrices:
+        for layer in scene.view_layers:
+            layer.update()
+    triples = scene_scratch_lamps(scene)
+    from .world import world_lamps
+
+    lamps = [lamp for _, lamp, _ in triples]
+    radii = [r for _, _, r in triples]
+    for extra in world_lamps(scene, max(0, 4 - len(lamps))):
+        lamps.append(extra)
+        radii.append(0.0)
+    for node in nodes:
+        write_lamp_inputs(node, lamps)
+        for k in range(1, 5):
+            r = radii[k - 1] if k <= len(radii) else 0.0
+            if node.inputs[f"Lamp{k}Radius"].default_value != r:
+                node.inputs[f"Lamp{k}Radius"].default_value = r
+    return len(lamps)

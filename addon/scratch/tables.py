@@ -1,0 +1,141 @@
+"""Scratch sets in a .blend: packed float images (source of truth) + an EXR cache for OSL.
+
+OSL ``texture()`` needs a file path, and packed images have none. So a scratch set lives in the
+.blend as four packed, float, Non-Color images laid out exactly like the EXR tables of
+``core/scratch/scratch_io.py`` (row 0 = top; 1024-wide wrapped tables)::
+
+    "MS Scratch <name> segments"   RGBA x0, y0, x1, y1 (um)
+    "MS Scratch <name> params"     RGBA width, depth, profile, scratch id
+    "MS Scratch <name> grid"       R, G offset, count (nx x ny)
+    "MS Scratch <name> cells"      R    segment index
+
+plus the scalars (patch size, sigma, cell size, query radius, M, K) in an ID property of the
+material. Before rendering (render_pre, load_post, and whenever a material is built) the tables are
+extracted with ``core.scratch.scratch_io.save_scratch_set_exr`` into a content-addressed cache
+folder ``<tempdir>/material_structures_scratch/<sha1>/``: identical content -> identical path, so
+OpenImageIO's texture cache can never serve stale tables, and a reopened file re-extracts what it
+needs. The shader reads the folder from its ``TableDir`` input.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+
+import numpy as np
+
+from ...core.scratch.scratch_io import TABLE_WIDTH, save_scratch_set_exr
+from ...core.scratch.scratch_set import ScratchSet, validate_scratch_set
+from ..fabric.maps import array_to_image, image_to_array
+
+IMAGE_PREFIX = "MS Scratch"
+TABLES = {"segments": 4, "params": 4, "grid": 2, "cells": 1}
+PROP = "ms_scratch_set"  # ID property (dict) on materials holding a scratch set
+
+
+def _wrap(table: np.ndarray, fill: float) -> np.ndarray:
+    n, c = table.shape
+    rows = max(1, -(-n // TABLE_WIDTH))
+    out = np.full((rows * TABLE_WIDTH, c), fill, dtype=np.float32)
+    out[:n] = table
+    return out.reshape(rows, TABLE_WIDTH, c)
+
+
+def set_to_arrays(s: ScratchSet) -> dict[str, np.ndarray]:
+    """The four tables as (H, W, C) float32 arrays, row 0 = top (scratch_io layout)."""
+    params = np.stack([s.width_um, s.depth_um, s.profile, s.scratch_id], 1)
+    return {
+        "segments": _wrap(np.asarray(s.segments, np.float64), 0.0),
+        "params": _wrap(params.astype(np.float64), -1.0),
+        "grid": np.stack([s.grid_offset, s.grid_count], -1).astype(np.float32),
+        "cells": _wrap(np.asarray(s.cell_segments, np.float64)[:, None], -1.0),
+    }
+
+
+def set_meta(s: ScratchSet, name: str) -> dict:
+    ny, nx = s.grid_shape
+    return {
+        "name": name,
+        "patch_size_um": [float(v) for v in s.patch_size_um],
+        "sigma_um": float(s.sigma_um),
+        "cell_size_um": float(s.cell_size_um),
+        "query_radius_um": float(s.query_radius_um),
+        "n_segments": int(s.n_segments),
+        "n_cells_entries": int(s.cell_segments.size),
+        "grid_nx": int(nx),
+        "grid_ny": int(ny),
+    }
+
+
+def image_name(name: str, table: str) -> str:
+    return f"{IMAGE_PREFIX} {name} {table}"
+
+
+def store_scratch_set(s: ScratchSet, name: str) -> dict:
+    """Pack ``s`` as images named after ``name`` (replacing older ones); returns the metadata dict."""
+    validate_scratch_set(s)
+    for table, arr in set_to_arrays(s).items():
+        img = array_to_image(arr, image_name(name, table), pack=True)
+        img.use_fake_user = True  # kept in the file even when no node uses it
+    return set_meta(s, name)
+
+
+def load_stored_set(meta) -> ScratchSet:
+    """Rebuild the scratch set from the packed images named in ``meta`` (dict or ID property)."""
+    import bpy
+
+    name = str(meta["name"])
+    arrays = {}
+    for table, ch in TABLES.items():
+        img = bpy.data.images.get(image_name(name, table))
+        if img is None:
+            raise ValueError(f"scratch set {name!r}: image {image_name(name, table)!r} is missing from the file")
+        arrays[table] = image_to_array(img, ch).astype(np.float64)
+    m, k = int(meta["n_segments"]), int(meta["n_cells_entries"])
+    seg = arrays["segments"].reshape(-1, 4)[:m]
+    par = arrays["params"].reshape(-1, 4)[:m]
+    grid = arrays["grid"]
+    s = ScratchSet(
+        segments=seg,
+        width_um=par[:, 0].copy(),
+        depth_um=par[:, 1].copy(),
+        profile=np.rint(par[:, 2]).astype(np.int64),
+        scratch_id=np.rint(par[:, 3]).astype(np.int64),
+        patch_size_um=np.asarray(list(meta["patch_size_um"]), np.float64),
+        sigma_um=float(meta["sigma_um"]),
+        cell_size_um=float(meta["cell_size_um"]),
+        query_radius_um=float(meta["query_radius_um"]),
+        grid_offset=np.rint(grid[..., 0]).astype(np.int64),
+        grid_count=np.rint(grid[..., 1]).astype(np.int64),
+        cell_segments=np.rint(arrays["cells"].reshape(-1)[:k]).astype(np.int64),
+    )
+    validate_scratch_set(s)
+    return s
+
+
+def content_hash(s: ScratchSet) -> str:
+    h = hashlib.sha1()
+    for arr in set_to_arrays(s).values():
+        h.update(np.ascontiguousarray(arr).tobytes())
+    h.update(repr(set_meta(s, "")).encode())
+    return h.hexdigest()[:16]
+
+
+def cache_root() -> str:
+    return os.path.join(tempfile.gettempdir(), "material_structures_scratch")
+
+
+def extract_tables(s: ScratchSet) -> str:
+    """Write the EXR tables of ``s`` to its content-addressed cache folder (once); returns the folder."""
+    folder = os.path.join(cache_root(), content_hash(s))
+    if not os.path.isfile(os.path.join(folder, "meta.exr")):
+        tmp = folder + f".tmp-{os.getpid()}"
+        save_scratch_set_exr(tmp, s)
+        try:
+            os.replace(tmp, folder)
+        except OSError:  # another process extracted it first
+            import shutil
+
+            shutil.rmtree(tmp, ignore_errors=True)
+    return folder

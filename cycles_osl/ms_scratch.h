@@ -1,0 +1,245 @@
+// Material Structures: the scratch term of thesis ch. 4 (mirrors core/scratch/scratch_radiance.py).
+//
+// Units: positions, widths, depths, sigma in micrometres; wavelengths in micrometres inside these
+// functions. Directions in the local frame (t_u, t_v, n) of the scratch plane. Each function names
+// the core function it ports.
+
+#define MS_PI 3.14159265358979
+#define MS_SQRT_PI 1.7724538509055159
+#define MS_REACH_SIGMAS 3.5  // scratch_set.REACH_SIGMAS
+#define MS_GAUSS_CUTOFF 2.5  // scratch_footprint.GAUSS_CUTOFF
+
+// Si(x): power series for |x| < 2, complex continued fraction (E1(ix), Lentz) beyond. Float accuracy
+// (~1e-6 absolute); the core's "series" form is accurate to 2e-6 (sine_integral.py).
+float ms_si(float x)
+{
+    float ax = abs(x);
+    float r = 0.0;
+    if (ax < 2.0) {
+        float x2 = ax * ax;
+        float term = ax;  // x^(2n+1) / (2n+1)! * (-1)^n
+        for (int n = 0; n < 12; ++n) {
+            r += term / float(2 * n + 1);
+            term *= -x2 / float((2 * n + 2) * (2 * n + 3));
+        }
+    } else {
+        // b = 1 + i t, c = 1 / tiny, d = h = 1 / b
+        float br = 1.0, bi = ax;
+        float cr = 1e30, ci = 0.0;
+        float den = br * br + bi * bi;
+        float dr = br / den, di = -bi / den;
+        float hr = dr, hi = di;
+        for (int i = 2; i < 200; ++i) {
+            float a = -float((i - 1) * (i - 1));
+            br += 2.0;
+            // d = 1 / (a d + b)
+            float er = a * dr + br, ei = a * di + bi;
+            den = er * er + ei * ei;
+            dr = er / den;
+            di = -ei / den;
+            // c = b + a / c
+            den = cr * cr + ci * ci;
+            cr = br + a * cr / den;
+            ci = bi - a * ci / den;
+            // del = c d; h *= del
+            float delr = cr * dr - ci * di, deli = cr * di + ci * dr;
+            float nhr = hr * delr - hi * deli, nhi = hr * deli + hi * delr;
+            hr = nhr;
+            hi = nhi;
+            if (abs(delr - 1.0) + abs(deli) < 3e-7)
+                break;
+        }
+        // h = (cos t - i sin t) h; Si = pi/2 + Im(h)
+        float c = cos(ax), s = sin(ax);
+        r = 0.5 * MS_PI + (c * hi - s * hr);
+    }
+    return x < 0.0 ? -r : r;
+}
+
+// int_0^zeta sinc^2(kW x / 2) dx (light_integration.sinc2_antiderivative)
+float ms_sinc2_antiderivative(float zeta, float kw)
+{
+    float u = kw * zeta;
+    float h = 0.5 * u;
+    float sn = abs(h) < 1e-6 ? 1.0 : sin(h) / h;
+    return 2.0 * ms_si(u) / kw - zeta * sn * sn;
+}
+
+// N(zeta1) - N(zeta0), eq. 4.27 (light_integration.band_limited_integral)
+float ms_band_integral(float z0, float z1, float w, float lam, float sigma)
+{
+    float k = 2.0 * MS_PI / lam;
+    float kw = k * w;
+    return MS_SQRT_PI / (sigma * k) * (ms_sinc2_antiderivative(z1, kw) - ms_sinc2_antiderivative(z0, kw));
+}
+
+// xi2 intervals of the line xi1 = 0 inside a sphere light (light_integration.specular_line_intervals_sphere).
+// Returns the number of non-empty intervals (0..2) in za[], zb[] (za < zb).
+int ms_sphere_intervals(float tx, float ty, vector wo, vector center, float radius,
+                        output float za[2], output float zb[2])
+{
+    float c = -(wo[0] * tx + wo[1] * ty);
+    float s = sqrt(max(1.0 - c * c, 0.0));
+    float o2 = -wo[0] * ty + wo[1] * tx;
+    float d = length(center);
+    if (d <= radius || d <= 0.0)
+        return 0;
+    vector p = center / d;
+    float sin_a = clamp(radius / d, 0.0, 1.0);
+    float cos_a = sqrt(1.0 - sin_a * sin_a);
+    float pt = p[0] * tx + p[1] * ty;
+    float pb = -p[0] * ty + p[1] * tx;
+    float rho = hypot(pb, p[2]);
+    float den = s * rho;
+    if (den <= 1e-30)
+        return 0;
+    float q = (cos_a - c * pt) / den;
+    if (q > 1.0)
+        return 0;
+    float phi_c = atan2(p[2], pb);
+    float delta = acos(clamp(q, -1.0, 1.0));
+    float lo = phi_c - delta, hi = phi_c + delta;
+    int n = 0;
+    for (int k = 0; k < 2; ++k) {
+        float off = k == 0 ? 0.0 : 2.0 * MS_PI;
+        float pa = max(lo + off, 0.0), pbb = min(hi + off, MS_PI);
+        if (pbb > pa) {
+            zb[n] = s * cos(pa) + o2;
+            za[n] = s * cos(pbb) + o2;
+            n += 1;
+        }
+    }
+    return n;
+}
+
+// Roots in (0, pi) of A cos(phi) + B sin(phi) = C (light_integration._circle_roots), appended to br[].
+int ms_circle_roots(float A, float B, float C, output float br[40], int nb)
+{
+    int n = nb;
+    float R = hypot(A, B);
+    if (R <= 1e-30)
+        return n;
+    float q = C / R;
+    if (abs(q) > 1.0)
+        return n;
+    float phi0 = atan2(B, A);
+    float delta = acos(q);
+    for (int k = 0; k < 2; ++k) {
+        float r = k == 0 ? phi0 - delta : phi0 + delta;
+        r = r + MS_PI;
+        r = r - 2.0 * MS_PI * floor(r / (2.0 * MS_PI));
+        r -= MS_PI;
+        if (r > 0.0 && r < MS_PI && n < 40) {
+            br[n] = r;
+            n += 1;
+        }
+    }
+    return n;
+}
+
+// xi2 intervals inside a convex polygon light (light_integration.specular_line_intervals_polygon).
+// vertices relative to the shaded point (local frame), nv <= 16. Intervals -> za[], zb[]; returns count.
+int ms_polygon_intervals(float tx, float ty, vector wo, vector verts[16], int nv,
+                         output float za[40], output float zb[40])
+{
+    float c = -(wo[0] * tx + wo[1] * ty);
+    float s = sqrt(max(1.0 - c * c, 0.0));
+    float o2 = -wo[0] * ty + wo[1] * tx;
+    if (s <= 0.0)
+        return 0;
+    vector t = vector(tx, ty, 0.0), b = vector(-ty, tx, 0.0), nn = vector(0, 0, 1);
+    vector U[16];
+    vector ne[16];
+    for (int i = 0; i < nv; ++i)
+        U[i] = normalize(verts[i]);
+    for (int i = 0; i < nv; ++i)
+        ne[i] = cross(U[i], U[(i + 1) % nv]);
+    float orient = dot(U[0], cross(U[1], U[2]));
+    orient = orient < 0.0 ? -1.0 : 1.0;
+    float br[40];
+    int nb = 0;
+    br[nb] = 0.0;
+    nb += 1;
+    br[nb] = MS_PI;
+    nb += 1;
+    for (int e = 0; e < nv; ++e)
+        nb = ms_circle_roots(s * dot(ne[e], b), s * ne[e][2], -c * dot(ne[e], t), br, nb);
+    // insertion sort
+    for (int i = 1; i < nb; ++i) {
+        float key = br[i];
+        int j = i - 1;
+        while (j >= 0 && br[j] > key) {
+            br[j + 1] = br[j];
+            j -= 1;
+        }
+        br[j + 1] = key;
+    }
+    int n = 0;
+    for (int i = 0; i + 1 < nb; ++i) {
+        float pa = br[i], pbb = br[i + 1];
+        if (pbb <= pa)
+            continue;
+        float pm = 0.5 * (pa + pbb);
+        vector w = c * t + s * (cos(pm) * b + sin(pm) * nn);
+        int inside = 1;
+        for (int e = 0; e < nv; ++e) {
+            if (dot(w, ne[e]) * orient < 0.0) {
+                inside = 0;
+                break;
+            }
+        }
+        if (inside) {
+            zb[n] = s * cos(pa) + o2;
+            za[n] = s * cos(pbb) + o2;
+            n += 1;
+        }
+    }
+    return n;
+}
+
+// Length inside the footprint ellipse of the segment shifted by o across itself (scratch_footprint._chord_length).
+float ms_chord_length(float A, float B, float C, float ed, float qe, float ee, float len, float o)
+{
+    float Bo = B + o * ed;
+    float Co = C + 2.0 * o * qe + o * o * ee;
+    float disc = Bo * Bo - A * Co;
+    if (disc <= 0.0)
+        return 0.0;
+    float sq = sqrt(disc);
+    float t0 = clamp((-Bo - sq) / A, 0.0, 1.0);
+    float t1 = clamp((-Bo + sq) / A, 0.0, 1.0);
+    return (t1 - t0) * len;
+}
+
+// Gaussian-weighted contained length, rule "chords" with 2 x 6 Gauss-Legendre nodes
+// (scratch_footprint.scratch_weighted_length).
+float ms_weighted_length(float A, float B, float C, float ed, float qe, float ee, float len, float v0, float V,
+                         float s_um)
+{
+    float gx[3] = {0.23861918608319693, 0.6612093864662645, 0.9324695142031521};
+    float gw[3] = {0.46791393457269104, 0.3607615730481386, 0.17132449237917036};
+    float th0 = asin(clamp(v0 / V, -1.0, 1.0));
+    float acc = 0.0;
+    for (int h = 0; h < 2; ++h) {
+        float span = h == 0 ? -MS_GAUSS_CUTOFF : MS_GAUSS_CUTOFF;
+        float th1 = asin(clamp((v0 + span * s_um) / V, -1.0, 1.0));
+        float half = 0.5 * abs(th1 - th0);
+        float mid = 0.5 * (th1 + th0);
+        for (int j = 0; j < 6; ++j) {
+            float node = j < 3 ? -gx[j] : gx[j - 3];
+            float wgt = j < 3 ? gw[j] : gw[j - 3];
+            float th = mid + half * node;
+            float v = V * sin(th);
+            float o = v - v0;
+            acc += ms_chord_length(A, B, C, ed, qe, ee, len, o) * exp(-(o * o) / (s_um * s_um)) * (V * cos(th))
+                   * (half * wgt);
+        }
+    }
+    return acc / (s_um * MS_SQRT_PI);
+}
+
+float ms_sinc(float y)  // numpy's sinc: sin(pi y) / (pi y)
+{
+    float a = MS_PI * y;
+    return abs(a) < 1e-6 ? 1.0 : sin(a) / a;
+}
