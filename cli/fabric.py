@@ -5,6 +5,7 @@
     python -m material_structures fabric synth --out BTF_DIR [--gt-out PARAMS_DIR] [--noise 0.05]
     python -m material_structures fabric score PRED_BTF REF_BTF
     python -m material_structures fabric ndf BTF --texel X Y --out ndf.exr
+    python -m material_structures fabric material PARAMS_DIR [--out fabric.blend] [--render preview.png]
 """
 
 from __future__ import annotations
@@ -27,6 +28,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="residuals in f_r cos(theta_i) (default) or in f_r (eq. 3.17 as printed)")
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.add_argument("--drop-cache", action="store_true", help="delete OUT/.fit_cache when done")
+    f.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address (tcp://host:8786); tiles become tasks on that cluster. "
+                        "Default: a local Dask cluster with --workers processes")
+    f.add_argument("--no-dask", action="store_true", help="use a plain local process pool instead of Dask")
     f.set_defaults(func=run_fit)
 
     e = fsub.add_parser("eval", help="write the model's prediction for given directions as a BTF")
@@ -58,6 +63,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     n.add_argument("--out", required=True, help="output .exr")
     n.set_defaults(func=run_ndf)
 
+    from .fabric_material import add_material_parser
+
+    add_material_parser(fsub)
+
     c = fsub.add_parser("score", help="PSNR of a predicted BTF against a reference BTF")
     c.add_argument("pred")
     c.add_argument("ref")
@@ -70,9 +79,18 @@ def run_fit(args: argparse.Namespace) -> int:
 
     if args.tile < 1:
         raise ValueError("--tile must be >= 1")
-    _, stats = fit_btf(args.btf, args.out, tile=args.tile, workers=args.workers,
-                       options=FitOptions(weighting=args.weighting), progress=not args.no_progress,
-                       keep_cache=not args.drop_cache)
+    options = FitOptions(weighting=args.weighting)
+    if args.no_dask and args.scheduler:
+        raise ValueError("--no-dask and --scheduler exclude each other")
+    if args.no_dask:
+        _, stats = fit_btf(args.btf, args.out, tile=args.tile, workers=args.workers, options=options,
+                           progress=not args.no_progress, keep_cache=not args.drop_cache)
+    else:
+        from ..scaleout.fabric import fit_btf_dask
+
+        _, stats = fit_btf_dask(args.btf, args.out, scheduler=args.scheduler, n_workers=args.workers,
+                                tile=args.tile, options=options, progress=not args.no_progress,
+                                keep_cache=not args.drop_cache)
     print(json.dumps(stats))
     return 0
 
