@@ -104,3 +104,28 @@ def test_moving_a_lamp_updates_the_shader(addon_module):
     coll = lamp.light_linking.receiver_collection
     assert coll is not None and obj.name in coll.objects
     assert coll.collection_objects[0].light_linking.link_state == "EXCLUDE"
+
+
+def test_fabric_material_cli_writes_a_blend(tmp_path):
+    import subprocess
+    import sys
+
+    _write_fit(tmp_path / "fit")
+    out = tmp_path / "fabric.blend"
+    proc = subprocess.run(
+        [sys.executable, "-m", "material_structures", "fabric", "material", str(tmp_path / "fit"), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    with bpy.data.libraries.load(str(out)) as (src, _dst):
+        assert "Fabric fit" in src.materials
+        assert {"SGGX fit kd", "SGGX fit basis"} <= set(src.images)
+    bad = subprocess.run(
+        [sys.executable, "-m", "material_structures", "fabric", "material", str(tmp_path / "nothing")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert bad.returncode == 2 and "params.json" in bad.stderr
