@@ -1,6 +1,6 @@
 """Operators (``bl_idname`` under ``material_structures.``)."""
 
-from . import asset_library, fabric, fabric_brush, scene_setup, teeth
+from . import asset_library, fabric, fabric_brush, scene_setup, scratch, teeth
 
 CLASSES: list[type] = [
     *scene_setup.CLASSES,
@@ -8,4 +8,5 @@ CLASSES: list[type] = [
     *fabric.CLASSES,
     *fabric_brush.CLASSES,
     *teeth.CLASSES,
+    *scratch.CLASSES,
 ]
