@@ -5,25 +5,46 @@ This is the function the OSL port mirrors (one shading point = one row):
     shading = scratch_radiance(points_um, footprint, wo, light, scratch_set, wavelengths_nm="rgb")
     pixel   = (1 - shading.rho_p) * base_radiance + shading.rgb
 
-For each point x (um, in the scratch plane; wrapped into the patch, so the patch tiles):
-1. grid walk: cell (floor(x / c)), its segment list (``ScratchSet``);
-2. per segment: tangent t, s_b, l_contained (line-ellipse), |eta_P|^2 (eq. 4.15-4.16),
-   rho_P (eq. 4.18);
-3. per segment and light: the xi2 intervals of the line xi1 = 0 inside the light
-   (sphere eq. 4.30-4.37, polygon eq. 4.38-4.41) and N(zeta1) - N(zeta0) (eq. 4.27, Si of eq. 4.29),
-   or for directional/point lights the BRDF at the light direction;
-4. radiance per wavelength  L_s(lambda) = L_i / (A_C lambda^2) sum_m W^2 |D|^2 |eta_P|^2 (N1 - N0)
-   (eq. 4.12 with eq. 4.3, 4.11), then linear sRGB by band quadrature (``cie_colour``).
+Conventions: local frame (t_u, t_v, n) = (x axis of the scratch plane, y axis, normal); points in
+um (x_um = u * patch_size_um[0], y_um = v * patch_size_um[1]), wrapped into the patch (it tiles).
+``wo``: unit direction to the viewer in that frame. Light geometry is relative to the shaded point, in
+that frame, any length unit. Radiance is linear in the light's radiance (area lights) or irradiance
+(directional; point lights: intensity / d^2). sigma (coherence radius) defaults to 60 um.
 
-Conventions: local frame (t_u, t_v, n) = (x axis of the scratch plane, y axis, normal). ``wo`` is the
-unit direction towards the viewer in that frame. Light geometry is relative to the shaded point, in
-that frame, any length unit. Radiance is linear in the light's radiance/irradiance.
+Per point x and per segment m of its grid cell (scalar form, what the shader does):
 
-``energy="thesis"`` returns rho_P of eq. 4.18 as printed (wavelength independent, one chord per
-segment, alpha_P-blended towards rho_C for small footprints; see ``scratch_footprint``). ``energy="conserving"``
-instead returns, per wavelength, the energy the scratch lobe scatters over the whole xi plane,
-rho = sum_m W |D|^2 |eta_P|^2 / (2 sqrt(pi) sigma A_C), so the scratch term never returns more light
-than the base reflection it removes (eq. 4.18 equals this averaged over depth phases, |D|^2 -> 2).
+1. geometry: d = p1 - p0, len = |d|, t = d / len, b = (-t_y, t_x); v0 = (p0 - x) . b (= s_b);
+   on_seg = 0 <= (x - p0) . t < len; footprint ellipse {x + J u, |u| <= 1}, A_P = pi |det J|,
+   alpha_P = min(A_P / (2 pi sigma^2), 1) (eq. 4.16).
+2. cull: skip the segment if its distance to x exceeds the footprint's semi-major axis + 2.5 sigma
+   (+ 3.5 sigma when alpha_P < 1).
+3. rho_P += alpha_P 2 W l_contained / A_P + (1 - alpha_P) rho_C (eq. 4.17-4.18; l_contained = length
+   of the segment inside the ellipse, eq. 4.14; rho_C uses on_seg and v0). Clamp the sum to 1.
+4. light: c = -wo . t, s = sqrt(1 - c^2), o2 = wo . b. The line xi1 = 0 is w(phi) =
+   c t + s (cos phi b + sin phi n), phi in [0, pi], xi2(phi) = s cos phi + o2.
+   Sphere (centre C, radius r, d = |C|, p = C / d, cos a = sqrt(1 - r^2/d^2)): rho = |(p.b, p.n)|,
+   phi_c = atan2(p.n, p.b), q = (cos a - c p.t) / (s rho); if q <= 1: Delta = acos(max(q, -1)) and the
+   arcs [phi_c - Delta, phi_c + Delta] and the same + 2 pi, each clipped to [0, pi], give
+   intervals [xi2(phi_b), xi2(phi_a)] (``specular_line_intervals_sphere``).
+   Polygon: per edge great circle n_e = U_i x U_i+1 solve A cos phi + B sin phi = C for the crossings,
+   add 0 and pi, sort, keep arcs whose midpoint is inside (all orient * w . n_e >= 0)
+   (``specular_line_intervals_polygon``). Skip the segment if no interval is non-empty.
+5. |eta_P|^2 = alpha_P 2 pi sigma^2 sigma sqrt(pi) l_w / A_P + (1 - alpha_P) 2 pi sigma^2
+   exp(-v0^2 / sigma^2) [on_seg] (eq. 4.15-4.16), with l_w the weighted length of
+   ``scratch_footprint.scratch_weighted_length`` (12 chords; ``footprint_rule="thesis"``: l_contained).
+6. per wavelength lambda (um), k = 2 pi / lambda: |D|^2 = 2 - 2 cos(4 pi D / lambda) (eq. 4.11);
+   for each interval N(z1) - N(z0) with N(z) = sqrt(pi)/(sigma k) (2 Si(k W z)/(k W) - z sinc^2(k W z/2))
+   (eq. 4.27; Si: ``sine_integral``, "series" or "thesis" eq. 4.29);
+   L(lambda) += L_i W^2 |D|^2 |eta_P|^2 (N1 - N0) / (pi sigma^2 lambda^2) (eq. 4.12).
+   Directional: L(lambda) += E cos(theta_i) W^2 |D|^2 |eta_P|^2 sinc^2(pi W xi2 / lambda)
+   exp(-sigma^2 k^2 xi1^2) / (pi sigma^2 lambda^2) with xi = (wi + wo) . (t, b).
+7. colour: rgb = M @ L(lambda_j), (wavelengths, M) = ``cie_colour.spectral_to_srgb_matrix("rgb"|"16")``.
+
+``energy="thesis"`` returns rho_P of eq. 4.18 as printed (wavelength independent). ``energy=
+"conserving"`` instead returns, per wavelength, the energy the scratch lobe scatters over the whole xi
+plane, rho = sum_m W |D|^2 |eta_P|^2 / (2 sqrt(pi) sigma A_C), so the scratch term never returns more
+light than the base reflection it removes (eq. 4.18 equals this averaged over depth phases, |D|^2 -> 2;
+per scratch the thesis' rho_P under-removes by up to a factor 2 for depths near lambda/4).
 """
 
 from __future__ import annotations
