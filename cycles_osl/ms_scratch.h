@@ -9,7 +9,8 @@
 #define MS_REACH_SIGMAS 3.5  // scratch_set.REACH_SIGMAS
 #define MS_GAUSS_CUTOFF 2.5  // scratch_footprint.GAUSS_CUTOFF
 
-// Si(x): power series for |x| < 2, complex continued fraction (E1(ix), Lentz) beyond. Float accuracy
+// Si(x): power series for |x| < 2, complex continued fraction (E1(ix), Lentz) up to 12, asymptotic beyond.
+// Float accuracy
 // (~1e-6 absolute); the core's "series" form is accurate to 2e-6 (sine_integral.py).
 float ms_si(float x)
 {
@@ -22,6 +23,12 @@ float ms_si(float x)
             r += term / float(2 * n + 1);
             term *= -x2 / float((2 * n + 2) * (2 * n + 3));
         }
+    } else if (ax > 12.0) {
+        // asymptotic expansion, 6 terms of f and g (sine_integral.sine_integral_series), |err| < 2e-6
+        float y = 1.0 / (ax * ax);
+        float f = 1.0 + y * (-2.0 + y * (24.0 + y * (-720.0 + y * (40320.0 + y * -3628800.0))));
+        float g = 1.0 + y * (-6.0 + y * (120.0 + y * (-5040.0 + y * (362880.0 + y * -39916800.0))));
+        r = 0.5 * MS_PI - f / ax * cos(ax) - g * y * sin(ax);
     } else {
         // b = 1 + i t, c = 1 / tiny, d = h = 1 / b
         float br = 1.0, bi = ax;
@@ -76,7 +83,7 @@ float ms_band_integral(float z0, float z1, float w, float lam, float sigma)
 // xi2 intervals of the line xi1 = 0 inside a sphere light (light_integration.specular_line_intervals_sphere).
 // Returns the number of non-empty intervals (0..2) in za[], zb[] (za < zb).
 int ms_sphere_intervals(float tx, float ty, vector wo, vector center, float radius,
-                        output float za[2], output float zb[2])
+                        output float za[34], output float zb[34])
 {
     float c = -(wo[0] * tx + wo[1] * ty);
     float s = sqrt(max(1.0 - c * c, 0.0));
@@ -113,7 +120,7 @@ int ms_sphere_intervals(float tx, float ty, vector wo, vector center, float radi
 }
 
 // Roots in (0, pi) of A cos(phi) + B sin(phi) = C (light_integration._circle_roots), appended to br[].
-int ms_circle_roots(float A, float B, float C, output float br[40], int nb)
+int ms_circle_roots(float A, float B, float C, output float br[34], int nb)
 {
     int n = nb;
     float R = hypot(A, B);
@@ -129,7 +136,7 @@ int ms_circle_roots(float A, float B, float C, output float br[40], int nb)
         r = r + MS_PI;
         r = r - 2.0 * MS_PI * floor(r / (2.0 * MS_PI));
         r -= MS_PI;
-        if (r > 0.0 && r < MS_PI && n < 40) {
+        if (r > 0.0 && r < MS_PI && n < 34) {
             br[n] = r;
             n += 1;
         }
@@ -138,32 +145,28 @@ int ms_circle_roots(float A, float B, float C, output float br[40], int nb)
 }
 
 // xi2 intervals inside a convex polygon light (light_integration.specular_line_intervals_polygon).
-// vertices relative to the shaded point (local frame), nv <= 16. Intervals -> za[], zb[]; returns count.
-int ms_polygon_intervals(float tx, float ty, vector wo, vector verts[16], int nv,
-                         output float za[40], output float zb[40])
+// The polygon is given by its edge great-circle normals ne[base .. base + nv) (cross products of
+// consecutive unit vertex directions, computed once per shading point) and its orientation sign.
+// Intervals -> za[], zb[]; returns their count.
+int ms_polygon_intervals(float tx, float ty, vector wo, vector ne[64], int base, int nv, float orient,
+                         output float za[34], output float zb[34])
 {
     float c = -(wo[0] * tx + wo[1] * ty);
     float s = sqrt(max(1.0 - c * c, 0.0));
     float o2 = -wo[0] * ty + wo[1] * tx;
     if (s <= 0.0)
         return 0;
-    vector t = vector(tx, ty, 0.0), b = vector(-ty, tx, 0.0), nn = vector(0, 0, 1);
-    vector U[16];
-    vector ne[16];
-    for (int i = 0; i < nv; ++i)
-        U[i] = normalize(verts[i]);
-    for (int i = 0; i < nv; ++i)
-        ne[i] = cross(U[i], U[(i + 1) % nv]);
-    float orient = dot(U[0], cross(U[1], U[2]));
-    orient = orient < 0.0 ? -1.0 : 1.0;
-    float br[40];
+    vector t = vector(tx, ty, 0.0), b = vector(-ty, tx, 0.0);
+    float br[34];
     int nb = 0;
     br[nb] = 0.0;
     nb += 1;
     br[nb] = MS_PI;
     nb += 1;
-    for (int e = 0; e < nv; ++e)
-        nb = ms_circle_roots(s * dot(ne[e], b), s * ne[e][2], -c * dot(ne[e], t), br, nb);
+    for (int e = 0; e < nv; ++e) {
+        vector q = ne[base + e];
+        nb = ms_circle_roots(s * dot(q, b), s * q[2], -c * dot(q, t), br, nb);
+    }
     // insertion sort
     for (int i = 1; i < nb; ++i) {
         float key = br[i];
@@ -180,10 +183,10 @@ int ms_polygon_intervals(float tx, float ty, vector wo, vector verts[16], int nv
         if (pbb <= pa)
             continue;
         float pm = 0.5 * (pa + pbb);
-        vector w = c * t + s * (cos(pm) * b + sin(pm) * nn);
+        vector w = c * t + s * (cos(pm) * b + vector(0, 0, sin(pm)));
         int inside = 1;
         for (int e = 0; e < nv; ++e) {
-            if (dot(w, ne[e]) * orient < 0.0) {
+            if (dot(w, ne[base + e]) * orient < 0.0) {
                 inside = 0;
                 break;
             }

@@ -137,7 +137,7 @@ def ensure_tables_extracted() -> int:
     n = 0
     for g in scratch_groups():
         node = script_node(g)
-        if not os.path.isfile(os.path.join(node.inputs["TableDir"].default_value, "meta.exr")):
+        if not os.path.isfile(os.path.join(node.inputs["TableDir"].default_value, "cell_params.exr")):
             sync_group_tables(g)
             n += 1
     return n

@@ -11,7 +11,8 @@ OSL ``texture()`` needs a file path, and packed images have none. So a scratch s
 
 plus the scalars (patch size, sigma, cell size, query radius, M, K) in an ID property of the
 material. Before rendering (render_pre, load_post, and whenever a material is built) the tables are
-extracted with ``core.scratch.scratch_io.save_scratch_set_exr`` into a content-addressed cache
+extracted with ``core.scratch.scratch_io.save_scratch_set_exr`` (plus two derived cell-major tables,
+:func:`write_cell_major_tables`) into a content-addressed cache
 folder ``<tempdir>/material_structures_scratch/<sha1>/``: identical content -> identical path, so
 OpenImageIO's texture cache can never serve stale tables, and a reopened file re-extracts what it
 needs. The shader reads the folder from its ``TableDir`` input.
@@ -119,6 +120,7 @@ def content_hash(s: ScratchSet) -> str:
     for arr in set_to_arrays(s).values():
         h.update(np.ascontiguousarray(arr).tobytes())
     h.update(repr(set_meta(s, "")).encode())
+    h.update(b"cache-layout-2")  # scratch_io tables + cell-major tables
     return h.hexdigest()[:16]
 
 
@@ -129,9 +131,10 @@ def cache_root() -> str:
 def extract_tables(s: ScratchSet) -> str:
     """Write the EXR tables of ``s`` to its content-addressed cache folder (once); returns the folder."""
     folder = os.path.join(cache_root(), content_hash(s))
-    if not os.path.isfile(os.path.join(folder, "meta.exr")):
+    if not os.path.isfile(os.path.join(folder, "cell_params.exr")):
         tmp = folder + f".tmp-{os.getpid()}"
         save_scratch_set_exr(tmp, s)
+        write_cell_major_tables(tmp, s)
         try:
             os.replace(tmp, folder)
         except OSError:  # another process extracted it first
@@ -139,3 +142,18 @@ def extract_tables(s: ScratchSet) -> str:
 
             shutil.rmtree(tmp, ignore_errors=True)
     return folder
+
+
+def write_cell_major_tables(folder: str, s: ScratchSet) -> None:
+    """Derived tables the shader walks: entry i of ``cell_segments`` with its segment's geometry
+    (``cell_geometry.exr`` RGBA = x0, y0, x1, y1) and parameters (``cell_params.exr`` RGBA = width,
+    depth, profile, segment index), same 1024-wide layout. One texture lookup per walked entry
+    instead of two (the walk is lookup-bound)."""
+    from ...core.exr_io import write_exr
+
+    cs = np.asarray(s.cell_segments, np.int64)
+    geo = np.asarray(s.segments, np.float64)[cs] if cs.size else np.zeros((0, 4))
+    par = (np.stack([s.width_um[cs], s.depth_um[cs], s.profile[cs], cs], 1).astype(np.float64)
+           if cs.size else np.zeros((0, 4)))
+    write_exr(os.path.join(folder, "cell_geometry.exr"), _wrap(geo, 0.0), ("R", "G", "B", "A"))
+    write_exr(os.path.join(folder, "cell_params.exr"), _wrap(par, -1.0), ("R", "G", "B", "A"))
