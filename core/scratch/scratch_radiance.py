@@ -358,6 +358,7 @@ def scratch_radiance(
         "cnt": s.grid_count[iy, ix], "off": s.grid_offset[iy, ix],
         "chunk": int(chunk_points),
     }
+    _cell_major_tables(s)  # build once, before any fork
     workers = max(1, min(int(workers), n // max(1, chunk_points) or 1))
     bounds = np.linspace(0, n, workers + 1).astype(int)
     blocks = [(int(bounds[i]), int(bounds[i + 1])) for i in range(workers)]
@@ -390,6 +391,17 @@ def scratch_radiance(
 _CTX: dict | None = None
 
 
+def _cell_major_tables(s: ScratchSet) -> tuple[np.ndarray, np.ndarray]:
+    """Segments and (width, depth) in cell-list order (contiguous per cell), cached on the set."""
+    key = (s.cell_segments, s.segments, s.width_um, s.depth_um)
+    cache = getattr(s, "_cell_major", None)
+    if cache is None or any(a is not b for a, b in zip(cache[0], key, strict=True)):
+        cs = s.cell_segments
+        cache = (key, np.ascontiguousarray(s.segments[cs]), np.stack([s.width_um[cs], s.depth_um[cs]], 1))
+        s._cell_major = cache
+    return cache[1], cache[2]
+
+
 def _walk_block_forked(block: tuple[int, int]):
     return _walk_block(_CTX, *block)
 
@@ -400,6 +412,7 @@ def _walk_block(ctx: dict, a0: int, b0: int):
     lam_nm, sigma, chunk = ctx["lam_nm"], ctx["sigma"], ctx["chunk"]
     L = lam_nm.size
     n = b0 - a0
+    cm_seg, cm_wd = _cell_major_tables(s)
     spec = np.zeros((n, L))
     rho_t = np.zeros(n)
     rho_c = np.zeros((n, L))
@@ -412,18 +425,18 @@ def _walk_block(ctx: dict, a0: int, b0: int):
             continue
         pp = np.repeat(np.arange(a, b), cnt)
         start = np.cumsum(cnt) - cnt
-        within = np.arange(tot) - np.repeat(start, cnt)
-        sg = s.cell_segments[np.repeat(ctx["off"][a:b], cnt) + within]
+        pos = np.repeat(ctx["off"][a:b] - start, cnt) + np.arange(tot)  # entries of the cell-major table
         # cull pairs that cannot contribute: farther than the footprint's semi-major axis + 2.5 sigma
         # (3.5 sigma for footprints below 2 A_C, where rho_C's wider Gaussian matters)
-        seg = s.segments[sg]
+        seg = cm_seg[pos]
         xp = xw[pp]
         keep = _point_segment_distance_fast(xp, seg) <= _take(ctx["reach"], pp)
         if not np.any(keep):
             continue
-        pp, sg, seg, xp = pp[keep], sg[keep], seg[keep], xp[keep]
+        pp, pos, seg, xp = pp[keep], pos[keep], seg[keep], xp[keep]
+        wd = cm_wd[pos]
         rad, rho, rc = shade_scratch_pairs(
-            xp, _take(J, pp), _take(wo, pp), _gather(geom, pp), seg, s.width_um[sg], s.depth_um[sg], lam_nm / 1000.0,
+            xp, _take(J, pp), _take(wo, pp), _gather(geom, pp), seg, wd[:, 0], wd[:, 1], lam_nm / 1000.0,
             sigma, ctx["si"], ctx["footprint_rule"], ctx["conserving"],
         )
         n_pairs += int(pp.size)
