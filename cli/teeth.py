@@ -43,7 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--lr-decay", type=float, default=0.02)
     f.add_argument("--spp", type=int, default=1)
     f.add_argument("--lights-per-iteration", type=int, default=18)
-    f.add_argument("--max-depth", type=int, default=5)
+    f.add_argument("--max-depth", type=int, default=6)
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to optimise (default: all volume, a_t, c)")
     f.add_argument("--seed", type=int, default=0)

@@ -46,7 +46,7 @@ class FitSettings:
     b2: float = 0.999
     eps: float = 1e-8
     spp: int = 1
-    max_depth: int = 5
+    max_depth: int = 6  # must match the depth the capture was rendered with (synthetic: 6)
     lights_per_iteration: int = 18
     seed: int = 0
     free: tuple = DEFAULT_FREE  # fnmatch patterns of parameter names to optimise
@@ -127,27 +127,38 @@ def _save_json(path: str, obj) -> None:
 
 def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarray, st: RenderSettings,
                        seed: int, layout: ParamLayout) -> tuple[float, np.ndarray, dict]:
-    """One stochastic loss + gradient evaluation (pass A image, pass B gradient)."""
+    """One stochastic loss + gradient evaluation (pass A image, pass B gradient).
+
+    Returns the loss estimate mean((C_A - C_ref)(C_B - C_ref)) over the masked pixels, the physical
+    gradient and timing statistics."""
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[:, light_ids].astype(np.float64)
     sa = RenderSettings(st.spp, st.max_depth, 2 * seed, st.chunk, True)
     ra = render(scene, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids, compiled=cs)
-    loss, adj = l2_loss(ra.images, ref, capture.masks)
+    loss_a, adj = l2_loss(ra.images, ref, capture.masks)
     sb = RenderSettings(st.spp, st.max_depth, 2 * seed + 1, st.chunk, True)
     rb = render(scene, capture.cameras, capture.lights, sb, pixels=pixels, light_ids=light_ids, adjoint=adj,
                 compiled=cs)
+    # Monte Carlo noise adds Var(C) to (C_A - C_ref)^2; the product of the two independent passes
+    # (C_A - C_ref)(C_B - C_ref) estimates the noise-free loss (E C - C_ref)^2 without that bias.
+    w = capture.masks[:, None, :, :, None]
+    m = max(float(np.sum(np.broadcast_to(w, ra.images.shape))), 1.0)
+    loss = float(np.sum((ra.images - ref) * (rb.images - ref) * w) / m)
     stats = {"path_vertices": ra.stats["path_vertices"] + rb.stats["path_vertices"],
-             "render_seconds": ra.stats["seconds"], "gradient_seconds": rb.stats["seconds"]}
+             "render_seconds": ra.stats["seconds"], "gradient_seconds": rb.stats["seconds"],
+             "loss_single_pass": loss_a}
     return loss, rb.grad, stats
 
 
 def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str | None = None,
-        resume: bool = False, progress: Callable | None = None) -> tuple[TeethScene, list]:
+        resume: bool = False, progress: Callable | None = None,
+        callback: Callable | None = None) -> tuple[TeethScene, list]:
     """Fit ``scene``'s free parameters to ``capture``; returns (best scene, log).
 
     With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json``,
-    ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint.
+    ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint. ``progress(entry)``
+    and ``callback(entry, scene)`` are called after every iteration.
     """
     if capture.images is None or capture.masks is None:
         raise ValueError("the capture needs images and masks to fit")
@@ -214,6 +225,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             log.append(entry)
             if progress is not None:
                 progress(entry)
+            if callback is not None:
+                callback(entry, cur)
             last = it == n_it - 1
             if out_dir is not None and ((it + 1) % s.checkpoint_every == 0 or last):
                 cur_scene = vector_to_scene(cur, from_optimiser(y, layout), layout)
