@@ -187,19 +187,25 @@ def specular_line_intervals_sphere(
     pt = p[:, 0] * tx + p[:, 1] * ty
     pb = -p[:, 0] * ty + p[:, 1] * tx
     rho = np.hypot(pb, p[:, 2])
-    phi_c = np.arctan2(p[:, 2], pb)
     den = s * rho
     ok = (den > 1e-300) & (d > np.asarray(radius))
     q = np.where(ok, (cos_a - c * pt) / np.where(ok, den, 1.0), 2.0)
     ok &= q <= 1.0
-    delta = np.arccos(np.clip(q, -1.0, 1.0))
-    lo, hi = phi_c - delta, phi_c + delta
-    pa = np.stack([np.maximum(lo, 0.0), np.maximum(lo + 2 * np.pi, 0.0)], 1)
-    pb_ = np.stack([np.minimum(hi, np.pi), np.minimum(hi + 2 * np.pi, np.pi)], 1)
-    keep = ok[:, None] & (pb_ > pa)
-    z1 = s[:, None] * np.cos(pa) + o2[:, None]
-    z0 = s[:, None] * np.cos(pb_) + o2[:, None]
-    return np.where(keep, z0, 0.0), np.where(keep, z1, 0.0)
+    P = t2.shape[0]
+    z0 = np.zeros((P, 2))
+    z1 = np.zeros((P, 2))
+    i = np.flatnonzero(ok)  # the trigonometry only where the line meets the cone
+    if i.size:
+        phi_c = np.arctan2(np.broadcast_to(p[:, 2], (P,))[i], pb[i])
+        delta = np.arccos(np.maximum(q[i], -1.0))
+        lo, hi = phi_c - delta, phi_c + delta
+        pa = np.stack([np.maximum(lo, 0.0), np.maximum(lo + 2 * np.pi, 0.0)], 1)
+        pb_ = np.stack([np.minimum(hi, np.pi), np.minimum(hi + 2 * np.pi, np.pi)], 1)
+        keep = pb_ > pa
+        si, oi = s[i, None], o2[i, None]
+        z1[i] = np.where(keep, si * np.cos(pa) + oi, 0.0)
+        z0[i] = np.where(keep, si * np.cos(pb_) + oi, 0.0)
+    return z0, z1
 
 
 def specular_line_intervals_polygon(
