@@ -47,8 +47,18 @@ def _load_script(tree, scene):
     node = tree.nodes.new("ShaderNodeScript")
     node.name = node.label = SCRIPT_NODE
     node.mode = "EXTERNAL"
-    node.filepath = osl_shader_path(SHADER)
-    node.update()
+    # script nodes compile against the *context* scene's engine: lend it Cycles + OSL meanwhile
+    ctx = bpy.context.scene
+    saved = (ctx.render.engine, ctx.cycles.shading_system) if ctx is not None else None
+    if ctx is not None:
+        ctx.render.engine = "CYCLES"
+        ctx.cycles.shading_system = True
+    try:
+        node.filepath = osl_shader_path(SHADER)
+        node.update()
+    finally:
+        if ctx is not None and ctx != scene:
+            ctx.render.engine, ctx.cycles.shading_system = saved
     need = [n for n, *_ in GROUP_INPUTS] + ["UV", "Tangent", "TableDir", "Lamp1Type", "Lamp1Radius"]
     missing = [s for s in need if s not in node.inputs]
     if missing or "Scratch" not in node.outputs:
