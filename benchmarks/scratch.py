@@ -16,9 +16,11 @@ Measured side by side in one run:
   method's time (vectorised over a batch of >= 1000 configurations, per subset; the time with one
   Python call per configuration is reported too) against the time plain Monte
   Carlo light+footprint sampling needs to reach the analytic method's relative L2 error. MC is run at
-  increasing sample counts; its error follows c / sqrt(N) (fit reported), which gives the sample count
-  N* of equal error; its time is the measured time per sample times N*. Reported for the default
-  analytic settings and for the thesis settings (larger error, so smaller N*).
+  1k-256k samples per configuration (``SCRATCH_BENCH_MC_SAMPLES``); its error follows c / sqrt(N)
+  (c fitted with the slope fixed at -1/2; the free slope is reported as a check), which gives the
+  sample count N* of equal error; its time is the measured time per sample times N*. Reported for the
+  default analytic settings (headline; N* lies far beyond the measured range, i.e. extrapolated) and
+  for the thesis settings (Si eq. 4.29, single chord: larger error, N* inside the measured range).
 * ``seconds_1m_points_10k_scratches``: wall time of ``scratch_radiance`` for 1 M shading points
   (uniform over a 50 mm patch, footprint radius 100 um, 3 wavelengths -> RGB) against a 10 000-scratch
   uniform-wear set (about 87 000 segments), one sphere light off the mirror direction, 2 worker
