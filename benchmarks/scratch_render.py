@@ -63,6 +63,7 @@ def scratch_render() -> dict:
         errs.append(relative_errors(rgb, ref, mask))
     err = np.concatenate(errs)
 
+    hdri = _hdri_error()
     reset_scene()
     scenes = {"scratched": _scene(bpy, "MS Scratched", False), "plain": _scene(bpy, "MS Plain", True)}
     times = {k: [] for k in scenes}
@@ -87,7 +88,27 @@ def scratch_render() -> dict:
         "resolution": list(RESOLUTION),
         "samples": SAMPLES,
         "n_scratches": 10000,
+        "hdri_approx_median_rel_err": hdri["median_rel_err"],
+        "hdri_approx_p99_rel_err": hdri["p99_rel_err"],
+        "hdri_approx_total_rel_err": hdri["total_rel_err"],
     }
+
+
+def _hdri_error() -> dict:
+    """Scratch term under a synthetic sky (6 degree sun + gradient) approximated by 2 world lamps,
+    against every texel integrated as a polygon light (addon/scratch/world.py)."""
+    import math
+
+    from ..addon.scratch import world as W
+    from ..addon.scratch.verify import test_scratch_set
+
+    d, _ = W.equirect_directions()
+    sun = np.array([0.5, 0.3, 0.81]) / np.linalg.norm([0.5, 0.3, 0.81])
+    env = np.clip(d[..., 2], 0, 1)[..., None] * np.array([0.3, 0.4, 0.6])
+    env = env + (d @ sun > math.cos(math.radians(6)))[..., None] * np.array([40.0, 38.0, 34.0])
+    pts = np.random.default_rng(0).uniform(300, 1700, (60, 2))
+    wo = np.array([-0.4, -0.2, 0.89])
+    return W.world_approximation_error(env, 2, test_scratch_set(), pts, wo / np.linalg.norm(wo))
 
 
 BENCHMARKS = {"scratch-render": scratch_render}

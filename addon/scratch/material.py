@@ -232,13 +232,13 @@ def sync_scratch_lamps(scene, update_matrices: bool = True) -> int:
         for layer in scene.view_layers:
             layer.update()
     triples = scene_scratch_lamps(scene)
-    from .world import world_lamps
+    from .world import world_lamps_with_radii
 
     lamps = [lamp for _, lamp, _ in triples]
     radii = [r for _, _, r in triples]
-    for extra in world_lamps(scene, max(0, 4 - len(lamps))):
+    for extra, r in world_lamps_with_radii(scene, max(0, 4 - len(lamps))):
         lamps.append(extra)
-        radii.append(0.0)
+        radii.append(r)
     for node in nodes:
         write_lamp_inputs(node, lamps)
         for k in range(1, 5):
