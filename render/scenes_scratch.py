@@ -27,7 +27,7 @@ def build_scratched_plate(scene, workdir: str = "", plain: bool = False, n_scrat
     from . import add_textured_plane, new_material
     from .scene import material_output
 
-    base_color, roughness = (0.91, 0.92, 0.92), 0.08
+    base_color, roughness = (0.91, 0.92, 0.92), 0.05
     if plain:
         mat = new_material("Plain Steel")
         bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
@@ -52,11 +52,11 @@ def build_scratched_plate(scene, workdir: str = "", plain: bool = False, n_scrat
     scene.camera = cam
     # sphere lamp near the mirror direction of the view, area lamp to the side
     key = bpy.data.lights.new("MS Scratch Sphere", "POINT")
-    key.energy, key.shadow_soft_size = 30.0, 0.01
+    key.energy, key.shadow_soft_size = 2.0, 0.01
     key_obj = bpy.data.objects.new("MS Scratch Sphere", key)
     key_obj.location = (0.01, 0.25 * math.sin(math.radians(40)), 0.25 * math.cos(math.radians(40)))
     area = bpy.data.lights.new("MS Scratch Area", "AREA")
-    area.energy, area.shape, area.size, area.size_y = 20.0, "RECTANGLE", 0.06, 0.02
+    area.energy, area.shape, area.size, area.size_y = 3.0, "RECTANGLE", 0.06, 0.02
     area_obj = bpy.data.objects.new("MS Scratch Area", area)
     area_obj.location = (-0.12, 0.12, 0.18)
     area_obj.rotation_euler = (-Vector(area_obj.location)).to_track_quat("-Z", "Y").to_euler()
