@@ -11,8 +11,11 @@ a_t (1 - F) at each boundary). The contribution is f(path; theta) / p(path; thet
 
 Derivatives. With the path and its discrete structure fixed, d/dtheta [f / p] = (f / p) d log f,
 and d log f is the sum of per-interaction terms (eq. 5.8): 1 / a_t (eq. 5.10), phase-function terms
-(eq. 5.11-5.14), blended albedo / phase terms via l(q) (eq. 5.15-5.21), (N - 1) / sigma_t - sum t_k
-(eq. 5.23), and the dentin-shape term (S_i - S_e) dt/dc for every dentin crossing (eq. 5.25-5.32).
+(eq. 5.11-5.14), blended albedo / phase / sigma_t terms via l(q) (eq. 5.15-5.21), (N - 1) / sigma_t -
+sum t_k (eq. 5.23), and the dentin-shape term (S_i - S_e) dt/dc for every dentin crossing
+(eq. 5.25-5.32). Because sigma_s at a vertex is blended with l(q) (see ``scene``), the contribution
+is continuous in the dentin coefficients, so these per-path terms are the complete derivative of
+the expected image (no boundary term is dropped).
 With ``adjoint`` = d rho / d C (eq. 5.7) the tracer returns grad = sum adjoint * dC/dtheta; terms that
 precede a vertex are weighted by the adjoint-weighted contributions of all later vertices (suffix
 sums), connection terms by the connection's own contribution.
