@@ -24,9 +24,24 @@ def package_parent() -> str:
     return os.path.dirname(root)
 
 
+FIT_MODULES = ("numpy", "scipy", "tqdm", "matplotlib")
+
+
 def python_executable() -> str:
-    """The interpreter for the fit: ``MS_PYTHON`` if set, else this process's (``bpy`` module: the venv)."""
-    return os.environ.get("MS_PYTHON") or sys.executable
+    """The interpreter for the fit: ``MS_PYTHON`` if set; else this process's when it has the fit's
+    dependencies (the ``bpy`` module in the project venv); else the checkout's ``.venv`` (a desktop
+    Blender's bundled Python has no scipy); else this process's."""
+    import importlib.util
+
+    if os.environ.get("MS_PYTHON"):
+        return os.environ["MS_PYTHON"]
+    if all(importlib.util.find_spec(m) is not None for m in FIT_MODULES):
+        return sys.executable
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    for cand in (os.path.join(root, ".venv", "bin", "python"), os.path.join(root, ".venv", "Scripts", "python.exe")):
+        if os.path.isfile(cand):
+            return cand
+    return sys.executable
 
 
 def fit_command(capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",

@@ -1,0 +1,88 @@
+"""Fitting from Blender: the core fit in a background process (progress, log, loss plot, cancel), its
+result written into the teeth materials and dentin shape keys."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import bpy
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="module")
+def capture_dir(tmp_path_factory):
+    """A tiny synthetic capture (1 tooth, 1 camera, 3 lights, 16 x 12 px) written by the core."""
+    from material_structures.core.teeth.capture import default_rig
+    from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
+
+    folder = str(tmp_path_factory.mktemp("teeth-capture"))
+    scene = make_scene(n_teeth=1, resolution=12)
+    cams, lights = default_rig(target=scene_target(scene), width=16, height=12, n_lights=3, n_cameras=1,
+                               fov_x_deg=2.6)
+    render_capture(scene, cams, lights, spp=2, spp_background=1, max_depth=4).save(folder, scene.to_dict())
+    return folder
+
+
+def _import(capture_dir):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    path = os.path.join(capture_dir, "scene.json")
+    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+    return bpy.data.objects["tooth0 Enamel"]
+
+
+def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
+    from material_structures.core.teeth.scene import load_scene
+
+    enamel = _import(capture_dir)
+    assert bpy.data.objects.get("Gums") is not None and bpy.data.objects.get("Oral Cavity") is not None
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = capture_dir
+    fs.out_dir = str(tmp_path / "fit")
+    fs.iterations = 3
+    fs.lights_per_iteration = 2
+    fs.init = "perturbed"  # c reset to 0, volumes perturbed: the fit result differs from the import
+    assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}  # EXEC: blocking
+    fit = load_scene(str(tmp_path / "fit" / "scene_fit.json"))
+    t = fit.teeth[0]
+    st = enamel.ms_tooth
+    assert st.has_fit
+    np.testing.assert_allclose(tuple(st.fitted), t.c, atol=1e-6)
+    np.testing.assert_allclose(st.coefficients(), np.clip(t.c, -0.8, 0.8), atol=1e-6)
+    node = enamel.active_material.node_tree.nodes["Enamel"]
+    np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
+    dnode = st.partner.active_material.node_tree.nodes["Dentin"]
+    np.testing.assert_allclose(tuple(dnode.inputs["Albedo"].default_value)[:3], t.dentin.albedo, rtol=1e-6)
+    for name in ("fit_log.txt", "loss.png", "loss.json", "checkpoint.json"):
+        assert os.path.isfile(tmp_path / "fit" / name), name
+    log = open(tmp_path / "fit" / "fit_log.txt").read()
+    assert "3/3" in log and "best loss" in log
+    assert fs.progress == pytest.approx(1.0) and not fs.running
+
+
+def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path):
+    from material_structures.addon.teeth.fit_job import FitJob
+
+    t0 = time.perf_counter()
+    job = FitJob(capture_dir, str(tmp_path / "fit"), iterations=10000, init="scene", lights_per_iteration=1).start()
+    assert time.perf_counter() - t0 < 1.0  # returns at once: Blender keeps running
+    deadline = time.time() + 90
+    while job.done_iterations < 2 and job.poll() == "RUNNING" and time.time() < deadline:
+        time.sleep(0.2)
+    assert job.poll() == "RUNNING", job.last_line
+    assert job.done_iterations >= 2 and job.loss is not None and job.loss > 0
+    assert 0.0 < job.progress < 0.01
+    assert "iteration" in job.status_text()
+    job.cancel()
+    assert job.poll() == "CANCELLED"
+    assert job.proc.returncode != 0
+
+
+def test_fit_errors(addon_module, tmp_path):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = str(tmp_path)
+    with pytest.raises(RuntimeError, match="no capture.json"):
+        bpy.ops.material_structures.teeth_fit()
+    assert bpy.ops.material_structures.teeth_fit_cancel() == {"CANCELLED"}  # a warning, nothing to cancel
