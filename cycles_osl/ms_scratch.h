@@ -9,14 +9,14 @@
 #define MS_REACH_SIGMAS 3.5  // scratch_set.REACH_SIGMAS
 #define MS_GAUSS_CUTOFF 2.5  // scratch_footprint.GAUSS_CUTOFF
 
-// Si(x): power series for |x| < 2, complex continued fraction (E1(ix), Lentz) up to 12, asymptotic beyond.
+// Si(x): power series for |x| < 4, complex continued fraction (E1(ix), Lentz) up to 12, asymptotic beyond.
 // Float accuracy
 // (~1e-6 absolute); the core's "series" form is accurate to 2e-6 (sine_integral.py).
 float ms_si(float x)
 {
     float ax = abs(x);
     float r = 0.0;
-    if (ax < 2.0) {
+    if (ax < 4.0) {
         float x2 = ax * ax;
         float term = ax;  // x^(2n+1) / (2n+1)! * (-1)^n
         for (int n = 0; n < 12; ++n) {
