@@ -36,6 +36,7 @@ class LibraryMaterial:
     catalog: str  # asset catalog path, e.g. "Fabric/Velvet"
     build: Callable  # build(scene, workdir) -> bpy.types.Material (lamps synced by the caller)
     description: str = ""
+    preview: Callable | None = None  # preview(scene, material): own preview stage (default: shader ball)
 
 
 MATERIALS: dict[str, LibraryMaterial] = {}
@@ -108,8 +109,9 @@ def render_material_preview(
     scene = reset_scene()
     configure_cycles(scene, resolution=resolution, samples=samples)
     dark_world(scene)
-    material = MATERIALS[name].build(scene, workdir)
-    build_preview_scene(scene, material)
+    entry = MATERIALS[name]
+    material = entry.build(scene, workdir)
+    (entry.preview or build_preview_scene)(scene, material)
     return render_to_array(scene, exr_path)
 
 

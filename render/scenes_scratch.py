@@ -21,10 +21,8 @@ def showcase_scratch_set(n: int = N_SCRATCHES, seed: int = 11):
 
 
 def build_scratched_plate(scene, workdir: str = "", plain: bool = False, n_scratches: int = N_SCRATCHES) -> None:
-    import bpy
-    from mathutils import Vector
 
-    from . import add_textured_plane, new_material
+    from . import new_material
     from .scene import material_output
 
     base_color, roughness = (0.91, 0.92, 0.92), 0.05
@@ -41,6 +39,21 @@ def build_scratched_plate(scene, workdir: str = "", plain: bool = False, n_scrat
         mat = create_scratched_metal("Scratched Steel", showcase_scratch_set(n_scratches), "showcase",
                                      base_color=base_color, roughness=roughness,
                                      tiling=PLATE_M / (PATCH_MM / 1000.0), scene=scene)
+    _plate_stage(scene, mat)
+    if not plain:
+        from ..addon.scratch.material import sync_scratch_lamps
+
+        sync_scratch_lamps(scene)
+
+
+def _plate_stage(scene, mat) -> None:
+    """The close-up plate stage: a 10 cm plate wearing ``mat``, a sphere lamp near the mirror
+    direction of the view and a rectangular area lamp to the side."""
+    import bpy
+    from mathutils import Vector
+
+    from . import add_textured_plane
+
     add_textured_plane(scene, PLATE_M, mat, name="MS Scratched Plate")
     cam_data = bpy.data.cameras.new("MS Scratch Camera")
     cam_data.lens = 50.0
@@ -66,11 +79,64 @@ def build_scratched_plate(scene, workdir: str = "", plain: bool = False, n_scrat
         bg = next((n for n in scene.world.node_tree.nodes if n.type == "BACKGROUND"), None)
         if bg is not None:
             bg.inputs["Strength"].default_value = 0.02
-    if not plain:
-        from ..addon.scratch.material import sync_scratch_lamps
-
-        sync_scratch_lamps(scene)
 
 
 register_scene(LibraryScene("scratch-plate", "Scratched steel plate (10 000 scratches)", build_scratched_plate,
                             resolution=(320, 240), samples=16, tags=("scratch",)))
+
+
+# -- library materials: worn metals (RGB and spectral) ---------------------------------------------
+_WORN_TILING = PLATE_M / 0.02  # the 20 mm scratch patch tiles the 10 cm preview plate
+
+
+def _worn_metal(name, scratch_set, scene, spectral, base_color=(0.91, 0.92, 0.92), roughness=0.06):
+    from ..addon.scratch.material import create_scratched_metal
+
+    return create_scratched_metal(name, scratch_set, name, base_color=base_color, roughness=roughness,
+                                  spectral=spectral, tiling=_WORN_TILING, scene=scene)
+
+
+def light_wear_material(scene, workdir: str = ""):
+    from ..core.scratch.scratch_generators import uniform_wear
+
+    return _worn_metal("Light Wear Steel", uniform_wear(600, (20000.0, 20000.0), seed=3), scene, spectral=False)
+
+
+def polished_circles_material(scene, workdir: str = ""):
+    from ..core.scratch.scratch_generators import circular_polish
+
+    return _worn_metal("Polished Circles Aluminium", circular_polish(1500, (20000.0, 20000.0), seed=4), scene,
+                       spectral=True, base_color=(0.92, 0.93, 0.94), roughness=0.04)
+
+
+def heavy_wear_material(scene, workdir: str = ""):
+    from ..core.scratch.scratch_generators import uniform_wear
+
+    return _worn_metal("Heavy Wear Brass", uniform_wear(4000, (20000.0, 20000.0), seed=5), scene, spectral=True,
+                       base_color=(0.91, 0.78, 0.42), roughness=0.08)
+
+
+def metal_preview(scene, material) -> None:
+    """Library preview of a worn metal: the close-up plate stage (scratch glints need it)."""
+    from ..addon.scratch.material import sync_scratch_lamps
+
+    _plate_stage(scene, material)
+    sync_scratch_lamps(scene)
+
+
+def _register_worn_metals() -> None:
+    from .library import LibraryMaterial, register_material
+
+    register_material(LibraryMaterial("Light Wear Steel", "Light wear (RGB)", "Metal/Light Wear",
+                                      light_wear_material, "Steel with sparse wear scratches, 3-wavelength mode",
+                                      preview=metal_preview))
+    register_material(LibraryMaterial("Polished Circles Aluminium", "Polished circles (16 bands)",
+                                      "Metal/Polished", polished_circles_material,
+                                      "Circular polishing marks, 16-band spectral mode",
+                                      preview=metal_preview))
+    register_material(LibraryMaterial("Heavy Wear Brass", "Heavy wear (16 bands)", "Metal/Heavy Wear",
+                                      heavy_wear_material, "Brass with dense wear, 16-band spectral mode",
+                                      preview=metal_preview))
+
+
+_register_worn_metals()
