@@ -1,8 +1,8 @@
 """``bench teeth``: path throughput, time per optimisation iteration, gradient FD check and the
 parameter-recovery acceptance fit (2 teeth, 3 cameras at 96 x 64, 54 lights, perturbed start).
 
-Environment: TEETH_BENCH_ITERATIONS (default 80) and TEETH_BENCH_SYNTH_SPP (default 8) size the
-recovery fit; TEETH_BENCH_RECOVERY=0 skips it.
+Environment: TEETH_BENCH_ITERATIONS (default 120) and TEETH_BENCH_SYNTH_SPP (default 32) size the
+recovery fit (about 20 minutes on 2 shared cores); TEETH_BENCH_RECOVERY=0 skips it.
 """
 
 from __future__ import annotations
@@ -53,8 +53,8 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     )
     from material_structures.core.teeth.synthetic import perturbed_start
 
-    iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", "100"))
-    synth_spp = synth_spp or int(os.environ.get("TEETH_BENCH_SYNTH_SPP", "8"))
+    iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", "120"))
+    synth_spp = synth_spp or int(os.environ.get("TEETH_BENCH_SYNTH_SPP", "32"))
     t0 = time.perf_counter()
     truth, capture = acceptance_setup(synth_spp)
     out: dict = {"synth_seconds": time.perf_counter() - t0}
