@@ -86,3 +86,51 @@ def test_fit_errors(addon_module, tmp_path):
     with pytest.raises(RuntimeError, match="no capture.json"):
         bpy.ops.material_structures.teeth_fit()
     assert bpy.ops.material_structures.teeth_fit_cancel() == {"CANCELLED"}  # a warning, nothing to cancel
+
+
+class _Recorder:
+    def __init__(self):
+        self.status, self.progress, self.ended, self.timer_removed = [], [], False, False
+
+    # window manager
+    def progress_update(self, v):
+        self.progress.append(v)
+
+    def progress_end(self):
+        self.ended = True
+
+    def event_timer_remove(self, timer):
+        self.timer_removed = True
+
+    # workspace
+    def status_text_set(self, text):
+        self.status.append(text)
+
+
+def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp_path):
+    """Drive the modal operator's ``modal()`` with stand-in timer events (no window headless): the status bar
+    text and the window-manager progress follow the background fit; at the end the result is applied."""
+    from types import SimpleNamespace
+
+    from material_structures.addon.operators import teeth as ops
+    from material_structures.addon.teeth.fit_job import FitJob
+
+    enamel = _import(capture_dir)
+    rec = _Recorder()
+    context = SimpleNamespace(scene=bpy.context.scene, window_manager=rec, workspace=rec, screen=None)
+    fake = SimpleNamespace(_timer=object(), report=lambda *a: None)
+    fake._cleanup = lambda ctx: ops.MS_OT_teeth_fit._cleanup(fake, ctx)
+    fake._finish = lambda ctx, job, state: ops.MS_OT_teeth_fit._finish(fake, ctx, job, state)
+    ops._JOB["job"] = FitJob(capture_dir, str(tmp_path / "fit"), iterations=4, init="scene",
+                             lights_per_iteration=2).start()
+    timer = SimpleNamespace(type="TIMER")
+    result, deadline = {"PASS_THROUGH"}, time.time() + 120
+    while result == {"PASS_THROUGH"} and time.time() < deadline:
+        time.sleep(0.1)
+        result = ops.MS_OT_teeth_fit.modal(fake, context, timer)
+    assert result == {"FINISHED"}
+    texts = [t for t in rec.status if t]
+    assert texts and texts[-1].startswith("Teeth fit: iteration 4/4")
+    assert rec.status[-1] is None and rec.ended and rec.timer_removed  # status bar restored
+    assert max(rec.progress) == 1000
+    assert enamel.ms_tooth.has_fit and "done" in bpy.context.scene.ms_teeth_fit.status
