@@ -173,12 +173,46 @@ def new_teeth_material(kind: str, name: str | None = None, scene=None, volume=No
         tree.links.new(node.outputs["Surface"], out.inputs["Surface"])
     tree.links.new(node.outputs["Volume"], out.inputs["Volume"])
     node.inputs["mm per Unit"].default_value = mm_per_unit
+    if kind in SURFACE_GROUPS:
+        out.target = "CYCLES"
+        _add_eevee_output(mat, kind)
     mat.diffuse_color = (*[min(1.0, x) for x in DEFAULTS[kind]["albedo"]], 1.0)  # solid-view colour
     if volume is not None:
         set_volume(mat, volume)
     if a_t is not None:
         set_a_t(mat, a_t)
     return mat
+
+
+def _add_eevee_output(mat, kind: str) -> None:
+    """EEVEE/viewport stand-in (the OSL boundary and the volumes are Cycles-only): a Principled BSDF with
+    random-walk subsurface scattering, radius = 1 / sigma_t, colour = albedo; kept in sync by set_volume."""
+    tree = mat.node_tree
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.target = "EEVEE"
+    out.name = out.label = "EEVEE Output"
+    p = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    p.name = p.label = "EEVEE Stand-in"
+    p.inputs["Roughness"].default_value = 0.08
+    p.inputs["IOR"].default_value = DEFAULTS[kind]["eta"]
+    weight = p.inputs.get("Subsurface Weight") or p.inputs.get("Subsurface")
+    if weight is not None:
+        weight.default_value = 1.0
+    tree.links.new(p.outputs[0], out.inputs["Surface"])
+    p.location, out.location = (100, -350), (400, -350)
+
+
+def _sync_eevee(mat, volume, mm_per_unit: float) -> None:
+    p = mat.node_tree.nodes.get("EEVEE Stand-in") if mat.node_tree else None
+    if p is None:
+        return
+    p.inputs["Base Color"].default_value = (*(float(x) for x in volume.albedo), 1.0)
+    radius = p.inputs.get("Subsurface Radius")
+    if radius is not None:
+        radius.default_value = tuple(float(1.0 / x) for x in volume.sigma_t)
+    scale = p.inputs.get("Subsurface Scale")
+    if scale is not None:
+        scale.default_value = 1.0 / mm_per_unit
 
 
 def group_node(mat):
@@ -199,6 +233,7 @@ def set_volume(mat, volume) -> None:
     node.inputs["G2"].default_value = float(volume.g2)
     node.inputs["Beta"].default_value = float(volume.beta)
     mat.diffuse_color = (*(float(x) for x in volume.albedo), 1.0)
+    _sync_eevee(mat, volume, node.inputs["mm per Unit"].default_value)
 
 
 def get_volume(mat) -> dict:
