@@ -48,6 +48,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="comma-separated parameter name patterns to optimise (default: all volume, a_t, c)")
     f.add_argument("--seed", type=int, default=0)
     f.add_argument("--resume", action="store_true", help="continue from FIT_DIR/checkpoint.json")
+    f.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address (tcp://host:8786): per-view gradient renders become tasks there")
+    f.add_argument("--dask-workers", type=int, default=None,
+                   help="processes of the local Dask cluster (default: CPU count)")
+    f.add_argument("--no-dask", action="store_true", help="render in this process instead of on Dask")
     f.add_argument("--no-progress", action="store_true")
     f.set_defaults(func=run_fit)
 
@@ -117,7 +122,17 @@ def run_fit(args: argparse.Namespace) -> int:
     if args.resume and bar is not None:
         with open(os.path.join(args.out, "checkpoint.json")) as f:
             bar.update(len(json.load(f)["log"]))
-    best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress)
+    if args.no_dask and args.scheduler:
+        raise ValueError("--no-dask and --scheduler exclude each other")
+    if not args.no_dask:
+        from ..scaleout.cluster import dask_client
+        from ..scaleout.teeth import DaskGradient
+
+        with dask_client(args.scheduler, args.dask_workers) as client:
+            best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress,
+                            gradient=DaskGradient(client, cap))
+    else:
+        best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress)
     if bar is not None:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))

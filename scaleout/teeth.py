@@ -30,12 +30,14 @@ def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSetting
                 pixels=pixels, light_ids=light_ids, compiled=cs)
     w = np.broadcast_to(mask[None, None, :, :, None], ra.images.shape)
     diff = (ra.images - ref) * w
-    loss = float(np.sum(diff * diff) / norm)
     adj = 2.0 * diff / norm
     rb = render(scene, cams, capture.lights, RenderSettings(st.spp, st.max_depth, seed_b, st.chunk, True),
                 pixels=pixels, light_ids=light_ids, adjoint=adj, compiled=cs)
+    # the loss estimator of optimise.iteration_gradient: mean((C_A - C_ref)(C_B - C_ref))
+    loss = float(np.sum(diff * (rb.images - ref)) / norm)
     stats = {"path_vertices": ra.stats["path_vertices"] + rb.stats["path_vertices"],
-             "render_seconds": ra.stats["seconds"], "gradient_seconds": rb.stats["seconds"]}
+             "render_seconds": ra.stats["seconds"], "gradient_seconds": rb.stats["seconds"],
+             "loss_single_pass": float(np.sum(diff * diff) / norm)}
     return loss, rb.grad, stats
 
 
@@ -68,6 +70,7 @@ class DaskGradient:
             "path_vertices": int(sum(r[2]["path_vertices"] for r in results)),
             "render_seconds": float(sum(r[2]["render_seconds"] for r in results)),
             "gradient_seconds": float(sum(r[2]["gradient_seconds"] for r in results)),
+            "loss_single_pass": float(sum(r[2]["loss_single_pass"] for r in results)),
         }
         return loss, grad, stats
 

@@ -153,11 +153,12 @@ def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarra
 
 def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str | None = None,
         resume: bool = False, progress: Callable | None = None,
-        callback: Callable | None = None) -> tuple[TeethScene, list]:
+        callback: Callable | None = None, gradient: Callable | None = None) -> tuple[TeethScene, list]:
     """Fit ``scene``'s free parameters to ``capture``; returns (best scene, log).
 
     With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json``,
-    ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint. ``progress(entry)``
+    ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint. ``gradient``
+    replaces :func:`iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``. ``progress(entry)``
     and ``callback(entry, scene)`` are called after every iteration.
     """
     if capture.images is None or capture.masks is None:
@@ -210,8 +211,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             light_ids = np.sort(rng.choice(len(capture.lights), n_l, replace=False))
             x = from_optimiser(y, layout)
             cur = vector_to_scene(cur, x, layout)
-            loss, g_phys, stats = iteration_gradient(cur, capture, light_ids, st,
-                                                     s.seed * 100003 + 10007 * pi + it, layout)
+            loss, g_phys, stats = (gradient or iteration_gradient)(cur, capture, light_ids, st,
+                                                                   s.seed * 100003 + 10007 * pi + it, layout)
             if loss < best_loss:
                 best_loss = loss
                 best_scene = cur.copy()

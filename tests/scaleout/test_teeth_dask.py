@@ -90,3 +90,14 @@ def test_dask_gradient_equals_local_and_survives_a_killed_worker(problem, client
     assert killed["during"], "the iteration finished before the worker was killed"
     assert loss2 == ref_loss
     np.testing.assert_array_equal(grad2, ref_grad)
+
+
+def test_fit_on_dask_is_deterministic_and_matches_local_decomposition(problem, client, tmp_path):
+    from material_structures.core.teeth.optimise import FitSettings, fit
+
+    scene, capture = problem
+    fs = FitSettings(iterations=2, spp=1, max_depth=4, lights_per_iteration=2, seed=1)
+    a, log_a = fit(scene, capture, fs, gradient=DaskGradient(client, capture))
+    b, log_b = fit(scene, capture, fs, gradient=local_gradient(capture))
+    assert [e["loss"] for e in log_a] == [e["loss"] for e in log_b]
+    assert a.to_dict() == b.to_dict()
