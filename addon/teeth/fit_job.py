@@ -46,9 +46,14 @@ def python_executable() -> str:
 
 def fit_command(capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
                 lights_per_iteration: int = 18, extra: list[str] | None = None) -> list[str]:
+    """The CLI call. ``--no-dask``: the fit renders in the one background process, so that cancelling
+    (terminate) stops all of it; pass ``extra=["--scheduler", ADDRESS]`` to use a Dask cluster instead."""
+    extra = list(extra or [])
+    if "--scheduler" not in extra:
+        extra.insert(0, "--no-dask")
     return [python_executable(), "-m", "material_structures", "teeth", "fit", capture_dir, "--out", out_dir,
             "--iterations", str(int(iterations)), "--init", init, "--lights-per-iteration",
-            str(int(lights_per_iteration)), *(extra or [])]
+            str(int(lights_per_iteration)), *extra]
 
 
 class FitJob:
