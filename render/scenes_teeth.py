@@ -133,3 +133,57 @@ register_scene(LibraryScene("teeth-smile", "Smile: enamel, dentin, gums", build_
                             ("teeth",)))
 register_scene(LibraryScene("teeth-fit-demo", "Teeth fit: start | fit | truth", build_fit_demo, (192, 64), 32,
                             ("teeth",)))
+
+
+# -- library materials: three dentin shades (the shade of a tooth is mostly its dentin) ------------
+SHADES = {
+    "Dentin Shade A1 (light)": ([2.2, 2.6, 3.2], [0.95, 0.90, 0.80]),
+    "Dentin Shade A3 (yellowish)": ([2.4, 2.9, 3.8], [0.93, 0.82, 0.62]),
+    "Dentin Shade C2 (greyish)": ([2.6, 2.8, 3.1], [0.86, 0.83, 0.76]),
+}
+
+
+def _shade_material(name: str):
+    def build(scene, workdir: str = ""):
+        from ..addon.teeth.materials import new_teeth_material
+        from ..core.teeth.scene import VolumeMaterial
+
+        _ensure_registered()
+        sigma_t, albedo = SHADES[name]
+        # 1 Blender unit = 1 m for artists' scenes (mm per Unit = 1000)
+        return new_teeth_material("Dentin", name, scene=scene, volume=VolumeMaterial(np.array(sigma_t),
+                                  np.array(albedo), 0.5, -0.1, 0.8), mm_per_unit=1000.0)
+
+    return build
+
+
+def shade_preview(scene, material) -> None:
+    """An incisor (generic enamel) whose dentin wears ``material``, on a dark stage (mm units)."""
+    from ..addon.teeth.materials import group_node
+    from ..addon.teeth.scene_build import build_teeth_scene, configure_teeth_cycles
+    from ..core.teeth.scene import TeethScene, Tooth
+    from ..core.teeth.synthetic import GROUND_TRUTH, scene_target
+    from ..core.teeth.tooth_mesh import make_tooth
+
+    geo = make_tooth("incisor", resolution=24)
+    tooth = Tooth("shade", geo.enamel, geo.dentin, GROUND_TRUTH["enamel"], GROUND_TRUTH["dentin"],
+                  np.full((1, 1, 3), 0.95), np.array([0.2, 0.0, 0.2]), kind="incisor")
+    ts = TeethScene([tooth], None, None)
+    objs = build_teeth_scene(ts, scene.collection, mm_per_unit=1.0, smooth=True)
+    group_node(material).inputs["mm per Unit"].default_value = 1.0  # the preview stage is in mm
+    objs["teeth"][0][1].data.materials[0] = material
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    _light_and_camera(scene, scene_target(ts), w, h, 16.0, [((60.0, 150.0, 60.0), 5.0e4)])
+    configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)
+
+
+def _register_shades() -> None:
+    from .library import LibraryMaterial, register_material
+
+    for name in SHADES:
+        register_material(LibraryMaterial(name, name.replace("Dentin Shade ", "Shade "), "Teeth/Dentin Shades",
+                                          _shade_material(name), "Dentin volume (two-lobe HG) of a tooth shade; "
+                                          "pair with the Enamel group", preview=shade_preview))
+
+
+_register_shades()
