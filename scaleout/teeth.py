@@ -49,21 +49,36 @@ def loss_normaliser(capture, n_lights: int) -> float:
 class DaskGradient:
     """A drop-in for ``optimise.iteration_gradient`` that runs one task per camera on ``client``."""
 
+    attempts = 3  # whole-iteration resubmissions when scattered inputs were lost with a worker
+
     def __init__(self, client, capture):
         self.client = client
-        [self.capture_future] = client.scatter([capture], broadcast=True)
         self.capture = capture
+        self.capture_future = None
+
+    def _scatter_capture(self):
+        [self.capture_future] = self.client.scatter([self.capture], broadcast=True)
 
     def __call__(self, scene, capture, light_ids, st, seed, layout):
+        from distributed.client import FutureCancelledError
+
         light_ids = np.asarray(light_ids)
         norm = loss_normaliser(capture, len(light_ids))
-        [scene_future] = self.client.scatter([scene], broadcast=True)
-        futures = [
-            self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
-                               layout, norm, pure=False, retries=3)
-            for c in range(len(capture.cameras))
-        ]
-        results = self.client.gather(futures)  # in camera order: the sum is the same every run
+        for attempt in range(self.attempts):
+            if self.capture_future is None or attempt > 0:
+                self._scatter_capture()
+            [scene_future] = self.client.scatter([scene], broadcast=True)
+            futures = [
+                self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
+                                   layout, norm, pure=False, retries=3)
+                for c in range(len(capture.cameras))
+            ]
+            try:
+                results = self.client.gather(futures)  # in camera order: the sum is the same every run
+                break
+            except FutureCancelledError:  # every replica of an input died: scatter again, rerun
+                if attempt == self.attempts - 1:
+                    raise
         loss = float(sum(r[0] for r in results))
         grad = np.sum([r[1] for r in results], axis=0)
         stats = {

@@ -33,13 +33,19 @@ def problem():
     return start, capture
 
 
-def _dead(pid: int) -> bool:
+def _dead(pid: int, wait: float = 5.0) -> bool:
     import psutil
 
-    try:
-        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
-    except psutil.NoSuchProcess:
-        return True
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            if psutil.Process(pid).status() == psutil.STATUS_ZOMBIE:
+                return True
+        except psutil.NoSuchProcess:
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
 
 
 @pytest.fixture(scope="module")
@@ -75,19 +81,24 @@ def test_dask_gradient_equals_local_and_survives_a_killed_worker(problem, client
     done = threading.Event()
 
     def kill_soon():
-        time.sleep(0.2)
-        victim = sorted(pids)[0]
-        killed["during"] = not done.is_set()
-        os.kill(pids[victim], signal.SIGKILL)
-        killed["pid"] = pids[victim]
+        # kill a worker as soon as it is computing one of the iteration's tasks
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not done.is_set():
+            busy = [w for w, keys in client.processing().items() if keys and w in pids]
+            if busy:
+                killed["during"] = not done.is_set()
+                os.kill(pids[busy[0]], signal.SIGKILL)
+                killed["pid"] = pids[busy[0]]
+                return
+            time.sleep(0.002)
 
     killer = threading.Thread(target=kill_soon)
     killer.start()
     loss2, grad2, _ = dask_grad(scene, capture, ids, st, 7, layout)
     done.set()
     killer.join()
+    assert killed.get("during"), "the iteration finished before a worker could be killed"
     assert _dead(killed["pid"]), "the killed worker is still running"
-    assert killed["during"], "the iteration finished before the worker was killed"
     assert loss2 == ref_loss
     np.testing.assert_array_equal(grad2, ref_grad)
 
