@@ -43,6 +43,16 @@ class MeshUVLookup:
         location, _normal, index, _dist = self.bvh.ray_cast(Vector(origin), Vector(direction))
         return None if index is None else self._uv(location, index)
 
+    def under_mouse(self, context, event):
+        """UV under the mouse cursor of a 3D viewport event, or None."""
+        from bpy_extras import view3d_utils
+
+        region, rv3d = context.region, context.region_data
+        coord = (event.mouse_region_x, event.mouse_region_y)
+        origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)
+        direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, coord)
+        return self.ray_cast(origin, direction)
+
     def nearest(self, point, max_distance: float = 1e30):
         """UV of the closest surface point to ``point``, or None."""
         location, _normal, index, _dist = self.bvh.find_nearest(Vector(point), max_distance)

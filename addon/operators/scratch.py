@@ -153,13 +153,7 @@ class MS_OT_scratch_draw(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def _uv_under_mouse(self, context, event):
-        from bpy_extras import view3d_utils
-
-        region, rv3d = context.region, context.region_data
-        coord = (event.mouse_region_x, event.mouse_region_y)
-        origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)
-        direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, coord)
-        return self.lookup.ray_cast(origin, direction)
+        return self.lookup.under_mouse(context, event)
 
     def modal(self, context, event):
         if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
