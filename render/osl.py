@@ -22,7 +22,8 @@ def load_osl_script(
     """Add a ``ShaderNodeScript`` running ``shader`` (a name in ``cycles_osl/`` or a path).
 
     Sets the engine to Cycles and enables OSL on ``scene`` (default: the context scene) *before*
-    assigning the file, calls ``node.update()`` and asserts that ``inputs`` and ``outputs`` exist.
+    assigning the file (and, for the compile, on the context scene too), calls ``node.update()``
+    and asserts that ``inputs`` and ``outputs`` exist.
     """
     import os
 
@@ -37,8 +38,18 @@ def load_osl_script(
     if name:
         node.name = node.label = name
     node.mode = "EXTERNAL"
-    node.filepath = path
-    node.update()
+    # Script nodes compile against the *context* scene's engine: lend it Cycles + OSL meanwhile.
+    ctx = bpy.context.scene
+    saved = (ctx.render.engine, ctx.cycles.shading_system) if ctx is not None else None
+    if ctx is not None:
+        ctx.render.engine = "CYCLES"
+        ctx.cycles.shading_system = True
+    try:
+        node.filepath = path
+        node.update()
+    finally:
+        if ctx is not None and ctx != scene:
+            ctx.render.engine, ctx.cycles.shading_system = saved
     have_in = {s.name for s in node.inputs}
     have_out = {s.name for s in node.outputs}
     missing = [s for s in inputs if s not in have_in] + [s for s in outputs if s not in have_out]

@@ -12,7 +12,7 @@ import os
 
 import bpy
 
-from ...render.session import ensure_bundled_paths, osl_shader_path
+from ...render.osl import load_osl_script
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 
 GROUP_NAME = "SGGX Fabric"
@@ -37,18 +37,8 @@ SHADER_INPUTS = [name for name, *_ in GROUP_INPUTS] + ["Tangent"]
 
 
 def _load_script(tree, scene):
-    ensure_bundled_paths()
-    scene.render.engine = "CYCLES"
-    scene.cycles.shading_system = True
-    node = tree.nodes.new("ShaderNodeScript")
-    node.name = node.label = SCRIPT_NODE
-    node.mode = "EXTERNAL"
-    node.filepath = osl_shader_path("ms_sggx_fabric")
-    node.update()
-    missing = [s for s in SHADER_INPUTS + ["Lamp1Type"] if s not in node.inputs]
-    if missing or "Exact" not in node.outputs:
-        raise RuntimeError(f"SGGX fabric shader did not compile or lacks sockets {missing}")
-    return node
+    return load_osl_script(tree, "ms_sggx_fabric", scene, inputs=SHADER_INPUTS + ["Lamp1Type"], outputs=["Exact"],
+                           name=SCRIPT_NODE)
 
 
 def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import bpy
 
-from ...render.session import ensure_bundled_paths, osl_flip_t, osl_shader_path
+from ...render.osl import load_osl_script
+from ...render.session import osl_flip_t
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .tables import PROP, extract_tables, load_stored_set, store_scratch_set
 
@@ -41,29 +42,8 @@ GROUP_INPUTS = [
 
 
 def _load_script(tree, scene):
-    ensure_bundled_paths()
-    scene.render.engine = "CYCLES"
-    scene.cycles.shading_system = True
-    node = tree.nodes.new("ShaderNodeScript")
-    node.name = node.label = SCRIPT_NODE
-    node.mode = "EXTERNAL"
-    # script nodes compile against the *context* scene's engine: lend it Cycles + OSL meanwhile
-    ctx = bpy.context.scene
-    saved = (ctx.render.engine, ctx.cycles.shading_system) if ctx is not None else None
-    if ctx is not None:
-        ctx.render.engine = "CYCLES"
-        ctx.cycles.shading_system = True
-    try:
-        node.filepath = osl_shader_path(SHADER)
-        node.update()
-    finally:
-        if ctx is not None and ctx != scene:
-            ctx.render.engine, ctx.cycles.shading_system = saved
     need = [n for n, *_ in GROUP_INPUTS] + ["UV", "Tangent", "TableDir", "Lamp1Type", "Lamp1Radius"]
-    missing = [s for s in need if s not in node.inputs]
-    if missing or "Scratch" not in node.outputs:
-        raise RuntimeError(f"scratched-metal shader did not compile or lacks sockets {missing}")
-    return node
+    return load_osl_script(tree, SHADER, scene, inputs=need, outputs=["Scratch"], name=SCRIPT_NODE)
 
 
 def group_name(set_name: str) -> str:

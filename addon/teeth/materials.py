@@ -18,7 +18,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...render.session import ensure_bundled_paths, osl_shader_path
+from ...render.osl import load_osl_script
 
 MARKER = "material_structures_teeth"
 SCRIPT_NODE = "Enamel Boundary"
@@ -57,18 +57,8 @@ def _group_inputs(kind: str) -> list[tuple]:
 
 
 def _load_boundary_script(tree, scene):
-    ensure_bundled_paths()
-    scene.render.engine = "CYCLES"
-    scene.cycles.shading_system = True
-    node = tree.nodes.new("ShaderNodeScript")
-    node.name = node.label = SCRIPT_NODE
-    node.mode = "EXTERNAL"
-    node.filepath = osl_shader_path("ms_enamel_boundary")
-    node.update()
-    missing = [s for s in ("Eta", "At", "Inner") if s not in node.inputs]
-    if missing or "BSDF" not in node.outputs:
-        raise RuntimeError(f"enamel boundary shader did not compile or lacks sockets {missing}")
-    return node
+    return load_osl_script(tree, "ms_enamel_boundary", scene, inputs=["Eta", "At", "Inner"], outputs=["BSDF"],
+                           name=SCRIPT_NODE)
 
 
 def _volume_subgraph(group, gin):
