@@ -12,6 +12,7 @@ parameters with the lowest loss seen are kept ("we keep track of the lowest loss
 from __future__ import annotations
 
 import fnmatch
+import inspect
 import json
 import os
 import time
@@ -52,6 +53,9 @@ class FitSettings:
     free: tuple = DEFAULT_FREE  # fnmatch patterns of parameter names to optimise
     checkpoint_every: int = 5
     lr_decay: float = 0.0  # lr_n = lr / (1 + lr_decay * n)
+    # image control variate (see ``anchor_image``): 0 = off, else the spp of the anchor image of all lights
+    anchor_spp: int = 0
+    anchor_every: int = 20  # iterations between anchor refreshes
 
 
 @dataclass
@@ -125,28 +129,75 @@ def _save_json(path: str, obj) -> None:
     os.replace(tmp, path)
 
 
+@dataclass
+class Anchor:
+    """An image control variate: ``images`` (all lights, ``spp`` samples) rendered at ``scene``.
+
+    With an anchor, pass A estimates the image at theta as
+    C(anchor; high spp) + [C(theta; w) - C(anchor; w)], the bracket evaluated with common random
+    numbers (paths sampled at the anchor, evaluated at theta and at the anchor). Both terms are
+    unbiased, so the gradient stays unbiased given the anchor image; the bracket's variance shrinks
+    with |theta - anchor|, which removes most of the 1-spp noise that pass A puts into the adjoint
+    2 (C_A - C_ref) (the dominant gradient-noise term near the optimum). The anchor image's own
+    noise acts as a fixed bias for the iterations that share it and averages out across refreshes.
+    The bracket is exact for the material parameters; for the dentin coefficients it uses theta's
+    geometry on both sides, so between refreshes the image estimate lags in c by c - c_anchor.
+    """
+    scene: TeethScene
+    images: np.ndarray  # (n_cam, n_lights, H, W, 3)
+    spp: int
+    iteration: int
+
+
+def anchor_image(scene: TeethScene, capture: Capture, spp: int, max_depth: int, seed: int, layout: ParamLayout,
+                 iteration: int = 0) -> Anchor:
+    """Render the masked pixels of every light at ``spp`` for an :class:`Anchor`."""
+    pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
+    res = render(scene, capture.cameras, capture.lights, RenderSettings(spp=spp, max_depth=max_depth, seed=seed),
+                 pixels=pixels, compiled=CompiledScene(scene, layout=layout))
+    return Anchor(scene.copy(), res.images, spp, iteration)
+
+
 def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarray, st: RenderSettings,
-                       seed: int, layout: ParamLayout) -> tuple[float, np.ndarray, dict]:
+                       seed: int, layout: ParamLayout, anchor: Anchor | None = None) -> tuple[float, np.ndarray, dict]:
     """One stochastic loss + gradient evaluation (pass A image, pass B gradient).
 
     Returns the loss estimate mean((C_A - C_ref)(C_B - C_ref)) over the masked pixels, the physical
-    gradient and timing statistics."""
+    gradient and timing statistics. ``anchor``: image control variate for pass A (see :class:`Anchor`)."""
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[:, light_ids].astype(np.float64)
     sa = RenderSettings(st.spp, st.max_depth, 2 * seed, st.chunk, True)
-    ra = render(scene, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids, compiled=cs)
-    loss_a, adj = l2_loss(ra.images, ref, capture.masks)
+    t0 = time.perf_counter()
+    if anchor is None:
+        ra = render(scene, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids, compiled=cs)
+        img_a, vert_a = ra.images, ra.stats["path_vertices"]
+    else:
+        # the bracket's pair shares theta's dentin geometry: re-weighting a path to other dentin shapes
+        # is only first-order exact (crossings are re-solved on the sampled triangles), so the anchor's
+        # materials are paired with theta's coefficients c and the image's response to c moves since
+        # the anchor waits for the next anchor refresh
+        base = anchor.scene.copy()
+        for tb, t in zip(base.teeth, scene.teeth, strict=True):
+            tb.c = np.array(t.c, dtype=np.float64)
+        at_theta = render(scene, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids,
+                          compiled=CompiledScene(scene, base, layout=layout))
+        at_anchor = render(base, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids,
+                           compiled=CompiledScene(base, layout=layout))
+        img_a = anchor.images[:, light_ids] + at_theta.images - at_anchor.images
+        vert_a = at_theta.stats["path_vertices"] + at_anchor.stats["path_vertices"]
+    render_seconds = time.perf_counter() - t0
+    loss_a, adj = l2_loss(img_a, ref, capture.masks)
     sb = RenderSettings(st.spp, st.max_depth, 2 * seed + 1, st.chunk, True)
     rb = render(scene, capture.cameras, capture.lights, sb, pixels=pixels, light_ids=light_ids, adjoint=adj,
                 compiled=cs)
     # Monte Carlo noise adds Var(C) to (C_A - C_ref)^2; the product of the two independent passes
     # (C_A - C_ref)(C_B - C_ref) estimates the noise-free loss (E C - C_ref)^2 without that bias.
     w = capture.masks[:, None, :, :, None]
-    m = max(float(np.sum(np.broadcast_to(w, ra.images.shape))), 1.0)
-    loss = float(np.sum((ra.images - ref) * (rb.images - ref) * w) / m)
-    stats = {"path_vertices": ra.stats["path_vertices"] + rb.stats["path_vertices"],
-             "render_seconds": ra.stats["seconds"], "gradient_seconds": rb.stats["seconds"],
+    m = max(float(np.sum(np.broadcast_to(w, rb.images.shape))), 1.0)
+    loss = float(np.sum((img_a - ref) * (rb.images - ref) * w) / m)
+    stats = {"path_vertices": vert_a + rb.stats["path_vertices"],
+             "render_seconds": render_seconds, "gradient_seconds": rb.stats["seconds"],
              "loss_single_pass": loss_a}
     return loss, rb.grad, stats
 
@@ -159,7 +210,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json``,
     ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint. ``gradient``
     replaces :func:`iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``. ``progress(entry)``
-    and ``callback(entry, scene)`` are called after every iteration.
+    and ``callback(entry, scene)`` are called after every iteration. With ``settings.anchor_spp`` the
+    gradient function also gets ``anchor=`` (an :class:`Anchor`, re-rendered every ``anchor_every``
+    iterations and after a resume).
     """
     if capture.images is None or capture.masks is None:
         raise ValueError("the capture needs images and masks to fit")
@@ -167,6 +220,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     phases = [("homogeneous", s.iterations)]
     if s.textured_iterations > 0:
         phases.append(("textured", s.textured_iterations))
+    if s.anchor_spp > 0 and gradient is not None and "anchor" not in inspect.signature(gradient).parameters:
+        raise ValueError("settings.anchor_spp > 0 needs a gradient function that takes anchor=; "
+                         "set anchor_spp=0 to use this one")
     st = RenderSettings(spp=s.spp, max_depth=s.max_depth)
     state: FitState | None = None
     ckpt = None if out_dir is None else os.path.join(out_dir, "checkpoint.json")
@@ -205,14 +261,22 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
         free = free_mask(layout, s.free)
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
+        anchor: Anchor | None = None
         for it in range(start_it, n_it):
             t0 = time.perf_counter()
             rng = np.random.default_rng([s.seed, pi, it])
             light_ids = np.sort(rng.choice(len(capture.lights), n_l, replace=False))
             x = from_optimiser(y, layout)
             cur = vector_to_scene(cur, x, layout)
-            loss, g_phys, stats = (gradient or iteration_gradient)(cur, capture, light_ids, st,
-                                                                   s.seed * 100003 + 10007 * pi + it, layout)
+            seed = s.seed * 100003 + 10007 * pi + it
+            kw = {}
+            if s.anchor_spp > 0:
+                if anchor is None or it - anchor.iteration >= max(s.anchor_every, 1):
+                    # odd seeds offset far from the passes' 2 * seed and 2 * seed + 1
+                    anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, 2 * (seed + 7_000_003) + 1,
+                                          layout, it)
+                kw["anchor"] = anchor
+            loss, g_phys, stats = (gradient or iteration_gradient)(cur, capture, light_ids, st, seed, layout, **kw)
             if loss < best_loss:
                 best_loss = loss
                 best_scene = cur.copy()
