@@ -12,33 +12,47 @@ disturbed run equals an undisturbed one.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from ..core.teeth.compiled_scene import CompiledScene
+from ..core.teeth.optimise import pass_a_image
 from ..core.teeth.path_tracer import RenderSettings, render
 
 
-def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSettings, seed: int, layout, norm: float):
-    """Loss share and physical-parameter gradient of one camera (runs on a worker)."""
+def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSettings, seed: int, layout, norm: float,
+                       anchor_scene=None, anchor_images=None):
+    """Loss share and physical-parameter gradient of one camera (runs on a worker); ``anchor_*``: the
+    image control variate of ``optimise.Anchor`` (``anchor_images``: this camera, these lights)."""
     cams = [capture.cameras[camera]]
     mask = capture.masks[camera]
     pixels = [np.flatnonzero(mask.ravel())]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[camera : camera + 1, light_ids].astype(np.float64)
     seed_a, seed_b = [int(s) for s in np.random.SeedSequence([seed, camera]).generate_state(2)]
-    ra = render(scene, cams, capture.lights, RenderSettings(st.spp, st.max_depth, seed_a, st.chunk, True),
-                pixels=pixels, light_ids=light_ids, compiled=cs)
-    w = np.broadcast_to(mask[None, None, :, :, None], ra.images.shape)
-    diff = (ra.images - ref) * w
+    t0 = time.perf_counter()
+    img_a, vert_a = pass_a_image(scene, cams, capture.lights, RenderSettings(st.spp, st.max_depth, seed_a, st.chunk,
+                                                                              True),
+                                 pixels, light_ids, cs, layout, anchor_scene, anchor_images)
+    seconds_a = time.perf_counter() - t0
+    w = np.broadcast_to(mask[None, None, :, :, None], img_a.shape)
+    diff = (img_a - ref) * w
     adj = 2.0 * diff / norm
     rb = render(scene, cams, capture.lights, RenderSettings(st.spp, st.max_depth, seed_b, st.chunk, True),
                 pixels=pixels, light_ids=light_ids, adjoint=adj, compiled=cs)
     # the loss estimator of optimise.iteration_gradient: mean((C_A - C_ref)(C_B - C_ref))
     loss = float(np.sum(diff * (rb.images - ref)) / norm)
-    stats = {"path_vertices": ra.stats["path_vertices"] + rb.stats["path_vertices"],
-             "render_seconds": ra.stats["seconds"], "gradient_seconds": rb.stats["seconds"],
+    stats = {"path_vertices": vert_a + rb.stats["path_vertices"],
+             "render_seconds": seconds_a, "gradient_seconds": rb.stats["seconds"],
              "loss_single_pass": float(np.sum(diff * diff) / norm)}
     return loss, rb.grad, stats
+
+
+def _anchor_args(anchor, camera: int, light_ids) -> tuple:
+    if anchor is None:
+        return (None, None)
+    return (anchor.scene, anchor.images[camera : camera + 1, np.asarray(light_ids)])
 
 
 def loss_normaliser(capture, n_lights: int) -> float:
@@ -59,7 +73,7 @@ class DaskGradient:
     def _scatter_capture(self):
         [self.capture_future] = self.client.scatter([self.capture], broadcast=True)
 
-    def __call__(self, scene, capture, light_ids, st, seed, layout):
+    def __call__(self, scene, capture, light_ids, st, seed, layout, anchor=None):
         from distributed.client import FutureCancelledError
 
         light_ids = np.asarray(light_ids)
@@ -70,7 +84,7 @@ class DaskGradient:
             [scene_future] = self.client.scatter([scene], broadcast=True)
             futures = [
                 self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
-                                   layout, norm, pure=False, retries=3)
+                                   layout, norm, *_anchor_args(anchor, c, light_ids), pure=False, retries=3)
                 for c in range(len(capture.cameras))
             ]
             try:
@@ -93,10 +107,11 @@ class DaskGradient:
 def local_gradient(capture):
     """The same per-camera decomposition evaluated in this process (reference for the Dask path)."""
 
-    def gradient(scene, capture_, light_ids, st, seed, layout):
+    def gradient(scene, capture_, light_ids, st, seed, layout, anchor=None):
         light_ids = np.asarray(light_ids)
         norm = loss_normaliser(capture_, len(light_ids))
-        results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm)
+        results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm,
+                                      *_anchor_args(anchor, c, light_ids))
                    for c in range(len(capture_.cameras))]
         return (float(sum(r[0] for r in results)), np.sum([r[1] for r in results], axis=0),
                 {"path_vertices": int(sum(r[2]["path_vertices"] for r in results))})

@@ -120,6 +120,8 @@ class FitState:
     best_loss: float
     best_scene: dict
     log: list = field(default_factory=list)
+    anchor_scene: dict | None = None  # the image control variate's scene (re-rendered on resume)
+    anchor_iteration: int = -1
 
 
 def _save_json(path: str, obj) -> None:
@@ -158,6 +160,34 @@ def anchor_image(scene: TeethScene, capture: Capture, spp: int, max_depth: int, 
     return Anchor(scene.copy(), res.images, spp, iteration)
 
 
+def _anchor_seed(s: FitSettings, phase_index: int, iteration: int) -> int:
+    """Seed of the anchor image refreshed at ``iteration``: odd and far from the passes' 2 seed, 2 seed + 1."""
+    return 2 * (s.seed * 100003 + 10007 * phase_index + iteration + 7_000_003) + 1
+
+
+def pass_a_image(scene: TeethScene, cameras: list, lights: list, sa: RenderSettings, pixels: list, light_ids,
+                 compiled: CompiledScene, layout: ParamLayout, anchor_scene: TeethScene | None = None,
+                 anchor_images: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """Pass A's image estimate (and its path vertices): plain, or with the anchor control variate
+    ``anchor_images + [C(theta; w) - C(anchor; w)]`` (``anchor_images`` for these cameras and lights)."""
+    if anchor_scene is None:
+        ra = render(scene, cameras, lights, sa, pixels=pixels, light_ids=light_ids, compiled=compiled)
+        return ra.images, ra.stats["path_vertices"]
+    # the bracket's pair shares theta's dentin geometry: re-weighting a path to other dentin shapes
+    # is only first-order exact (crossings are re-solved on the sampled triangles), so the anchor's
+    # materials are paired with theta's coefficients c, and the image's response to c moves since
+    # the anchor waits for the next anchor refresh
+    base = anchor_scene.copy()
+    for tb, t in zip(base.teeth, scene.teeth, strict=True):
+        tb.c = np.array(t.c, dtype=np.float64)
+    at_theta = render(scene, cameras, lights, sa, pixels=pixels, light_ids=light_ids,
+                      compiled=CompiledScene(scene, base, layout=layout))
+    at_anchor = render(base, cameras, lights, sa, pixels=pixels, light_ids=light_ids,
+                       compiled=CompiledScene(base, layout=layout))
+    return (anchor_images + at_theta.images - at_anchor.images,
+            at_theta.stats["path_vertices"] + at_anchor.stats["path_vertices"])
+
+
 def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarray, st: RenderSettings,
                        seed: int, layout: ParamLayout, anchor: Anchor | None = None) -> tuple[float, np.ndarray, dict]:
     """One stochastic loss + gradient evaluation (pass A image, pass B gradient).
@@ -169,23 +199,9 @@ def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarra
     ref = capture.images[:, light_ids].astype(np.float64)
     sa = RenderSettings(st.spp, st.max_depth, 2 * seed, st.chunk, True)
     t0 = time.perf_counter()
-    if anchor is None:
-        ra = render(scene, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids, compiled=cs)
-        img_a, vert_a = ra.images, ra.stats["path_vertices"]
-    else:
-        # the bracket's pair shares theta's dentin geometry: re-weighting a path to other dentin shapes
-        # is only first-order exact (crossings are re-solved on the sampled triangles), so the anchor's
-        # materials are paired with theta's coefficients c and the image's response to c moves since
-        # the anchor waits for the next anchor refresh
-        base = anchor.scene.copy()
-        for tb, t in zip(base.teeth, scene.teeth, strict=True):
-            tb.c = np.array(t.c, dtype=np.float64)
-        at_theta = render(scene, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids,
-                          compiled=CompiledScene(scene, base, layout=layout))
-        at_anchor = render(base, capture.cameras, capture.lights, sa, pixels=pixels, light_ids=light_ids,
-                           compiled=CompiledScene(base, layout=layout))
-        img_a = anchor.images[:, light_ids] + at_theta.images - at_anchor.images
-        vert_a = at_theta.stats["path_vertices"] + at_anchor.stats["path_vertices"]
+    img_a, vert_a = pass_a_image(scene, capture.cameras, capture.lights, sa, pixels, light_ids, cs, layout,
+                                 None if anchor is None else anchor.scene,
+                                 None if anchor is None else anchor.images[:, light_ids])
     render_seconds = time.perf_counter() - t0
     loss_a, adj = l2_loss(img_a, ref, capture.masks)
     sb = RenderSettings(st.spp, st.max_depth, 2 * seed + 1, st.chunk, True)
@@ -244,9 +260,14 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
         if pi < start_phase:
             continue
         start_it = 0
+        anchor: Anchor | None = None
         if state is not None:
             start_it = state.iteration
             layout = ParamLayout(cur)
+            if s.anchor_spp > 0 and state.anchor_scene is not None:
+                # same scene, spp and seed as before the interruption: the same anchor image
+                anchor = anchor_image(TeethScene.from_dict(state.anchor_scene), capture, s.anchor_spp, s.max_depth,
+                                      _anchor_seed(s, pi, state.anchor_iteration), layout, state.anchor_iteration)
             y = np.array(state.y)
             opt = Adam(s.lr, s.b1, s.b2, s.eps, None if state.adam_m is None else np.array(state.adam_m),
                        None if state.adam_v is None else np.array(state.adam_v), state.adam_n)
@@ -261,7 +282,6 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
         free = free_mask(layout, s.free)
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
-        anchor: Anchor | None = None
         for it in range(start_it, n_it):
             t0 = time.perf_counter()
             rng = np.random.default_rng([s.seed, pi, it])
@@ -272,9 +292,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             kw = {}
             if s.anchor_spp > 0:
                 if anchor is None or it - anchor.iteration >= max(s.anchor_every, 1):
-                    # odd seeds offset far from the passes' 2 * seed and 2 * seed + 1
-                    anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, 2 * (seed + 7_000_003) + 1,
-                                          layout, it)
+                    anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, _anchor_seed(s, pi, it), layout, it)
                 kw["anchor"] = anchor
             loss, g_phys, stats = (gradient or iteration_gradient)(cur, capture, light_ids, st, seed, layout, **kw)
             if loss < best_loss:
@@ -297,7 +315,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                 cur_scene = vector_to_scene(cur, from_optimiser(y, layout), layout)
                 _save_json(ckpt, asdict(FitState(phase, it + 1, cur_scene.to_dict(), y.tolist(),
                                                  opt.m.tolist(), opt.v.tolist(), opt.n, best_loss,
-                                                 best_scene.to_dict(), log)))
+                                                 best_scene.to_dict(), log,
+                                                 None if anchor is None else anchor.scene.to_dict(),
+                                                 -1 if anchor is None else anchor.iteration)))
                 _save_json(os.path.join(out_dir, "loss.json"), {"log": log, "settings": asdict(s)})
                 _save_json(os.path.join(out_dir, "scene_fit.json"), best_scene.to_dict())
         cur = vector_to_scene(cur, from_optimiser(y, layout), layout)
