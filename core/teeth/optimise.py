@@ -30,6 +30,7 @@ from .param_vector import (
     scene_to_vector,
     to_optimiser,
     vector_to_scene,
+    volume_pairs,
 )
 from .path_tracer import RenderSettings, render
 from .scene import TeethScene
@@ -56,6 +57,9 @@ class FitSettings:
     # image control variate (see ``anchor_image``): 0 = off, else the spp of the anchor image of all lights
     anchor_spp: int = 0
     anchor_every: int = 20  # iterations between anchor refreshes
+    # optimiser domain of sigma_t / albedo: "thesis" (log sigma_t, log10(1 - albedo), eq. 5.22-5.24)
+    # or "absorption" (log sigma_s, log sigma_a; see param_vector.to_optimiser)
+    domain: str = "thesis"
 
 
 @dataclass
@@ -277,16 +281,20 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                 cur = texture_phase_scene(best_scene, s.texture_size)
                 best_scene = texture_phase_scene(best_scene, s.texture_size)
             layout = ParamLayout(cur)
-            y = to_optimiser(scene_to_vector(cur, layout), layout)
+            y = to_optimiser(scene_to_vector(cur, layout), layout, s.domain)
             opt = Adam(s.lr, s.b1, s.b2, s.eps)
         free = free_mask(layout, s.free)
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
+        if s.domain == "absorption":
+            si, ai = volume_pairs(layout)
+            if np.any(free[si] != free[ai]):
+                raise ValueError('domain "absorption" mixes sigma_t and albedo: free both or neither of a volume')
         for it in range(start_it, n_it):
             t0 = time.perf_counter()
             rng = np.random.default_rng([s.seed, pi, it])
             light_ids = np.sort(rng.choice(len(capture.lights), n_l, replace=False))
-            x = from_optimiser(y, layout)
+            x = from_optimiser(y, layout, s.domain)
             cur = vector_to_scene(cur, x, layout)
             seed = s.seed * 100003 + 10007 * pi + it
             kw = {}
@@ -298,7 +306,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             if loss < best_loss:
                 best_loss = loss
                 best_scene = cur.copy()
-            g = chain_to_optimiser(g_phys, y, layout)
+            g = chain_to_optimiser(g_phys, y, layout, s.domain)
             g[~free] = 0.0
             lr = s.lr / (1.0 + s.lr_decay * it)
             y_new = opt.step(y, g, lr)
@@ -312,7 +320,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                 callback(entry, cur)
             last = it == n_it - 1
             if out_dir is not None and ((it + 1) % s.checkpoint_every == 0 or last):
-                cur_scene = vector_to_scene(cur, from_optimiser(y, layout), layout)
+                cur_scene = vector_to_scene(cur, from_optimiser(y, layout, s.domain), layout)
                 _save_json(ckpt, asdict(FitState(phase, it + 1, cur_scene.to_dict(), y.tolist(),
                                                  opt.m.tolist(), opt.v.tolist(), opt.n, best_loss,
                                                  best_scene.to_dict(), log,
@@ -320,7 +328,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                                                  -1 if anchor is None else anchor.iteration)))
                 _save_json(os.path.join(out_dir, "loss.json"), {"log": log, "settings": asdict(s)})
                 _save_json(os.path.join(out_dir, "scene_fit.json"), best_scene.to_dict())
-        cur = vector_to_scene(cur, from_optimiser(y, layout), layout)
+        cur = vector_to_scene(cur, from_optimiser(y, layout, s.domain), layout)
     return best_scene, log
 
 
