@@ -1,8 +1,8 @@
 """``bench teeth``: path throughput, time per optimisation iteration, gradient FD check and the
 parameter-recovery acceptance fit (2 teeth, 3 cameras at 96 x 64, 54 lights, perturbed start).
 
-Environment: TEETH_BENCH_ITERATIONS (default 120) and TEETH_BENCH_SYNTH_SPP (default 32) size the
-recovery fit (about 20 minutes on 2 shared cores); TEETH_BENCH_RECOVERY=0 skips it.
+Environment: TEETH_BENCH_ITERATIONS (default 200) and TEETH_BENCH_SYNTH_SPP (default 32) size the
+recovery fit (about 35 minutes on 2 cores); TEETH_BENCH_RECOVERY=0 skips it.
 """
 
 from __future__ import annotations
@@ -13,6 +13,10 @@ import time
 import numpy as np
 
 RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.dentin.albedo", "tooth*.c")
+# the acceptance fit's settings (besides iterations and free): 1 spp, half the lights per iteration,
+# the anchor image control variate (8 spp of all lights, re-rendered every 10 iterations)
+RECOVERY_SETTINGS = {"lr": 0.04, "lr_decay": 0.01, "spp": 1, "lights_per_iteration": 27, "anchor_spp": 8,
+                     "anchor_every": 10}
 
 
 def recovery_errors(fit_scene, truth) -> dict:
@@ -53,14 +57,13 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     )
     from material_structures.core.teeth.synthetic import perturbed_start
 
-    iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", "120"))
+    iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", "200"))
     synth_spp = synth_spp or int(os.environ.get("TEETH_BENCH_SYNTH_SPP", "32"))
     t0 = time.perf_counter()
     truth, capture = acceptance_setup(synth_spp)
     out: dict = {"synth_seconds": time.perf_counter() - t0}
     start = perturbed_start(truth, seed=seed, sigma_factor=0.25, kappa_shift=0.2)
-    settings = FitSettings(iterations=iterations, lr=0.04, lr_decay=0.01, spp=1, lights_per_iteration=27,
-                           free=RECOVERY_FREE)
+    settings = FitSettings(iterations=iterations, free=RECOVERY_FREE, **RECOVERY_SETTINGS)
     layout = ParamLayout(truth)
     ys: list = []
     t0 = time.perf_counter()
@@ -74,14 +77,14 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     out["recovery_best_loss_params"] = recovery_errors(best, truth)
     out["recovery_start"] = recovery_errors(start, truth)
     out["recovery_config"] = ("perturbed start (sigma_t x exp(+-0.25), kappa +-0.2, c = 0); free: enamel/dentin "
-                              f"sigma_t, albedo, c of both teeth; {iterations} Adam iterations, lr 0.04, "
-                              "1 spp, 27 of 54 lights per iteration; errors of the tail-averaged iterate")
+                              f"sigma_t, albedo, c of both teeth; {iterations} Adam iterations, "
+                              f"{RECOVERY_SETTINGS}; errors of the tail-averaged iterate")
     return out
 
 
 def bench_teeth() -> dict:
     from material_structures.core.teeth.gradient_check import fd_check
-    from material_structures.core.teeth.optimise import FitSettings, iteration_gradient
+    from material_structures.core.teeth.optimise import FitSettings, anchor_image, iteration_gradient
     from material_structures.core.teeth.param_vector import ParamLayout
     from material_structures.core.teeth.path_tracer import RenderSettings
     from material_structures.core.teeth.synthetic import perturbed_start
@@ -100,6 +103,14 @@ def bench_teeth() -> dict:
     _, _, stats = iteration_gradient(start, capture, ids, st, 0, lay)
     out["seconds_per_iteration"] = time.perf_counter() - t0
     out["iteration_config"] = "2 teeth, 3 cameras 96x64 (masked pixels), 27 of 54 lights, 1 spp, 2 passes"
+    # the acceptance fit's iteration: anchored pass A (two CRN renders) + the anchor's amortised cost
+    t0 = time.perf_counter()
+    anchor = anchor_image(start, capture, RECOVERY_SETTINGS["anchor_spp"], settings.max_depth, 11, lay)
+    anchor_seconds = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    iteration_gradient(start, capture, ids, st, 0, lay, anchor=anchor)
+    out["seconds_per_iteration_anchored"] = (time.perf_counter() - t0
+                                             + anchor_seconds / RECOVERY_SETTINGS["anchor_every"])
     half = stats["path_vertices"] / 2
     out["path_vertices_per_second"] = {"forward": half / stats["render_seconds"],
                                        "forward_and_gradient": half / stats["gradient_seconds"]}

@@ -51,7 +51,7 @@ def test_fit_with_anchor_control_variate_resumes_exactly(tmp_path):
                  "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "1",
                  "--resolution", "12"]) == 0
     common = ["teeth", "fit", str(cap_dir), "--init", "perturbed", "--lights-per-iteration", "2", "--no-progress",
-              "--max-depth", "3", "--anchor-spp", "2", "--anchor-every", "2"]
+              "--max-depth", "3", "--anchor-spp", "2", "--anchor-every", "2", "--domain", "absorption"]
     a, b = tmp_path / "a", tmp_path / "b"
     assert main(common + ["--out", str(a), "--iterations", "3"]) == 0
     assert main(common + ["--out", str(a), "--iterations", "5", "--resume"]) == 0
