@@ -63,6 +63,8 @@ class RenderResult:
     images: np.ndarray  # (n_cam, n_light, H, W, 3)
     grad: np.ndarray | None  # (n_params,) physical-parameter gradient of sum(adjoint * C)
     stats: dict = field(default_factory=dict)
+    # (n_traced_pixels, n_lights, 3, P): d C / d x[jacobian_cols] per traced pixel (see ``render``)
+    jacobian: np.ndarray | None = None
 
 
 def _accumulate(g: np.ndarray, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, w: np.ndarray) -> None:
@@ -83,11 +85,31 @@ def _diag(vals: np.ndarray) -> np.ndarray:
 
 
 class _Tracer:
-    def __init__(self, cs: CompiledScene, want_grad: bool):
+    def __init__(self, cs: CompiledScene, want_grad: bool, jacobian_cols: np.ndarray | None = None):
         self.cs = cs
         self.want_grad = want_grad
         self.n_shadow = 0
         self.n_casts = 0
+        # forward mode: layout column -> Jacobian column (-1: not requested)
+        self.jmap = None
+        self.n_j = 0
+        if jacobian_cols is not None:
+            self.jmap = np.full(cs.layout.size + 1, -1, dtype=np.int64)  # last slot: cols == -1
+            self.jmap[np.asarray(jacobian_cols, dtype=np.int64)] = np.arange(len(jacobian_cols))
+            self.n_j = len(jacobian_cols)
+
+    def add_scores(self, S: np.ndarray, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> None:
+        """Forward mode: S[rows[k], jmap[cols[k, j]], c] += vals[k, j, c] (S is (n, P, 3), C-contiguous)."""
+        if len(rows) == 0:
+            return
+        jc = self.jmap[np.asarray(cols)]  # cols == -1 reads the last slot (-1)
+        ok = jc >= 0
+        if not np.any(ok):
+            return
+        k_idx = np.broadcast_to(np.asarray(rows)[:, None], jc.shape)[ok]
+        base = (k_idx * self.n_j + jc[ok]) * 3
+        flat = (base[:, None] + np.arange(3)).ravel()
+        S.reshape(-1)[:] += np.bincount(flat, vals[ok].ravel(), minlength=S.size)
 
     # ---------------------------------------------------------------- ray traversal
     def through(self, o, d, tmax, shadow: bool):
@@ -294,11 +316,16 @@ class _Tracer:
 
 def render(scene, cameras: list[Camera], lights: list[PointLight], settings: RenderSettings | None = None, *,
            pixels: list[np.ndarray] | None = None, light_ids: np.ndarray | None = None, sampling_scene=None,
-           adjoint: np.ndarray | None = None, compiled: CompiledScene | None = None) -> RenderResult:
+           adjoint: np.ndarray | None = None, compiled: CompiledScene | None = None,
+           jacobian_cols: np.ndarray | None = None) -> RenderResult:
     """Render ``scene`` for every camera and (selected) light; optionally the gradient of sum(adjoint * C).
 
     ``pixels``: per camera, flat pixel indices (row * W + col) to trace (default: all).
     ``adjoint``: (n_cam, n_selected_lights, H, W, 3) = d rho / d C; returns ``grad`` (physical params).
+    ``jacobian_cols``: physical-parameter columns; returns ``jacobian`` (n_traced, n_selected_lights, 3, P),
+    the per-pixel image derivatives of the same estimator in forward mode (each path carries its
+    running score d log f, every connection adds its own terms), rows in the order of ``pixels``
+    (camera 0's pixels first). Contracting it with the adjoint gives ``grad`` of the same paths.
     ``sampling_scene``: theta_0 for the path sampling (default ``scene``), see module docstring.
     """
     settings = settings or RenderSettings()
@@ -313,29 +340,33 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
         pixels = [np.arange(hw) for _ in cameras]
     cam_of = np.concatenate([np.full(len(p), c) for c, p in enumerate(pixels)]).astype(np.int64)
     pix_of = np.concatenate([np.asarray(p, dtype=np.int64) for p in pixels])
+    row_of = np.repeat(np.arange(len(pix_of)), settings.spp)
     cam_of = np.repeat(cam_of, settings.spp)
     pix_of = np.repeat(pix_of, settings.spp)
     img = np.zeros(len(cameras) * n_l * hw * 3)
-    want_grad = adjoint is not None
+    want_grad = adjoint is not None or jacobian_cols is not None
     adj = None if adjoint is None else np.asarray(adjoint, dtype=np.float64).reshape(len(cameras), n_l, hw, 3)
-    grad = np.zeros(cs.layout.size) if want_grad else None
-    tr = _Tracer(cs, want_grad)
+    grad = np.zeros(cs.layout.size) if adjoint is not None else None
+    tr = _Tracer(cs, want_grad, jacobian_cols)
+    jac = None if jacobian_cols is None else np.zeros((len(row_of) // settings.spp, n_l, 3, tr.n_j))
     t0 = time.perf_counter()
     n_vertices = 0
     for ci, start in enumerate(range(0, len(pix_of), settings.chunk)):
         sl = slice(start, start + settings.chunk)
         rng = np.random.Generator(np.random.PCG64([settings.seed, ci]))
-        n_vertices += _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad, hw)
+        n_vertices += _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad, hw,
+                                   jac, row_of[sl])
     stats = {"seconds": time.perf_counter() - t0, "path_vertices": int(n_vertices),
              "shadow_rays": int(tr.n_shadow), "ray_casts": int(tr.n_casts), "camera_paths": int(len(pix_of))}
     images = img.reshape(len(cameras), n_l, h, w, 3)
-    return RenderResult(images, grad, stats)
+    return RenderResult(images, grad, stats, jac)
 
 
-def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings, img, adj, grad, hw) -> int:
+def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings, img, adj, grad, hw,
+                 jac=None, rows_j=None) -> int:
     cs = tr.cs
     n = len(pix)
-    want = grad is not None
+    want = tr.want_grad
     # --- camera rays (pinhole, box filter, eq. 5.8)
     jit = rng.random((n, 2)) if st.jitter else np.full((n, 2), 0.5)
     o = np.zeros((n, 3))
@@ -350,8 +381,19 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
     logf = np.zeros((n, 3))
     logp = np.zeros((n, 3))
     levels = st.max_depth + 2
-    A = np.zeros((n, levels, 3)) if want else None
-    prefix = []  # (level, rows, cols, vals)
+    A = np.zeros((n, levels, 3)) if grad is not None else None
+    prefix = []  # (level, rows, cols, vals) for the reverse-mode gradient
+    # forward mode: running per-path score (n, P, 3) and per-path image derivatives (n, L, 3, P)
+    S = None if jac is None else np.zeros((n, tr.n_j, 3))
+    JP = None if jac is None else np.zeros((n, len(lp), 3, tr.n_j))
+    fwd = None if jac is None else (S, JP)
+
+    def push(level, rows, cols, vals):
+        """Record the d log f terms of an interaction that all vertices from ``level`` on share."""
+        if grad is not None:
+            prefix.append((level, rows, cols, vals))
+        if S is not None:
+            tr.add_scores(S, rows, cols, vals)
     n_vertices = 0
     inv_spp = 1.0 / st.spp
 
@@ -393,10 +435,10 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
         if want:
             rec = tr.sigma_records(lens_e, mseq, pid)
             if rec is not None:
-                prefix.append((b,) + rec)
+                push(b, *rec)
             rec = tr.crossing_records(o, d, tri_x, mseq, np.where(in_medium, kstar, 0), pid)
             if rec is not None:
-                prefix.append((b,) + rec)
+                push(b, *rec)
         x = o + s[:, None] * d
         new_med = mseq[np.arange(m_), np.minimum(kstar, k)]
         alive = np.ones(m_, dtype=bool)
@@ -435,23 +477,23 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                 cols = np.concatenate([cs.col_sigma[mE][:, None] + np.arange(3),
                                        cs.col_sigma[mD][:, None] + np.arange(3)], axis=1)
                 vals = np.concatenate([_diag(lw_e[:, None] / s_mix), _diag((1 - lw_e[:, None]) / s_mix)], axis=1)
-                prefix.append((b, rows, cols, vals))  # (N - 1) / sigma_t term of eq. 5.23, blended
+                push(b, rows, cols, vals)  # (N - 1) / sigma_t term of eq. 5.23, blended
                 cols = np.concatenate([cs.col_alb["E"][mv][:, None] + np.arange(3),
                                        cs.col_alb["D"][mv][:, None] + np.arange(3)], axis=1)
                 vals = np.concatenate([_diag(lw_e[:, None] / a_mix), _diag((1 - lw_e[:, None]) / a_mix)], axis=1)
-                prefix.append((b, rows, cols, vals))  # eq. 5.20-5.21
+                push(b, rows, cols, vals)  # eq. 5.20-5.21
                 ht = tooth >= 0
                 if np.any(ht):
                     cols = cs.c_col[tooth[ht]][:, None] + np.arange(3)
                     dlog = (aE - aD)[ht] / a_mix[ht] + (sE - sD)[ht] / s_mix[ht]
                     vals = dlog[:, None, :] * (dl[ht, None] * dqdc[ht])[:, :, None]
-                    prefix.append((b, rows[ht], cols, vals))  # eq. 5.21 via dl/dq dq/dc
+                    push(b, rows[ht], cols, vals)  # eq. 5.21 via dl/dq dq/dc
             pe_e, pd_e, mix_e = tr.vertex_phase(mv, lw_e, "e")
             _, _, mix_s = tr.vertex_phase(mv, lw_s, "s")
             # next-event estimation to every light
             wv = np.exp(logf[vs] - _logmeanexp(logp[vs]))
             _nee(tr, vs, xv, d[vs], mv, wv, None, lp, li, cam, pix, pid, b, img, adj, grad, A, hw, inv_spp,
-                 (lw_e, dl, dqdc, pe_e, pd_e, mix_e))
+                 (lw_e, dl, dqdc, pe_e, pd_e, mix_e), fwd)
             # continue: sample the phase function with the sampling parameters
             first = u[vs, 1] < mix_s[:, 2]
             gsel = np.where(first, mix_s[:, 0], mix_s[:, 1])
@@ -463,7 +505,7 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
             logp[vs] += np.log(f_s[:, 0])[:, None]
             if want:
                 cols, vals = tr.phase_scores(mu[:, None], mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)
-                prefix.append((b + 1, pid[vs], cols[:, :], np.repeat(vals[:, 0, :, None], 3, axis=2)))
+                push(b + 1, pid[vs], cols[:, :], np.repeat(vals[:, 0, :, None], 3, axis=2))
 
         # ---------------- surface events
         sv = np.flatnonzero(~scatter & (end_tri >= 0))
@@ -489,7 +531,7 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                     a, cols, w4 = tr.a_t_at(tt, o[tv_], d[tv_], end_t[tv_], "e")
                     logf[tv_] += np.log(a)
                     if want:
-                        prefix.append((b, pid[tv_], cols, tr.a_t_vals(a, w4)))
+                        push(b, pid[tv_], cols, tr.a_t_vals(a, w4))
                 new_med[rv] = med[rv]
             # opaque Lambertian oral cavity
             ov = sv[kind == KIND_OPAQUE]
@@ -499,11 +541,11 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                 nrm = nrm * -np.sign(np.einsum("nx,nx->n", nrm, d[ov]))[:, None]
                 logf[ov] += np.log(cs.rho_e)[None, :]
                 if want:
-                    prefix.append((b, pid[ov], np.broadcast_to(cs.col_rho + np.arange(3), (len(ov), 3)),
-                                   _diag(np.broadcast_to(1.0 / cs.rho_e, (len(ov), 3)))))
+                    push(b, pid[ov], np.broadcast_to(cs.col_rho + np.arange(3), (len(ov), 3)),
+                         _diag(np.broadcast_to(1.0 / cs.rho_e, (len(ov), 3))))
                 wv = np.exp(logf[ov] - _logmeanexp(logp[ov]))
                 _nee(tr, ov, x[ov], d[ov], med[ov], wv, nrm, lp, li, cam, pix, pid, b, img, adj, grad, A, hw,
-                     inv_spp, None)
+                     inv_spp, None, fwd)
                 # cosine-weighted continuation: f / p = rho
                 r1, r2 = u[ov, 4], u[ov, 5]
                 mu = np.sqrt(1.0 - r1)
@@ -522,6 +564,8 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
         R = np.cumsum(A[:, ::-1, :], axis=1)[:, ::-1, :]  # suffix sums over vertex levels
         for level, rows, cols, vals in prefix:
             _accumulate(grad, rows, np.asarray(cols), vals, R[:, level, :])
+    if jac is not None:
+        np.add.at(jac, rows_j, JP)  # rows repeat when spp > 1
     return n_vertices
 
 
@@ -531,7 +575,7 @@ def _logmeanexp(a: np.ndarray) -> np.ndarray:
 
 
 def _nee(tr: _Tracer, idx, xv, dv, mv, wv, normal, lp, li, cam, pix, pid, b, img, adj, grad, A, hw, inv_spp,
-         phase_ctx):
+         phase_ctx, fwd=None):
     """Connect vertices to all lights; splat contributions; gradient terms of the connections."""
     n = len(idx)
     n_l = len(lp)
@@ -555,6 +599,17 @@ def _nee(tr: _Tracer, idx, xv, dv, mv, wv, normal, lp, li, cam, pix, pid, b, img
     base = ((c_[:, None] * n_l + np.arange(n_l)[None, :]) * hw + p_[:, None]) * 3  # (n, L)
     flat = (base[:, :, None] + np.arange(3)).ravel()
     img += np.bincount(flat, contrib.ravel(), minlength=img.size)
+    if fwd is not None:
+        S, JP = fwd
+        score = np.repeat(S[pid[idx]], n_l, axis=0)  # (n L, P, 3): the path's terms so far ...
+        for rows, cols, vals in recs:  # ... plus the connection's own (shadow ray, eq. 5.10, 5.23, 5.29)
+            tr.add_scores(score, rows, cols, vals)
+        if phase_ctx is not None:
+            cols, vals = tr.phase_scores(mu, mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)  # (n, L, 9)
+            tr.add_scores(score, np.arange(n * n_l), np.repeat(cols, n_l, axis=0),
+                          np.repeat(vals.reshape(n * n_l, 9)[:, :, None], 3, axis=2))
+        # each path has one vertex per level, so pid[idx] has no repeats
+        JP[pid[idx]] += contrib[:, :, :, None] * score.reshape(n, n_l, -1, 3).transpose(0, 1, 3, 2)
     if grad is None:
         return
     a = adj.reshape(-1)[flat].reshape(n, n_l, 3) * contrib
