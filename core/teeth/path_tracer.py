@@ -47,6 +47,7 @@ from .phase_function import direction_from_mu, hg, hg_dlog_dg, sample_hg_mu
 from .sigmoid_blend import blend_weight, blend_weight_dq
 
 MAX_CROSSINGS = 12
+JACOBIAN_MAX_BYTES = 8 * 2**30
 
 
 @dataclass
@@ -348,7 +349,14 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     adj = None if adjoint is None else np.asarray(adjoint, dtype=np.float64).reshape(len(cameras), n_l, hw, 3)
     grad = np.zeros(cs.layout.size) if adjoint is not None else None
     tr = _Tracer(cs, want_grad, jacobian_cols)
-    jac = None if jacobian_cols is None else np.zeros((len(row_of) // settings.spp, n_l, 3, tr.n_j))
+    jac = None
+    if jacobian_cols is not None:
+        n_rows = len(row_of) // settings.spp
+        need = 8 * n_l * 3 * tr.n_j * (n_rows + 2 * min(settings.chunk, len(row_of)))  # result + chunk buffers
+        if need > JACOBIAN_MAX_BYTES:
+            raise ValueError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
+                             f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
+        jac = np.zeros((n_rows, n_l, 3, tr.n_j))
     t0 = time.perf_counter()
     n_vertices = 0
     for ci, start in enumerate(range(0, len(pix_of), settings.chunk)):

@@ -118,3 +118,15 @@ def test_forward_mode_image_jacobian_matches_reverse_mode_and_per_pixel_differen
         assert np.linalg.norm(fd) > 0, layout.component_names()[p]
     # per-pixel agreement of every column within 5 % (relative Frobenius norm)
     assert worst < 0.05, worst
+
+
+def test_image_jacobian_refuses_a_request_beyond_the_memory_limit(monkeypatch):
+    from material_structures.core.teeth import path_tracer
+    from material_structures.core.teeth.gradient_check import fd_test_scene
+    from material_structures.core.teeth.param_vector import ParamLayout
+
+    sc, cams, lights = fd_test_scene()
+    cols = np.arange(ParamLayout(sc).size)
+    monkeypatch.setattr(path_tracer, "JACOBIAN_MAX_BYTES", 1000)
+    with pytest.raises(ValueError, match="GiB"):
+        path_tracer.render(sc, cams, lights, path_tracer.RenderSettings(spp=1), jacobian_cols=cols)
