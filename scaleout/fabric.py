@@ -79,7 +79,8 @@ def _asdict(options: FitOptions) -> dict:
 def _run_tiles(client, todo, cache, init_args, progress, total) -> None:
     from distributed import as_completed
 
-    [shared] = client.scatter([init_args], broadcast=True)  # directions etc. sent once, not per task
+    # sent once, not per task; hash=False: no key shared with an earlier fit (dask/distributed#3703)
+    [shared] = client.scatter([init_args], broadcast=True, hash=False)
     futures = client.map(
         _fit_tile_task,
         todo,

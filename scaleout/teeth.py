@@ -70,8 +70,11 @@ class DaskGradient:
         self.capture = capture
         self.capture_future = None
 
+    # hash=False everywhere: with content-hashed keys a scatter of data equal to a just-released
+    # future (same scene twice, a new DaskGradient on the same capture) races with the release and
+    # can leave gather() waiting forever (dask/distributed#3703; seen as a CI hang under load)
     def _scatter_capture(self):
-        [self.capture_future] = self.client.scatter([self.capture], broadcast=True)
+        [self.capture_future] = self.client.scatter([self.capture], broadcast=True, hash=False)
 
     def __call__(self, scene, capture, light_ids, st, seed, layout, anchor=None):
         from distributed.client import FutureCancelledError
@@ -81,7 +84,7 @@ class DaskGradient:
         for attempt in range(self.attempts):
             if self.capture_future is None or attempt > 0:
                 self._scatter_capture()
-            [scene_future] = self.client.scatter([scene], broadcast=True)
+            [scene_future] = self.client.scatter([scene], broadcast=True, hash=False)
             futures = [
                 self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
                                    layout, norm, *_anchor_args(anchor, c, light_ids), pure=False, retries=3)
