@@ -607,15 +607,19 @@ def _nee(tr: _Tracer, idx, xv, dv, mv, wv, normal, lp, li, cam, pix, pid, b, img
     base = ((c_[:, None] * n_l + np.arange(n_l)[None, :]) * hw + p_[:, None]) * 3  # (n, L)
     flat = (base[:, :, None] + np.arange(3)).ravel()
     img += np.bincount(flat, contrib.ravel(), minlength=img.size)
+    if fwd is None and grad is None:
+        return
+    # the connection's own d log f terms: shadow ray (eq. 5.10, 5.23, 5.29) and phase function at the vertex
+    conn = list(recs)
+    if phase_ctx is not None:
+        cols, vals = tr.phase_scores(mu, mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)  # (n, L, 9)
+        conn.append((np.arange(n * n_l), np.repeat(cols, n_l, axis=0),
+                     np.repeat(vals.reshape(n * n_l, 9)[:, :, None], 3, axis=2)))
     if fwd is not None:
         S, JP = fwd
         score = np.repeat(S[pid[idx]], n_l, axis=0)  # (n L, P, 3): the path's terms so far ...
-        for rows, cols, vals in recs:  # ... plus the connection's own (shadow ray, eq. 5.10, 5.23, 5.29)
+        for rows, cols, vals in conn:  # ... plus the connection's own
             tr.add_scores(score, rows, cols, vals)
-        if phase_ctx is not None:
-            cols, vals = tr.phase_scores(mu, mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)  # (n, L, 9)
-            tr.add_scores(score, np.arange(n * n_l), np.repeat(cols, n_l, axis=0),
-                          np.repeat(vals.reshape(n * n_l, 9)[:, :, None], 3, axis=2))
         # each path has one vertex per level, so pid[idx] has no repeats
         JP[pid[idx]] += contrib[:, :, :, None] * score.reshape(n, n_l, -1, 3).transpose(0, 1, 3, 2)
     if grad is None:
@@ -623,11 +627,5 @@ def _nee(tr: _Tracer, idx, xv, dv, mv, wv, normal, lp, li, cam, pix, pid, b, img
     a = adj.reshape(-1)[flat].reshape(n, n_l, 3) * contrib
     A[pid[idx], b, :] += a.sum(axis=1)
     a2 = a.reshape(n * n_l, 3)
-    for rows, cols, vals in recs:
+    for rows, cols, vals in conn:
         _accumulate(grad, rows, cols, vals, a2)
-    if phase_ctx is not None:
-        cols, vals = tr.phase_scores(mu, mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)  # (n, L, 9)
-        rows = np.repeat(np.arange(n), n_l)
-        vals3 = np.repeat(vals.reshape(n * n_l, 9)[:, :, None], 3, axis=2)
-        _accumulate(grad, np.arange(n * n_l), np.repeat(cols, n_l, axis=0), vals3, a2)
-        del rows
