@@ -31,10 +31,10 @@ def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSetting
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[camera : camera + 1, light_ids].astype(np.float64)
     seed_a, seed_b = [int(s) for s in np.random.SeedSequence([seed, camera]).generate_state(2)]
+    sa = RenderSettings(st.spp, st.max_depth, seed_a, st.chunk, True)
     t0 = time.perf_counter()
-    img_a, vert_a = pass_a_image(scene, cams, capture.lights, RenderSettings(st.spp, st.max_depth, seed_a, st.chunk,
-                                                                              True),
-                                 pixels, light_ids, cs, layout, anchor_scene, anchor_images)
+    img_a, vert_a = pass_a_image(scene, cams, capture.lights, sa, pixels, light_ids, cs, layout, anchor_scene,
+                                 anchor_images)
     seconds_a = time.perf_counter() - t0
     w = np.broadcast_to(mask[None, None, :, :, None], img_a.shape)
     diff = (img_a - ref) * w
