@@ -175,21 +175,37 @@ class _Tracer:
             med[:, j + 1] = np.where(valid[:, j], nxt[:, j], med[:, j])
         return med
 
-    def eval_crossings(self, o, d, tri_x, t_x):
-        """Crossing distances on the evaluation geometry (dentin moves with c), (n, K)."""
+    def eval_crossings(self, o, d, tri_x, t_x, upper):
+        """Crossing distances on the evaluation geometry (dentin moves with c), (n, K), and which were clipped.
+
+        A crossing is re-solved on the moved triangle's plane, which is first-order exact; far from the
+        sampling geometry (a grazing ray, a large change of c) the plane distance can leave the segment or
+        overtake the next crossing, which would give negative piece lengths and overflowing weights. The
+        distances are therefore kept ordered and within [0, ``upper``] (the path's vertex or the shadow
+        ray's light); a clipped crossing no longer depends on c (its dt/dc term is dropped). With equal
+        sampling and evaluation geometry only crossings beyond a path's vertex are clipped, which the
+        estimator does not use."""
         cs = self.cs
         t_e = t_x.copy()
         rows, cols = np.nonzero((tri_x >= 0) & (cs.kind[np.maximum(tri_x, 0)] == KIND_INDEX_MATCHED))
-        if len(rows):
-            tv = cs.tris_e[tri_x[rows, cols]]
-            t_e[rows, cols], _ = ray_triangle_distance(o[rows], d[rows], tv[:, 0], tv[:, 1], tv[:, 2])
-        return t_e
+        if len(rows) == 0:
+            return t_e, None
+        tv = cs.tris_e[tri_x[rows, cols]]
+        t_e[rows, cols], _ = ray_triangle_distance(o[rows], d[rows], tv[:, 0], tv[:, 1], tv[:, 2])
+        valid = tri_x >= 0
+        kept = np.minimum(np.maximum.accumulate(np.where(valid, np.maximum(t_e, 0.0), 0.0), axis=1), upper[:, None])
+        clipped = valid & (kept != t_e)
+        if not np.any(clipped):
+            return t_e, None
+        return np.where(valid, kept, t_e), clipped
 
-    def crossing_records(self, o, d, tri_x, med, upto, rows_out):
+    def crossing_records(self, o, d, tri_x, med, upto, rows_out, clipped=None):
         """Dentin-shape terms (S_i - S_e) dt/dc for dentin crossings j < upto (eq. 5.29-5.32)."""
         cs = self.cs
         valid = (tri_x >= 0) & (np.arange(tri_x.shape[1])[None, :] < upto[:, None])
         valid &= cs.kind[np.maximum(tri_x, 0)] == KIND_INDEX_MATCHED
+        if clipped is not None:
+            valid &= ~clipped
         r, j = np.nonzero(valid)
         if len(r) == 0:
             return None
@@ -254,7 +270,7 @@ class _Tracer:
         self.n_shadow += len(x)
         tri_x, t_x, cnt, _, _, blocked = self.through(x, w, r, shadow=True)
         med = self.media_sequence(med0, w, tri_x)
-        t_e = self.eval_crossings(x, w, tri_x, t_x)
+        t_e, clipped = self.eval_crossings(x, w, tri_x, t_x, r)
         k = tri_x.shape[1]
         tb = np.concatenate([np.zeros((len(x), 1)), np.where(tri_x >= 0, t_e, r[:, None]), r[:, None]], axis=1)
         lens = np.diff(tb, axis=1)
@@ -275,7 +291,7 @@ class _Tracer:
             rs = self.sigma_records(lens, med, rows_all)
             if rs is not None:
                 recs.append(rs)
-            rc = self.crossing_records(x, w, tri_x, med, np.full(len(x), k), rows_all)
+            rc = self.crossing_records(x, w, tri_x, med, np.full(len(x), k), rows_all, clipped)
             if rc is not None:
                 recs.append(rc)
         return T, recs
@@ -433,7 +449,7 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
         logp += -tau_at_s
         logp[scatter] += np.log(sig_k_s[scatter])
         # evaluation: piece lengths on the evaluation geometry up to s
-        t_e = tr.eval_crossings(o, d, tri_x, t_x)
+        t_e, clipped = tr.eval_crossings(o, d, tri_x, t_x, np.where(scatter, s, end_t))
         tb_e = np.concatenate([np.zeros((m_, 1)), np.where(tri_x >= 0, t_e, end_f[:, None]), end_f[:, None]], 1)
         jj = np.arange(k + 1)[None, :]
         upper = np.where(jj < kstar[:, None], tb_e[:, 1:], s[:, None])
@@ -444,7 +460,7 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
             rec = tr.sigma_records(lens_e, mseq, pid)
             if rec is not None:
                 push(b, *rec)
-            rec = tr.crossing_records(o, d, tri_x, mseq, np.where(in_medium, kstar, 0), pid)
+            rec = tr.crossing_records(o, d, tri_x, mseq, np.where(in_medium, kstar, 0), pid, clipped)
             if rec is not None:
                 push(b, *rec)
         x = o + s[:, None] * d
