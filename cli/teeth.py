@@ -48,6 +48,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="image control variate: spp of an anchor image of all lights (0 = off); cuts the "
                         "gradient noise of pass A, see core/teeth/optimise.py Anchor")
     f.add_argument("--anchor-every", type=int, default=20, help="iterations between anchor re-renders")
+    f.add_argument("--loss-block", type=int, default=1,
+                   help="L2 loss of box-filtered images over N x N pixel tiles (1 = per pixel, as in the thesis); "
+                        "averages the gradient's pass A x pass B noise over each tile")
     f.add_argument("--domain", choices=("thesis", "absorption"), default="thesis",
                    help="optimiser variables of sigma_t/albedo: thesis (log sigma_t, log10(1 - albedo)) or "
                         "absorption (log sigma_s, log sigma_a)")
@@ -112,7 +115,7 @@ def run_fit(args: argparse.Namespace) -> int:
                      texture_size=args.texture_size, lr=args.lr, lr_decay=args.lr_decay, spp=args.spp,
                      max_depth=args.max_depth, lights_per_iteration=args.lights_per_iteration, seed=args.seed,
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
-                     domain=args.domain)
+                     loss_block=args.loss_block, domain=args.domain)
     if not args.resume:
         if args.init == "literature":
             scene = literature_start(scene, cap)

@@ -17,14 +17,15 @@ import time
 import numpy as np
 
 from ..core.teeth.compiled_scene import CompiledScene
-from ..core.teeth.optimise import pass_a_image
+from ..core.teeth.optimise import l2_loss, paired_loss, pass_a_image
 from ..core.teeth.path_tracer import RenderSettings, render
 
 
 def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSettings, seed: int, layout, norm: float,
-                       anchor_scene=None, anchor_images=None):
+                       anchor_scene=None, anchor_images=None, loss_block: int = 1):
     """Loss share and physical-parameter gradient of one camera (runs on a worker); ``anchor_*``: the
-    image control variate of ``optimise.Anchor`` (``anchor_images``: this camera, these lights)."""
+    image control variate of ``optimise.Anchor`` (``anchor_images``: this camera, these lights);
+    ``loss_block``: tile size of the box-filtered L2 loss (``optimise.l2_loss``; tiles never span cameras)."""
     cams = [capture.cameras[camera]]
     mask = capture.masks[camera]
     pixels = [np.flatnonzero(mask.ravel())]
@@ -36,16 +37,16 @@ def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSetting
     img_a, vert_a = pass_a_image(scene, cams, capture.lights, sa, pixels, light_ids, cs, layout, anchor_scene,
                                  anchor_images)
     seconds_a = time.perf_counter() - t0
-    w = np.broadcast_to(mask[None, None, :, :, None], img_a.shape)
-    diff = (img_a - ref) * w
-    adj = 2.0 * diff / norm
+    # this camera's share of the global mean: its own mean times (its values / all values)
+    share = max(float(np.count_nonzero(mask)) * len(light_ids) * 3.0, 1.0) / norm
+    loss_a, adj = l2_loss(img_a, ref, mask[None], loss_block)
     rb = render(scene, cams, capture.lights, RenderSettings(st.spp, st.max_depth, seed_b, st.chunk, True),
-                pixels=pixels, light_ids=light_ids, adjoint=adj, compiled=cs)
+                pixels=pixels, light_ids=light_ids, adjoint=adj * share, compiled=cs)
     # the loss estimator of optimise.iteration_gradient: mean((C_A - C_ref)(C_B - C_ref))
-    loss = float(np.sum(diff * (rb.images - ref)) / norm)
+    loss = paired_loss(img_a, rb.images, ref, mask[None], loss_block) * share
     stats = {"path_vertices": vert_a + rb.stats["path_vertices"],
              "render_seconds": seconds_a, "gradient_seconds": rb.stats["seconds"],
-             "loss_single_pass": float(np.sum(diff * diff) / norm)}
+             "loss_single_pass": loss_a * share}
     return loss, rb.grad, stats
 
 
@@ -76,7 +77,7 @@ class DaskGradient:
     def _scatter_capture(self):
         [self.capture_future] = self.client.scatter([self.capture], broadcast=True, hash=False)
 
-    def __call__(self, scene, capture, light_ids, st, seed, layout, anchor=None):
+    def __call__(self, scene, capture, light_ids, st, seed, layout, anchor=None, loss_block: int = 1):
         from distributed.client import FutureCancelledError
 
         light_ids = np.asarray(light_ids)
@@ -87,7 +88,8 @@ class DaskGradient:
             [scene_future] = self.client.scatter([scene], broadcast=True, hash=False)
             futures = [
                 self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
-                                   layout, norm, *_anchor_args(anchor, c, light_ids), pure=False, retries=3)
+                                   layout, norm, *_anchor_args(anchor, c, light_ids), loss_block, pure=False,
+                                   retries=3)
                 for c in range(len(capture.cameras))
             ]
             try:
@@ -110,11 +112,11 @@ class DaskGradient:
 def local_gradient(capture):
     """The same per-camera decomposition evaluated in this process (reference for the Dask path)."""
 
-    def gradient(scene, capture_, light_ids, st, seed, layout, anchor=None):
+    def gradient(scene, capture_, light_ids, st, seed, layout, anchor=None, loss_block: int = 1):
         light_ids = np.asarray(light_ids)
         norm = loss_normaliser(capture_, len(light_ids))
         results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm,
-                                      *_anchor_args(anchor, c, light_ids))
+                                      *_anchor_args(anchor, c, light_ids), loss_block)
                    for c in range(len(capture_.cameras))]
         return (float(sum(r[0] for r in results)), np.sum([r[1] for r in results], axis=0),
                 {"path_vertices": int(sum(r[2]["path_vertices"] for r in results))})

@@ -57,6 +57,11 @@ class FitSettings:
     # image control variate (see ``anchor_image``): 0 = off, else the spp of the anchor image of all lights
     anchor_spp: int = 0
     anchor_every: int = 20  # iterations between anchor refreshes
+    # L2 loss of box-filtered images (block x block pixel tiles; 1 = per pixel as in the thesis). The
+    # noise-free loss still has its minimum where the model matches the capture, and the gradient's
+    # dominant noise near the optimum, the product of pass A's and pass B's independent per-pixel noise,
+    # averages over each tile (see README, "Fit noise")
+    loss_block: int = 1
     # optimiser domain of sigma_t / albedo: "thesis" (log sigma_t, log10(1 - albedo), eq. 5.22-5.24)
     # or "absorption" (log sigma_s, log sigma_a; see param_vector.to_optimiser)
     domain: str = "thesis"
@@ -86,12 +91,48 @@ class Adam:
         return y - (self.lr if lr is None else lr) * mh / np.sqrt(vh + self.eps)
 
 
-def l2_loss(images: np.ndarray, reference: np.ndarray, masks: np.ndarray) -> tuple[float, np.ndarray]:
-    """rho = mean over masked pixels, lights and channels of (C - C_ref)^2 and d rho / d C."""
+def block_sums(x: np.ndarray, block: int) -> np.ndarray:
+    """Sums of (n_cam, n_light, H, W, 3) over block x block pixel tiles, (n_cam, n_light, H/b, W/b, 3)
+    (edges padded with zeros)."""
+    if block == 1:
+        return x
+    n, nl, h, w, c = x.shape
+    hb, wb = -(-h // block), -(-w // block)
+    pad = np.zeros((n, nl, hb * block, wb * block, c))
+    pad[:, :, :h, :w] = x
+    return pad.reshape(n, nl, hb, block, wb, block, c).sum(axis=(3, 5))
+
+
+def _block_counts(masks: np.ndarray, block: int) -> np.ndarray:
+    """Masked pixels per tile, (n_cam, 1, H/b, W/b, 1), at least 1."""
+    return np.maximum(block_sums(masks[:, None, :, :, None].astype(np.float64), block), 1.0)
+
+
+def l2_loss(images: np.ndarray, reference: np.ndarray, masks: np.ndarray, block: int = 1) -> tuple[float, np.ndarray]:
+    """rho = mean over masked pixels, lights and channels of (C - C_ref)^2 and d rho / d C.
+
+    ``block`` > 1: the L2 loss of the box-filtered images instead, sum over block x block tiles of
+    (sum of the tile's masked differences)^2 / (masked pixels in the tile), with the same normaliser (so
+    block = 1 is the per-pixel loss). Not in the thesis; see ``FitSettings.loss_block``."""
     w = np.broadcast_to(masks[:, None, :, :, None], images.shape).astype(np.float64)
     m = max(w.sum(), 1.0)
     diff = (images - reference) * w
-    return float(np.sum(diff * diff) / m), 2.0 * diff / m
+    if block == 1:
+        return float(np.sum(diff * diff) / m), 2.0 * diff / m
+    h, wd = images.shape[2:4]
+    tile = block_sums(diff, block) / _block_counts(masks, block)  # per-tile mean difference
+    up = np.repeat(np.repeat(tile, block, axis=2), block, axis=3)[:, :, :h, :wd]
+    return float(np.sum(tile * block_sums(diff, block)) / m), 2.0 * up * w / m
+
+
+def paired_loss(img_a: np.ndarray, img_b: np.ndarray, reference: np.ndarray, masks: np.ndarray,
+                block: int = 1) -> float:
+    """The L2 loss (of ``block``-filtered images) estimated from two independent renders: the product
+    (C_A - C_ref)(C_B - C_ref) has no Monte Carlo variance bias, unlike (C_A - C_ref)^2."""
+    w = masks[:, None, :, :, None]
+    m = max(float(np.sum(np.broadcast_to(w, img_b.shape))), 1.0)
+    ra, rb = block_sums((img_a - reference) * w, block), block_sums((img_b - reference) * w, block)
+    return float(np.sum(ra * rb / _block_counts(masks, block)) / m)
 
 
 def free_mask(layout: ParamLayout, patterns) -> np.ndarray:
@@ -193,11 +234,13 @@ def pass_a_image(scene: TeethScene, cameras: list, lights: list, sa: RenderSetti
 
 
 def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarray, st: RenderSettings,
-                       seed: int, layout: ParamLayout, anchor: Anchor | None = None) -> tuple[float, np.ndarray, dict]:
+                       seed: int, layout: ParamLayout, anchor: Anchor | None = None,
+                       loss_block: int = 1) -> tuple[float, np.ndarray, dict]:
     """One stochastic loss + gradient evaluation (pass A image, pass B gradient).
 
     Returns the loss estimate mean((C_A - C_ref)(C_B - C_ref)) over the masked pixels, the physical
-    gradient and timing statistics. ``anchor``: image control variate for pass A (see :class:`Anchor`)."""
+    gradient and timing statistics. ``anchor``: image control variate for pass A (see :class:`Anchor`);
+    ``loss_block``: tile size of the box-filtered L2 loss (see :func:`l2_loss`)."""
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[:, light_ids].astype(np.float64)
@@ -207,15 +250,13 @@ def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarra
                                  None if anchor is None else anchor.scene,
                                  None if anchor is None else anchor.images[:, light_ids])
     render_seconds = time.perf_counter() - t0
-    loss_a, adj = l2_loss(img_a, ref, capture.masks)
+    loss_a, adj = l2_loss(img_a, ref, capture.masks, loss_block)
     sb = RenderSettings(st.spp, st.max_depth, 2 * seed + 1, st.chunk, True)
     rb = render(scene, capture.cameras, capture.lights, sb, pixels=pixels, light_ids=light_ids, adjoint=adj,
                 compiled=cs)
     # Monte Carlo noise adds Var(C) to (C_A - C_ref)^2; the product of the two independent passes
     # (C_A - C_ref)(C_B - C_ref) estimates the noise-free loss (E C - C_ref)^2 without that bias.
-    w = capture.masks[:, None, :, :, None]
-    m = max(float(np.sum(np.broadcast_to(w, rb.images.shape))), 1.0)
-    loss = float(np.sum((img_a - ref) * (rb.images - ref) * w) / m)
+    loss = paired_loss(img_a, rb.images, ref, capture.masks, loss_block)
     stats = {"path_vertices": vert_a + rb.stats["path_vertices"],
              "render_seconds": render_seconds, "gradient_seconds": rb.stats["seconds"],
              "loss_single_pass": loss_a}
@@ -243,6 +284,11 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     if s.anchor_spp > 0 and gradient is not None and "anchor" not in inspect.signature(gradient).parameters:
         raise ValueError("settings.anchor_spp > 0 needs a gradient function that takes anchor=; "
                          "set anchor_spp=0 to use this one")
+    if s.loss_block < 1:
+        raise ValueError(f"settings.loss_block must be >= 1, got {s.loss_block}")
+    if s.loss_block > 1 and gradient is not None and "loss_block" not in inspect.signature(gradient).parameters:
+        raise ValueError("settings.loss_block > 1 needs a gradient function that takes loss_block=; "
+                         "set loss_block=1 to use this one")
     st = RenderSettings(spp=s.spp, max_depth=s.max_depth)
     state: FitState | None = None
     ckpt = None if out_dir is None else os.path.join(out_dir, "checkpoint.json")
@@ -297,7 +343,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             x = from_optimiser(y, layout, s.domain)
             cur = vector_to_scene(cur, x, layout)
             seed = s.seed * 100003 + 10007 * pi + it
-            kw = {}
+            kw = {"loss_block": s.loss_block} if s.loss_block > 1 else {}
             if s.anchor_spp > 0:
                 if anchor is None or it - anchor.iteration >= max(s.anchor_every, 1):
                     anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, _anchor_seed(s, pi, it), layout, it)

@@ -92,3 +92,36 @@ def test_fit_with_anchor_runs_and_rejects_a_gradient_hook_without_anchor():
 
     with pytest.raises(ValueError, match="anchor"):
         fit(theta, cap, s, gradient=hook)
+
+
+def test_box_filtered_l2_loss_matches_brute_force_and_its_adjoint_matches_differences():
+    """l2_loss(block=b): sum over b x b tiles of (tile's masked difference sum)^2 / (tile's masked pixels),
+    over the per-pixel normaliser; block 1 is the per-pixel loss; the adjoint is its derivative; the
+    camera shares used by the Dask decomposition add up to the whole."""
+    from material_structures.core.teeth.optimise import l2_loss, paired_loss
+
+    rng = np.random.default_rng(0)
+    img = rng.random((2, 3, 13, 10, 3))
+    ref = rng.random(img.shape)
+    masks = rng.random((2, 13, 10)) > 0.3
+    d = (img - ref) * masks[:, None, :, :, None]
+    assert l2_loss(img, ref, masks, 1)[0] == pytest.approx(np.sum(d * d) / (masks.sum() * 9), rel=1e-12)
+    brute = 0.0
+    for c in range(2):
+        for i in range(0, 13, 4):
+            for j in range(0, 10, 4):
+                n = max(masks[c, i:i + 4, j:j + 4].sum(), 1)
+                brute += np.sum(d[c, :, i:i + 4, j:j + 4].sum(axis=(1, 2)) ** 2) / n
+    loss, adj = l2_loss(img, ref, masks, 4)
+    assert loss == pytest.approx(brute / (masks.sum() * 9), rel=1e-12)
+    assert paired_loss(img, img, ref, masks, 4) == pytest.approx(loss, rel=1e-12)
+    assert np.all(adj[~np.broadcast_to(masks[:, None, :, :, None], adj.shape)] == 0)
+    h = 1e-6
+    for idx in [(1, 2, 5, 7, 1), (0, 0, 12, 9, 2), (0, 1, 3, 4, 0)]:
+        e = np.zeros_like(img)
+        e[idx] = h
+        fd = (l2_loss(img + e, ref, masks, 4)[0] - l2_loss(img - e, ref, masks, 4)[0]) / (2 * h)
+        assert adj[idx] == pytest.approx(fd, rel=1e-6, abs=1e-12)
+    shares = sum(l2_loss(img[c:c + 1], ref[c:c + 1], masks[c:c + 1], 4)[0] * masks[c].sum() / masks.sum()
+                 for c in range(2))
+    assert shares == pytest.approx(loss, rel=1e-12)
