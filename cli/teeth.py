@@ -3,6 +3,7 @@
     python -m material_structures teeth synth OUT [--teeth 2] [--width 96 --height 64] [--spp 16]
     python -m material_structures teeth fit CAPTURE_DIR --out FIT_DIR [--iterations 100] [--resume]
     python -m material_structures teeth render SCENE_JSON CAPTURE_DIR --out DIR
+    python -m material_structures teeth sensitivity CAPTURE_DIR (--capture-spp N | --noise-variance V)
 """
 
 from __future__ import annotations
@@ -73,6 +74,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--spp", type=int, default=16)
     r.add_argument("--seed", type=int, default=1)
     r.set_defaults(func=run_render)
+
+    v = tsub.add_parser("sensitivity",
+                        help="how strongly a capture constrains sigma_s, sigma_a and the dentin coefficients")
+    v.add_argument("capture", help="capture folder (capture.json, masks; images are not needed)")
+    v.add_argument("--scene", default=None, help="scene JSON to evaluate at (default CAPTURE/scene.json)")
+    noise = v.add_mutually_exclusive_group(required=True)
+    noise.add_argument("--capture-spp", type=int, help="synthetic capture: its samples per pixel")
+    noise.add_argument("--noise-variance", type=float, help="the photographs' noise variance per pixel value")
+    v.add_argument("--passes", type=int, default=6, help="independent 1-spp Jacobian passes (>= 2)")
+    v.add_argument("--block", type=int, default=8, help="pixel tile size the image changes are pooled over")
+    v.add_argument("--max-depth", type=int, default=6)
+    v.add_argument("--json", default=None, help="also write the table to this JSON file")
+    v.set_defaults(func=run_sensitivity)
 
 
 def run_synth(args: argparse.Namespace) -> int:
@@ -170,4 +184,27 @@ def run_render(args: argparse.Namespace) -> int:
             for k, li in enumerate(ids):
                 write_exr(os.path.join(args.out, f"cam{c}_light{li}.exr"), res.images[c, k])
     print(f"wrote {len(cap.cameras) * len(cap.lights)} images to {args.out}")
+    return 0
+
+
+def run_sensitivity(args: argparse.Namespace) -> int:
+    from ..core.teeth.capture import Capture
+    from ..core.teeth.scene import load_scene
+    from ..core.teeth.sensitivity import capture_sensitivity, default_directions
+
+    cap = Capture.load(args.capture)
+    scene = load_scene(args.scene or os.path.join(args.capture, "scene.json"))
+    names, directions = default_directions(scene)
+    out = capture_sensitivity(scene, cap, directions, passes=args.passes, block=args.block,
+                              noise_variance=args.noise_variance, capture_spp=args.capture_spp,
+                              max_depth=args.max_depth)
+    rows = sorted(zip(names, out["chi2"].tolist(), strict=True), key=lambda r: -r[1])
+    print(f"chi2 of each change against the capture noise (variance {out['noise_variance']:.3g} per value, "
+          f"{out['tiles']} tiles of {args.block} x {args.block} px; sigma_s/sigma_a: +10 %, c: +0.05)")
+    for name, c in rows:
+        print(f"  {name:32s} {c:12.1f}")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"chi2": dict(rows), "noise_variance": out["noise_variance"], "tiles": out["tiles"],
+                       "block": args.block, "passes": args.passes}, f, indent=1)
     return 0

@@ -61,3 +61,21 @@ def test_fit_with_anchor_control_variate_resumes_exactly(tmp_path):
     assert [e["iteration"] for e in la] == [0, 1, 2, 3, 4]
     assert [e["loss"] for e in la] == pytest.approx([e["loss"] for e in lb], rel=1e-12)
     assert all(np.isfinite(e["loss"]) for e in la)
+
+
+def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
+                 "--lights", "4", "--cameras", "1", "--spp", "2", "--spp-background", "1",
+                 "--resolution", "12"]) == 0
+    out = tmp_path / "sens.json"
+    assert main(["teeth", "sensitivity", str(cap_dir), "--capture-spp", "2", "--passes", "3", "--block", "4",
+                 "--max-depth", "4", "--json", str(out)]) == 0
+    table = json.loads(out.read_text())
+    names = list(table["chi2"])
+    assert "tooth0.enamel.sigma_s[0]" in names and "tooth0.c[2]" in names and table["noise_variance"] > 0
+    assert table["chi2"]["tooth0.enamel.sigma_s[1]"] > 0
+    assert "chi2 of each change" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as e:  # neither noise option: argparse's usage error
+        main(["teeth", "sensitivity", str(cap_dir)])
+    assert e.value.code == 2

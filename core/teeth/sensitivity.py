@@ -1,0 +1,113 @@
+"""How strongly a capture constrains each parameter direction (a diagnostic for the fit, Sec. 5.6-5.7).
+
+For a displacement d of the physical parameters, the noise-free image change is J d (J = dC/dx, the
+forward-mode image Jacobian of ``path_tracer.render``). Its energy relative to the capture's noise,
+
+    chi2(d) = sum over tiles, lights, channels of (sum_tile J d)^2 / (tile pixels * noise variance),
+
+says whether the capture can tell x from x + d: chi2 ~ 1 is one standard deviation of the capture
+noise. J is only available as a Monte Carlo estimate, and |J_hat d|^2 is biased upwards by J_hat's
+variance, so the square is estimated without bias from independent passes: the mean over pairs
+i != j of (J_i d)(J_j d) (which can come out negative when the signal is below the estimator's noise).
+Pixels are pooled into ``block`` x ``block`` tiles first (a lower bound on the per-pixel chi2, with
+far less estimator noise). The fit needs a direction's chi2 to stand out of its own gradient noise to
+move along it, so directions with chi2 orders of magnitude below the others converge far more slowly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .capture import Capture
+from .compiled_scene import CompiledScene
+from .param_vector import ParamLayout, scene_to_vector
+from .path_tracer import RenderSettings, render
+from .scene import TeethScene
+
+
+def default_directions(scene: TeethScene, layout: ParamLayout | None = None, rel: float = 0.1,
+                       dc: float = 0.05) -> tuple[list[str], np.ndarray]:
+    """Names and (K, P) physical displacements: per volume and channel sigma_s x (1 + rel) at fixed sigma_a
+    and sigma_a x (1 + rel) at fixed sigma_s (first order in sigma_t and albedo), and every dentin
+    coefficient + dc."""
+    layout = layout or ParamLayout(scene)
+    x = scene_to_vector(scene, layout)
+    names, rows = [], []
+    for e in layout.entries:
+        if e.kind != "sigma_t":
+            continue
+        prefix = e.name[: -len(".sigma_t")]
+        a_start = layout[prefix + ".albedo"].start
+        for ch in range(e.size):
+            s, a = e.start + ch, a_start + ch
+            st, al = x[s], x[a]
+            for what, dst, dal in (("sigma_s", rel * st * al, rel * al * (1.0 - al)),
+                                   ("sigma_a", rel * st * (1.0 - al), -rel * al * (1.0 - al))):
+                d = np.zeros(layout.size)
+                d[s], d[a] = dst, dal
+                names.append(f"{prefix}.{what}[{ch}]")
+                rows.append(d)
+    for e in layout.entries:
+        if e.kind == "c":
+            for k in range(e.size):
+                d = np.zeros(layout.size)
+                d[e.start + k] = dc
+                names.append(f"{e.name}[{k}]")
+                rows.append(d)
+    return names, np.array(rows)
+
+
+def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndarray, *, passes: int = 6,
+                        block: int = 8, noise_variance: float | None = None, capture_spp: int | None = None,
+                        max_depth: int = 6, seed: int = 0) -> dict:
+    """chi2 of each row of ``directions`` (K, P physical displacements) for ``capture`` (module docstring).
+
+    The capture's per-value noise variance is ``noise_variance`` or, for a synthetic capture rendered with
+    ``capture_spp`` samples, the passes' pooled 1-spp variance / ``capture_spp``. Returns
+    ``{"chi2": (K,), "noise_variance": float, "tiles": int}``."""
+    if capture.masks is None:
+        raise ValueError("the capture needs masks")
+    if passes < 2:
+        raise ValueError("passes must be >= 2 (the square is estimated from pairs of independent passes)")
+    if (noise_variance is None) == (capture_spp is None):
+        raise ValueError("give exactly one of noise_variance and capture_spp")
+    layout = ParamLayout(scene)
+    directions = np.atleast_2d(np.asarray(directions, dtype=np.float64))
+    if directions.shape[1] != layout.size:
+        raise ValueError(f"directions must have {layout.size} columns (the scene's parameters), "
+                         f"got {directions.shape[1]}")
+    cols = np.flatnonzero(np.any(directions != 0, axis=0))
+    k = len(directions)
+    h, w = capture.masks.shape[1:]
+    pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
+    wb = -(-w // block)
+    tile_of = np.concatenate([c * (-(-h // block)) * wb + (p // w // block) * wb + (p % w) // block
+                              for c, p in enumerate(pixels)])
+    tiles, tile_of = np.unique(tile_of, return_inverse=True)
+    n_tiles = len(tiles)
+    tile_pixels = np.bincount(tile_of, minlength=n_tiles).astype(np.float64)
+    cs = CompiledScene(scene, layout=layout)
+    s1 = s2 = None
+    img_sum = img_sq = 0.0
+    for i in range(passes):
+        st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + i)
+        if len(cols):
+            r = render(scene, capture.cameras, capture.lights, st, pixels=pixels, compiled=cs, jacobian_cols=cols)
+            a = r.jacobian @ directions[:, cols].T  # (rows, L, 3, K)
+        else:
+            r = render(scene, capture.cameras, capture.lights, st, pixels=pixels, compiled=cs)
+            a = np.zeros((len(tile_of), len(capture.lights), 3, k))
+        t = np.zeros((n_tiles,) + a.shape[1:])
+        np.add.at(t, tile_of, a)
+        s1 = t if s1 is None else s1 + t
+        s2 = t * t if s2 is None else s2 + t * t
+        vals = np.concatenate([r.images[c].reshape(r.images.shape[1], h * w, 3)[:, p] for c, p in enumerate(pixels)],
+                              axis=1)
+        img_sum = img_sum + vals
+        img_sq = img_sq + vals * vals
+    if noise_variance is None:
+        var1 = np.mean((img_sq - img_sum * img_sum / passes) / (passes - 1))  # pooled 1-spp variance
+        noise_variance = float(var1 / capture_spp)
+    energy = (s1 * s1 - s2) / (passes * (passes - 1))  # unbiased (E[J] d)^2 per tile, light, channel
+    chi2 = np.einsum("tlck,t->k", energy, 1.0 / tile_pixels) / max(noise_variance, 1e-300)
+    return {"chi2": chi2, "noise_variance": float(noise_variance), "tiles": int(n_tiles)}

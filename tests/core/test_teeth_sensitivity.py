@@ -1,0 +1,115 @@
+"""Capture sensitivity (chi2 of parameter directions): the tile/pair estimator against a brute-force
+recomputation from central differences of the same estimator (common random numbers), and its
+unbiasedness across independent seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from material_structures.core.teeth.capture import Capture
+from material_structures.core.teeth.gradient_check import fd_test_scene
+from material_structures.core.teeth.param_vector import ParamLayout, scene_to_vector, vector_to_scene
+from material_structures.core.teeth.path_tracer import RenderSettings, render
+from material_structures.core.teeth.sensitivity import capture_sensitivity, default_directions
+
+
+@pytest.fixture(scope="module")
+def problem():
+    sc, cams, lights = fd_test_scene()
+    masks = np.zeros((1, cams[0].height, cams[0].width), bool)
+    masks[0, 1:11, 2:13] = True
+    return sc, Capture(cams, lights, None, masks)
+
+
+def test_default_directions_keep_sigma_s_or_sigma_a_fixed(problem):
+    sc, _ = problem
+    layout = ParamLayout(sc)
+    names, D = default_directions(sc, layout, rel=0.1, dc=0.05)
+    x = scene_to_vector(sc, layout)
+    h = 1e-4
+    for name, d in zip(names, D, strict=True):
+        if ".c[" in name:
+            assert d.max() == 0.05 and np.count_nonzero(d) == 1
+            continue
+        prefix, what = name.rsplit(".", 1)
+        ch = int(what.split("[")[1][0])
+        s, a = layout.col(prefix + ".sigma_t") + ch, layout.col(prefix + ".albedo") + ch
+        y = x + h * d
+        ss0, sa0 = x[s] * x[a], x[s] * (1 - x[a])
+        ss1, sa1 = y[s] * y[a], y[s] * (1 - y[a])
+        moved, fixed = ((ss1 / ss0, sa1 / sa0) if what.startswith("sigma_s") else (sa1 / sa0, ss1 / ss0))
+        assert (moved - 1) / h == pytest.approx(0.1, rel=1e-3), name
+        assert abs(fixed - 1) / h < 1e-3 * 0.1, name
+
+
+def test_chi2_matches_brute_force_from_crn_central_differences(problem):
+    sc, cap = problem
+    layout = ParamLayout(sc)
+    names, D = default_directions(sc, layout)
+    pick = [names.index(n) for n in ("tooth0.dentin.sigma_s[1]", "tooth0.enamel.sigma_a[2]", "tooth0.c[0]")]
+    D = np.vstack([D[pick], np.zeros(layout.size)])  # plus a direction that changes nothing
+    passes, block, nv = 4, 4, 2e-5
+    out = capture_sensitivity(sc, cap, D, passes=passes, block=block, noise_variance=nv, max_depth=5, seed=3)
+    # brute force: per pass, the CRN central difference of the images along d, tiles summed by loops
+    x0 = scene_to_vector(sc, layout)
+    m = cap.masks[0]
+    hgt, wid = m.shape
+    ref = []
+    for d in D[:-1]:
+        eps = 1e-5 / np.abs(d).max()
+        tiles = []
+        for i in range(passes):
+            st = RenderSettings(spp=1, max_depth=5, seed=3 + i)
+            ip, im = (render(vector_to_scene(sc, x0 + sgn * eps * d, layout), cap.cameras, cap.lights, st,
+                             pixels=[np.flatnonzero(m)], sampling_scene=sc).images[0] for sgn in (1, -1))
+            diff = (ip - im) / (2 * eps)
+            t = []
+            for r0 in range(0, hgt, block):
+                for c0 in range(0, wid, block):
+                    mm = m[r0:r0 + block, c0:c0 + block]
+                    if mm.any():
+                        t.append((diff[:, r0:r0 + block, c0:c0 + block][:, mm].sum(axis=1), mm.sum()))
+            tiles.append(t)
+        chi2 = 0.0
+        for ti in range(len(tiles[0])):
+            n_pix = tiles[0][ti][1]
+            for i in range(passes):
+                for j in range(passes):
+                    if i != j:
+                        chi2 += np.sum(tiles[i][ti][0] * tiles[j][ti][0]) / (passes * (passes - 1) * n_pix * nv)
+        ref.append(chi2)
+    assert out["tiles"] == len(tiles[0])
+    np.testing.assert_allclose(out["chi2"][:-1], ref, rtol=2e-3)
+    assert out["chi2"][-1] == 0.0
+    assert out["chi2"][0] > 100 * abs(out["chi2"][1])  # sigma_s is far better constrained than sigma_a
+
+
+def test_chi2_does_not_depend_on_the_number_of_passes_and_scales_with_the_capture_noise(problem):
+    """The pair estimator is unbiased for any number of passes: the mean of eight 4-pass estimates equals
+    a 32-pass estimate on other seeds. A plain square of the mean Jacobian would be biased by Var / passes:
+    here (per pixel) about +120 % at 4 passes and +15 % at 32; the unbiased estimates measured within
+    23 % of each other over three seed sets, hence the 35 % tolerance."""
+    sc, cap = problem
+    names, D = default_directions(sc)
+    D = D[[names.index(n) for n in ("tooth0.dentin.sigma_s[1]", "tooth0.enamel.sigma_s[0]")]]
+
+    def chi2(passes, seed, **kw):
+        kw = kw or {"noise_variance": 1e-5}
+        return capture_sensitivity(sc, cap, D, passes=passes, block=1, max_depth=5, seed=seed, **kw)["chi2"]
+    small = np.mean([chi2(4, 100 * i) for i in range(8)], axis=0)
+    np.testing.assert_allclose(small, chi2(32, 5000), rtol=0.35)
+    # capture_spp: the passes' pooled 1-spp variance over the capture's samples
+    a, b = chi2(4, 0, capture_spp=32), chi2(4, 0, capture_spp=64)
+    np.testing.assert_allclose(b, 2 * a, rtol=1e-9)
+
+
+def test_sensitivity_rejects_bad_input(problem):
+    sc, cap = problem
+    _, D = default_directions(sc)
+    with pytest.raises(ValueError, match="columns"):
+        capture_sensitivity(sc, cap, D[:, :-1], capture_spp=8)
+    with pytest.raises(ValueError, match="passes"):
+        capture_sensitivity(sc, cap, D, passes=1, capture_spp=8)
+    with pytest.raises(ValueError, match="exactly one"):
+        capture_sensitivity(sc, cap, D)
