@@ -120,9 +120,10 @@ def l2_loss(images: np.ndarray, reference: np.ndarray, masks: np.ndarray, block:
     if block == 1:
         return float(np.sum(diff * diff) / m), 2.0 * diff / m
     h, wd = images.shape[2:4]
-    tile = block_sums(diff, block) / _block_counts(masks, block)  # per-tile mean difference
+    sums = block_sums(diff, block)
+    tile = sums / _block_counts(masks, block)  # per-tile mean difference
     up = np.repeat(np.repeat(tile, block, axis=2), block, axis=3)[:, :, :h, :wd]
-    return float(np.sum(tile * block_sums(diff, block)) / m), 2.0 * up * w / m
+    return float(np.sum(tile * sums) / m), 2.0 * up * w / m
 
 
 def paired_loss(img_a: np.ndarray, img_b: np.ndarray, reference: np.ndarray, masks: np.ndarray,

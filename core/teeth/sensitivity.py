@@ -20,7 +20,7 @@ import numpy as np
 
 from .capture import Capture
 from .compiled_scene import CompiledScene
-from .param_vector import ParamLayout, scene_to_vector
+from .param_vector import ParamLayout, scene_to_vector, volume_pairs
 from .path_tracer import RenderSettings, render
 from .scene import TeethScene
 
@@ -33,20 +33,15 @@ def default_directions(scene: TeethScene, layout: ParamLayout | None = None, rel
     layout = layout or ParamLayout(scene)
     x = scene_to_vector(scene, layout)
     names, rows = [], []
-    for e in layout.entries:
-        if e.kind != "sigma_t":
-            continue
-        prefix = e.name[: -len(".sigma_t")]
-        a_start = layout[prefix + ".albedo"].start
-        for ch in range(e.size):
-            s, a = e.start + ch, a_start + ch
-            st, al = x[s], x[a]
-            for what, dst, dal in (("sigma_s", rel * st * al, rel * al * (1.0 - al)),
-                                   ("sigma_a", rel * st * (1.0 - al), -rel * al * (1.0 - al))):
-                d = np.zeros(layout.size)
-                d[s], d[a] = dst, dal
-                names.append(f"{prefix}.{what}[{ch}]")
-                rows.append(d)
+    component = layout.component_names()
+    for s, a in zip(*volume_pairs(layout), strict=True):
+        st, al = x[s], x[a]
+        for what, dst, dal in (("sigma_s", rel * st * al, rel * al * (1.0 - al)),
+                               ("sigma_a", rel * st * (1.0 - al), -rel * al * (1.0 - al))):
+            d = np.zeros(layout.size)
+            d[s], d[a] = dst, dal
+            names.append(component[s].replace(".sigma_t[", f".{what}["))
+            rows.append(d)
     for e in layout.entries:
         if e.kind == "c":
             for k in range(e.size):
