@@ -16,7 +16,7 @@ import numpy as np
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .parameterisation import albedo_from_kappa
-from .path_tracer import RenderSettings, render
+from .path_tracer import RenderSettings, render, traced_values
 from .scene import TeethScene, VolumeMaterial
 
 SIGMA_RANGE_MM = (0.3, 30.0)
@@ -58,8 +58,7 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
     rng = np.random.default_rng(seed)
     light_ids = np.sort(rng.choice(len(capture.lights), min(n_lights, len(capture.lights)), replace=False))
     pixels = [np.flatnonzero(m.ravel())[::pixel_stride] for m in capture.masks]
-    ref = np.concatenate([capture.images[c, light_ids].reshape(len(light_ids), -1, 3)[:, p].reshape(-1, 3)
-                          for c, p in enumerate(pixels)])
+    ref = traced_values(capture.images[:, light_ids], pixels).reshape(-1, 3)
     n_pts = len(table)
     pad = (-n_pts) % 3
     idx = np.concatenate([np.arange(n_pts), np.zeros(pad, dtype=np.int64)])
@@ -72,8 +71,7 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
             sc = _homogeneous(scene, mat)
             res = render(sc, capture.cameras, capture.lights, RenderSettings(spp=1, max_depth=4, seed=seed + j),
                          pixels=pixels, light_ids=light_ids, compiled=CompiledScene(sc))
-            vals = np.concatenate([res.images[c].reshape(len(light_ids), -1, 3)[:, p].reshape(-1, 3)
-                                   for c, p in enumerate(pixels)])
+            vals = traced_values(res.images, pixels).reshape(-1, 3)
             for k in range(3):
                 for c in range(3):
                     e = scale_invariant_error(vals[:, k], ref[:, c])

@@ -68,6 +68,14 @@ class RenderResult:
     jacobian: np.ndarray | None = None
 
 
+def traced_values(images: np.ndarray, pixels: list[np.ndarray]) -> np.ndarray:
+    """The traced pixels of (n_cam, n_light, H, W, 3) ``images`` as (n_light, n_rows, 3), rows in the
+    order of ``render``'s ``pixels`` (camera 0's first), i.e. the rows of ``RenderResult.jacobian``."""
+    n_cam, n_l = images.shape[:2]
+    flat = images.reshape(n_cam, n_l, -1, 3)
+    return np.concatenate([flat[c][:, p] for c, p in enumerate(pixels)], axis=1)
+
+
 def _accumulate(g: np.ndarray, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, w: np.ndarray) -> None:
     """g[cols[k, j]] += sum_c vals[k, j, c] * w[rows[k], c]."""
     if len(rows) == 0:

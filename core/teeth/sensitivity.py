@@ -21,7 +21,7 @@ import numpy as np
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .param_vector import ParamLayout, scene_to_vector, volume_pairs
-from .path_tracer import RenderSettings, render
+from .path_tracer import RenderSettings, render, traced_values
 from .scene import TeethScene
 
 
@@ -96,8 +96,7 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
         np.add.at(t, tile_of, a)
         s1 = t if s1 is None else s1 + t
         s2 = t * t if s2 is None else s2 + t * t
-        vals = np.concatenate([r.images[c].reshape(r.images.shape[1], h * w, 3)[:, p] for c, p in enumerate(pixels)],
-                              axis=1)
+        vals = traced_values(r.images, pixels)
         img_sum = img_sum + vals
         img_sq = img_sq + vals * vals
     if noise_variance is None:
