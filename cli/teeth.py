@@ -37,6 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--init", choices=("literature", "scene", "perturbed"), default="literature",
                    help="start point: literature-table search (thesis), the scene's values, or a "
                         "perturbation of them (recovery tests)")
+    f.add_argument("--init-error", choices=("scale-invariant", "absolute"), default="scale-invariant",
+                   help="literature search error: scale-invariant (thesis; uncalibrated exposure) or absolute "
+                        "(calibrated light intensities and camera)")
     f.add_argument("--iterations", type=int, default=100, help='"homogeneous" phase iterations')
     f.add_argument("--textured-iterations", type=int, default=0, help='"textured" phase iterations')
     f.add_argument("--texture-size", type=int, default=8)
@@ -114,7 +117,7 @@ def run_fit(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..core.teeth.capture import Capture
-    from ..core.teeth.literature_init import literature_start
+    from ..core.teeth.literature_init import literature_start, literature_table
     from ..core.teeth.optimise import DEFAULT_FREE, FitSettings, fit, plot_loss
     from ..core.teeth.scene import load_scene
     from ..core.teeth.synthetic import perturbed_start
@@ -132,7 +135,11 @@ def run_fit(args: argparse.Namespace) -> int:
                      loss_block=args.loss_block, domain=args.domain)
     if not args.resume:
         if args.init == "literature":
-            scene = literature_start(scene, cap)
+            table, gs = literature_table()
+            n_points = len(table) * len(gs)
+            with tqdm(total=n_points, desc="init", unit="point", disable=args.no_progress) as init_bar:
+                scene = literature_start(scene, cap, scale_invariant=args.init_error == "scale-invariant",
+                                         progress=init_bar.update)
         elif args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
     total = fs.iterations + fs.textured_iterations

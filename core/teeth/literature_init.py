@@ -5,11 +5,14 @@ values reported for enamel and dentin [Spitzer and ten Bosch 1975; Fried et al. 
 et al. 2015] (50000 points), renders a virtual *homogeneous* tooth for each point, compares it with
 the masked measurements by a scale-invariant error and, per colour channel, starts from the point
 with the smallest error. Here the table is a coarse log-spaced grid over the same span (sigma_t
-0.3-30 / mm, albedo 0.5-0.999, g 0.3-0.9; a few hundred points), evaluated on a subset of pixels and
-lights; each render evaluates three table points at once (one per colour channel).
+0.3-30 / mm, albedo 0.5-0.999, g 0.3-0.9; a few hundred points), evaluated on a subset of lights with
+two independently seeded renders per point and tile sums of the masked pixels, so that the choice
+follows the model and not the renders' Monte Carlo noise (see ``literature_start``).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -40,6 +43,35 @@ def scale_invariant_error(render_vals: np.ndarray, ref_vals: np.ndarray) -> floa
     return float(1.0 - rf * rf / (rr * ff))
 
 
+def paired_table_errors(r1: np.ndarray, r2: np.ndarray, f: np.ndarray, scale_invariant: bool = True) -> np.ndarray:
+    """Errors of rendered values against the reference ``f`` (n,), per column of ``r1``, ``r2`` (n, k),
+    two renders of the same table points with independent seeds.
+
+    A render's Monte Carlo noise adds its variance to |r|^2, which would favour table points whose
+    renders are less noisy; products of the two independent renders have no such bias:
+    scale-invariant 1 - (r1 . f)(r2 . f) / ((r1 . r2) |f|^2) (the thesis' error, up to that bias), or
+    absolute (|f|^2 - (r1 + r2) . f + r1 . r2) / |f|^2 = |E r - f|^2 / |f|^2 for calibrated captures."""
+    ff = float(np.dot(f, f))
+    if ff <= 0:
+        return np.ones(r1.shape[1])
+    f1, f2, r12 = f @ r1, f @ r2, np.einsum("nk,nk->k", r1, r2)
+    if scale_invariant:
+        return np.where(r12 > 0, 1.0 - f1 * f2 / np.where(r12 > 0, r12, 1.0) / ff, 1.0)
+    return (ff - f1 - f2 + r12) / ff
+
+
+def _tile_sums(values: np.ndarray, pixels: list[np.ndarray], width: int, tile: int) -> np.ndarray:
+    """(n_light, n_rows, 3) traced values (rows: ``pixels`` of each camera in turn) summed over
+    tile x tile pixel tiles per camera and light: (n_light * n_tiles, 3)."""
+    keys = np.concatenate([c * 1_000_003 + (p // width // tile) * 1009 + (p % width) // tile
+                           for c, p in enumerate(pixels)])
+    _, inv = np.unique(keys, return_inverse=True)
+    n_t = int(inv.max()) + 1 if len(inv) else 0
+    out = np.zeros((values.shape[0], n_t, 3))
+    np.add.at(out, (slice(None), inv), values)
+    return out.reshape(-1, 3)
+
+
 def _homogeneous(scene: TeethScene, mat: VolumeMaterial) -> TeethScene:
     out = scene.copy()
     for t in out.teeth:
@@ -50,34 +82,48 @@ def _homogeneous(scene: TeethScene, mat: VolumeMaterial) -> TeethScene:
 
 
 def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_albedo: int = 8,
-                     pixel_stride: int = 3, n_lights: int = 6, seed: int = 0) -> TeethScene:
-    """Start scene whose enamel and dentin take, per channel, the best table point (c = 0)."""
+                     pixel_stride: int = 1, n_lights: int = 6, seed: int = 0, spp: int = 1, tile: int = 8,
+                     max_depth: int = 4, scale_invariant: bool = True,
+                     progress: Callable[[int], None] | None = None) -> TeethScene:
+    """Start scene whose enamel and dentin take, per channel, the best table point (c = 0).
+
+    Every (sigma_t, albedo, g) point is rendered as a grey homogeneous tooth (the surroundings keep
+    their colours, so channel c of the render is compared with channel c of the capture), twice with
+    independent seeds at ``spp``; the masked pixels are summed over ``tile`` x ``tile`` tiles per
+    camera and light (per-pixel 1-spp values are mostly noise) and compared by
+    :func:`paired_table_errors` (``scale_invariant``: the thesis' error; else the absolute one, for
+    calibrated captures). ``progress(n)`` is called after each table point with n = 1."""
     if capture.images is None or capture.masks is None:
         raise ValueError("the literature search needs capture images and masks")
+    if spp < 1 or tile < 1 or pixel_stride < 1:
+        raise ValueError(f"spp, tile and pixel_stride must be >= 1, got {spp}, {tile}, {pixel_stride}")
     table, gs = literature_table(n_sigma, n_albedo)
     rng = np.random.default_rng(seed)
     light_ids = np.sort(rng.choice(len(capture.lights), min(n_lights, len(capture.lights)), replace=False))
     pixels = [np.flatnonzero(m.ravel())[::pixel_stride] for m in capture.masks]
-    ref = traced_values(capture.images[:, light_ids], pixels).reshape(-1, 3)
-    n_pts = len(table)
-    pad = (-n_pts) % 3
-    idx = np.concatenate([np.arange(n_pts), np.zeros(pad, dtype=np.int64)])
-    best = {c: (np.inf, None, None) for c in range(3)}
+    if sum(len(p) for p in pixels) == 0:
+        raise ValueError("the capture's masks select no pixels")
+    width = capture.masks.shape[2]
+    ref = _tile_sums(traced_values(capture.images[:, light_ids].astype(np.float64), pixels), pixels, width, tile)
     base = scene.teeth[0].enamel
-    for g in gs:
-        for j in range(0, len(idx), 3):
-            pts = table[idx[j:j + 3]]
-            mat = VolumeMaterial(pts[:, 0], np.minimum(pts[:, 1], 0.999), g, base.g2, base.beta)
+    errors = np.zeros((len(gs), len(table), 3))
+    for gi, g in enumerate(gs):
+        for j, (sig, alb) in enumerate(table):
+            mat = VolumeMaterial(np.full(3, sig), np.full(3, min(alb, 0.999)), g, base.g2, base.beta)
             sc = _homogeneous(scene, mat)
-            res = render(sc, capture.cameras, capture.lights, RenderSettings(spp=1, max_depth=4, seed=seed + j),
-                         pixels=pixels, light_ids=light_ids, compiled=CompiledScene(sc))
-            vals = traced_values(res.images, pixels).reshape(-1, 3)
-            for k in range(3):
-                for c in range(3):
-                    e = scale_invariant_error(vals[:, k], ref[:, c])
-                    if e < best[c][0]:
-                        best[c] = (e, pts[k], g)
-    sigma = np.array([best[c][1][0] for c in range(3)])
-    albedo = np.array([best[c][1][1] for c in range(3)])
-    g = float(np.median([best[c][2] for c in range(3)]))
+            cs = CompiledScene(sc)
+            r = [_tile_sums(traced_values(render(sc, capture.cameras, capture.lights,
+                                                 RenderSettings(spp=spp, max_depth=max_depth,
+                                                                seed=2 * (seed + gi * len(table) + j) + h),
+                                                 pixels=pixels, light_ids=light_ids, compiled=cs).images, pixels),
+                            pixels, width, tile) for h in (0, 1)]
+            for c in range(3):
+                errors[gi, j, c] = paired_table_errors(r[0][:, c:c + 1], r[1][:, c:c + 1], ref[:, c],
+                                                       scale_invariant)[0]
+            if progress is not None:
+                progress(1)
+    best = [np.unravel_index(np.argmin(errors[:, :, c]), errors.shape[:2]) for c in range(3)]
+    sigma = np.array([table[j, 0] for _, j in best])
+    albedo = np.array([table[j, 1] for _, j in best])
+    g = float(np.median([gs[gi] for gi, _ in best]))
     return _homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), g, base.g2, base.beta))

@@ -79,3 +79,26 @@ def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:  # neither noise option: argparse's usage error
         main(["teeth", "sensitivity", str(cap_dir)])
     assert e.value.code == 2
+
+
+def test_fit_starts_from_the_literature_search(tmp_path):
+    """``--init literature`` (the default) runs the table search before the fit: the first iteration's
+    scene is the search's start (table values, c = 0)."""
+    from material_structures.core.teeth.literature_init import literature_start, literature_table
+
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "0",
+                 "--resolution", "12"]) == 0
+    cap = Capture.load(cap_dir)
+    table, _ = literature_table()
+    fit_dir = tmp_path / "fit"
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--iterations", "1",
+                 "--lights-per-iteration", "1", "--no-progress", "--max-depth", "3", "--free", "*.c"]) == 0
+    fitted = load_scene(fit_dir / "scene_fit.json")  # best of 1 iteration = the start (only c is free)
+    expected = literature_start(load_scene(cap_dir / "scene.json"), cap)  # scale-invariant, the default
+    for t, e in zip(fitted.teeth, expected.teeth, strict=True):
+        np.testing.assert_allclose(t.enamel.sigma_t, e.enamel.sigma_t, rtol=1e-12)
+        np.testing.assert_allclose(t.dentin.albedo, e.dentin.albedo, rtol=1e-12)
+        assert all(np.isclose(table[:, 0], s).any() for s in t.enamel.sigma_t)
+        np.testing.assert_array_equal(t.c, 0.0)

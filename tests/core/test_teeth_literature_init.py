@@ -1,0 +1,120 @@
+"""Literature-table initialisation (thesis Sec. 5.7): the paired (noise-unbiased) table errors against a
+direct computation, and the search run on homogeneous synthetic captures rendered with table points (a
+different point per colour channel)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from material_structures.core.teeth.capture import Capture, default_rig
+from material_structures.core.teeth.literature_init import (
+    literature_start,
+    literature_table,
+    paired_table_errors,
+    scale_invariant_error,
+)
+from material_structures.core.teeth.scene import VolumeMaterial
+from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
+
+N_SIGMA, N_ALBEDO = 4, 3  # coarse table: sigma_t 0.3, 1.39, 6.46, 30 / mm; albedo 0.5, 0.978, 0.999
+
+
+def test_scale_invariant_error_ignores_scale_and_sees_shape():
+    rng = np.random.default_rng(0)
+    f = rng.random(50)
+    assert scale_invariant_error(3.7 * f, f) == pytest.approx(0.0, abs=1e-12)
+    g = f + 0.3 * rng.standard_normal(50)
+    expected = 1.0 - np.dot(g, f) ** 2 / (np.dot(g, g) * np.dot(f, f))
+    assert scale_invariant_error(g, f) == pytest.approx(expected, rel=1e-12)
+    assert 0.01 < scale_invariant_error(g, f) < 1.0
+    assert scale_invariant_error(np.zeros(50), f) == 1.0
+
+
+def test_paired_errors_are_unbiased_by_render_noise():
+    """Two renders = mean + independent noise: the paired errors average to the noise-free errors
+    (closed form), while the single-render scale-invariant error is biased upwards by the noise."""
+    rng = np.random.default_rng(1)
+    f = rng.random(40) + 0.5
+    mean = np.stack([2.0 * f, f + 0.2 * np.sin(np.arange(40))], axis=1)  # (n, k=2)
+    exact_si = [scale_invariant_error(mean[:, k], f) for k in range(2)]
+    exact_abs = [np.sum((mean[:, k] - f) ** 2) / np.dot(f, f) for k in range(2)]
+    n_rep, sd = 4000, 0.5
+    e_si, e_abs, single = np.zeros(2), np.zeros(2), np.zeros(2)
+    for _ in range(n_rep):
+        r1 = mean + sd * rng.standard_normal(mean.shape)
+        r2 = mean + sd * rng.standard_normal(mean.shape)
+        e_si += paired_table_errors(r1, r2, f) / n_rep
+        e_abs += paired_table_errors(r1, r2, f, scale_invariant=False) / n_rep
+        single += np.array([scale_invariant_error(r1[:, k], f) for k in range(2)]) / n_rep
+    np.testing.assert_allclose(e_si, exact_si, atol=0.01)
+    np.testing.assert_allclose(e_abs, exact_abs, rtol=0.02, atol=0.01)
+    assert np.all(single > np.array(exact_si) + 0.05)  # what the paired form removes
+
+
+def _capture_of_table_points(picks, scale: float = 1.0):
+    table, gs = literature_table(N_SIGMA, N_ALBEDO)
+    grid = table.reshape(N_SIGMA, N_ALBEDO, 2)
+    pts = np.array([grid[i, j] for i, j in picks])  # (channel, (sigma_t, albedo))
+    truth = make_scene(n_teeth=1, resolution=14)
+    base = truth.teeth[0].enamel
+    mat = VolumeMaterial(pts[:, 0], np.minimum(pts[:, 1], 0.999), float(gs[1]), base.g2, base.beta)
+    for t in truth.teeth:
+        t.enamel, t.dentin, t.c = mat, mat, np.zeros(3)
+    cams, lights = default_rig(target=scene_target(truth), width=24, height=20, n_lights=12, n_cameras=2,
+                               fov_x_deg=3.0)
+    cap = render_capture(truth, cams, lights, spp=32, spp_background=0, seed=5, max_depth=4)
+    cap.images = cap.images * np.float32(scale)
+    # the search starts from other materials: it must not depend on the scene's own values
+    start = truth.copy()
+    for t in start.teeth:
+        t.enamel = t.dentin = VolumeMaterial([5.0, 5.0, 5.0], [0.7, 0.7, 0.7], 0.3, base.g2, base.beta)
+    return pts, float(gs[1]), start, cap
+
+
+@pytest.mark.parametrize("picks", [((1, 1), (0, 0), (1, 0)), ((0, 0), (1, 1), (1, 0))])
+def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
+    """Points of the table whose images differ (sigma_t 0.3 or 1.39 / mm, albedo 0.5 or 0.978). Denser or
+    brighter neighbours (sigma_t 6.46 vs 30 / mm at albedo 0.5, albedo 0.978 vs 0.999 at sigma_t 0.3) give
+    images within a few 1e-3 of each other in this error, less than a 32-spp capture's noise: no search
+    can tell them apart, so they are not asked for."""
+    pts, g, start, cap = _capture_of_table_points(picks)
+    assert cap.masks.sum() > 60
+    calls = []
+    found = literature_start(start, cap, N_SIGMA, N_ALBEDO, n_lights=12, spp=4, tile=4, scale_invariant=False,
+                             progress=calls.append)
+    assert len(calls) == 3 * N_SIGMA * N_ALBEDO
+    for t in found.teeth:
+        for m in (t.enamel, t.dentin):
+            np.testing.assert_allclose(m.sigma_t, pts[:, 0], rtol=1e-12)
+            np.testing.assert_allclose(m.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
+            assert m.g1 == g
+        np.testing.assert_array_equal(t.c, 0.0)
+
+
+def test_scale_invariant_search_ignores_the_exposure():
+    """A capture 3x too bright (uncalibrated exposure) gives the scale-invariant search the same start,
+    and the absolute search a different one."""
+    picks = ((1, 1), (2, 1), (1, 0))
+    _, _, start, cap = _capture_of_table_points(picks)
+    _, _, _, bright = _capture_of_table_points(picks, scale=3.0)
+    kw = dict(n_lights=12, spp=1, tile=4)
+    a = literature_start(start, cap, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
+    b = literature_start(start, bright, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
+    np.testing.assert_allclose(b.sigma_t, a.sigma_t, rtol=1e-12)
+    np.testing.assert_allclose(b.albedo, a.albedo, rtol=1e-12)
+    assert b.g1 == a.g1
+    c = literature_start(start, bright, N_SIGMA, N_ALBEDO, scale_invariant=False, **kw).teeth[0].enamel
+    assert np.any(c.sigma_t != a.sigma_t) or np.any(c.albedo != a.albedo)
+
+
+def test_search_rejects_missing_data_and_bad_settings():
+    truth = make_scene(n_teeth=1, resolution=14)
+    cams, lights = default_rig(target=scene_target(truth), width=8, height=6, n_lights=2, n_cameras=1)
+    with pytest.raises(ValueError, match="images and masks"):
+        literature_start(truth, Capture(cams, lights, None, None))
+    images = np.zeros((1, 2, 6, 8, 3), np.float32)
+    with pytest.raises(ValueError, match="no pixels"):
+        literature_start(truth, Capture(cams, lights, images, np.zeros((1, 6, 8), bool)))
+    with pytest.raises(ValueError, match="spp"):
+        literature_start(truth, Capture(cams, lights, images, np.ones((1, 6, 8), bool)), spp=0)
