@@ -63,8 +63,10 @@ def paired_table_errors(r1: np.ndarray, r2: np.ndarray, f: np.ndarray, scale_inv
 def _tile_sums(values: np.ndarray, pixels: list[np.ndarray], width: int, tile: int) -> np.ndarray:
     """(n_light, n_rows, 3) traced values (rows: ``pixels`` of each camera in turn) summed over
     tile x tile pixel tiles per camera and light: (n_light * n_tiles, 3)."""
-    keys = np.concatenate([c * 1_000_003 + (p // width // tile) * 1009 + (p % width) // tile
-                           for c, p in enumerate(pixels)])
+    tiles_x = width // tile + 1
+    per_cam = (max((int(p.max()) for p in pixels if len(p)), default=0) // width // tile + 1) * tiles_x
+    keys = np.concatenate([c * per_cam + (p // width // tile) * tiles_x + (p % width) // tile
+                           for c, p in enumerate(np.asarray(q, dtype=np.int64) for q in pixels)])
     _, inv = np.unique(keys, return_inverse=True)
     n_t = int(inv.max()) + 1 if len(inv) else 0
     out = np.zeros((values.shape[0], n_t, 3))

@@ -52,6 +52,24 @@ def test_paired_errors_are_unbiased_by_render_noise():
     assert np.all(single > np.array(exact_si) + 0.05)  # what the paired form removes
 
 
+def test_tile_sums_match_a_loop_over_tiles():
+    from material_structures.core.teeth.literature_init import _tile_sums
+
+    rng = np.random.default_rng(2)
+    width, height, tile, n_l = 1300, 7, 3, 2  # wider than any fixed key stride would allow
+    pixels = [np.sort(rng.choice(width * height, 500, replace=False)), np.array([5, width + 5, 3 * width - 1])]
+    vals = rng.random((n_l, sum(len(p) for p in pixels), 3))
+    out = _tile_sums(vals, pixels, width, tile)
+    ref, row = {}, 0
+    for c, p in enumerate(pixels):
+        for q in p:
+            key = (c, q // width // tile, q % width // tile)
+            ref[key] = ref.get(key, 0.0) + vals[:, row]
+            row += 1
+    expected = np.stack([ref[k] for k in sorted(ref)], axis=1).reshape(-1, 3)  # (light, tile) order
+    np.testing.assert_allclose(out, expected, rtol=1e-12)
+
+
 def _capture_of_table_points(picks, scale: float = 1.0):
     table, gs = literature_table(N_SIGMA, N_ALBEDO)
     grid = table.reshape(N_SIGMA, N_ALBEDO, 2)
