@@ -99,7 +99,8 @@ def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
     pts, g, start, cap = _capture_of_table_points(picks)
     assert cap.masks.sum() > 60
     calls = []
-    found = literature_start(start, cap, N_SIGMA, N_ALBEDO, n_lights=12, spp=4, tile=4, scale_invariant=False,
+    found = literature_start(start, cap, N_SIGMA, N_ALBEDO, pixel_stride=1, n_lights=12, spp=4, tile=4,
+                             scale_invariant=False,
                              progress=calls.append)
     assert len(calls) == 3 * N_SIGMA * N_ALBEDO
     for t in found.teeth:
@@ -116,7 +117,7 @@ def test_scale_invariant_search_ignores_the_exposure():
     picks = ((1, 1), (2, 1), (1, 0))
     _, _, start, cap = _capture_of_table_points(picks)
     _, _, _, bright = _capture_of_table_points(picks, scale=3.0)
-    kw = dict(n_lights=12, spp=1, tile=4)
+    kw = dict(pixel_stride=1, n_lights=12, spp=1, tile=4)
     a = literature_start(start, cap, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
     b = literature_start(start, bright, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
     np.testing.assert_allclose(b.sigma_t, a.sigma_t, rtol=1e-12)
