@@ -19,7 +19,7 @@ import numpy as np
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .parameterisation import albedo_from_kappa
-from .path_tracer import RenderSettings, render, traced_values
+from .path_tracer import RenderSettings, render, traced_tiles, traced_values
 from .scene import TeethScene, VolumeMaterial
 
 SIGMA_RANGE_MM = (0.3, 30.0)
@@ -60,17 +60,10 @@ def paired_table_errors(r1: np.ndarray, r2: np.ndarray, f: np.ndarray, scale_inv
     return (ff - f1 - f2 + r12) / ff
 
 
-def _tile_sums(values: np.ndarray, pixels: list[np.ndarray], width: int, tile: int) -> np.ndarray:
-    """(n_light, n_rows, 3) traced values (rows: ``pixels`` of each camera in turn) summed over
-    tile x tile pixel tiles per camera and light: (n_light * n_tiles, 3)."""
-    tiles_x = width // tile + 1
-    per_cam = (max((int(p.max()) for p in pixels if len(p)), default=0) // width // tile + 1) * tiles_x
-    keys = np.concatenate([c * per_cam + (p // width // tile) * tiles_x + (p % width) // tile
-                           for c, p in enumerate(np.asarray(q, dtype=np.int64) for q in pixels)])
-    _, inv = np.unique(keys, return_inverse=True)
-    n_t = int(inv.max()) + 1 if len(inv) else 0
-    out = np.zeros((values.shape[0], n_t, 3))
-    np.add.at(out, (slice(None), inv), values)
+def _tile_sums(values: np.ndarray, tile_of: np.ndarray, n_tiles: int) -> np.ndarray:
+    """(n_light, n_rows, 3) traced values summed per tile (``path_tracer.traced_tiles``): (n_light * n_tiles, 3)."""
+    out = np.zeros((values.shape[0], n_tiles, 3))
+    np.add.at(out, (slice(None), tile_of), values)
     return out.reshape(-1, 3)
 
 
@@ -106,8 +99,8 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
     pixels = [np.flatnonzero(m.ravel())[::pixel_stride] for m in capture.masks]
     if sum(len(p) for p in pixels) == 0:
         raise ValueError("the capture's masks select no pixels")
-    width = capture.masks.shape[2]
-    ref = _tile_sums(traced_values(capture.images[:, light_ids].astype(np.float64), pixels), pixels, width, tile)
+    tiles = traced_tiles(pixels, *capture.masks.shape[1:], tile)
+    ref = _tile_sums(traced_values(capture.images[:, light_ids].astype(np.float64), pixels), *tiles)
     base = scene.teeth[0].enamel
     errors = np.zeros((len(gs), len(table), 3))
     for gi, g in enumerate(gs):
@@ -119,7 +112,7 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
                                                  RenderSettings(spp=spp, max_depth=max_depth,
                                                                 seed=2 * (seed + gi * len(table) + j) + h),
                                                  pixels=pixels, light_ids=light_ids, compiled=cs).images, pixels),
-                            pixels, width, tile) for h in (0, 1)]
+                            *tiles) for h in (0, 1)]
             for c in range(3):
                 errors[gi, j, c] = paired_table_errors(r[0][:, c:c + 1], r[1][:, c:c + 1], ref[:, c],
                                                        scale_invariant)[0]

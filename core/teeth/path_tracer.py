@@ -76,6 +76,18 @@ def traced_values(images: np.ndarray, pixels: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([flat[c][:, p] for c, p in enumerate(pixels)], axis=1)
 
 
+def traced_tiles(pixels: list[np.ndarray], height: int, width: int, block: int) -> tuple[np.ndarray, int]:
+    """Tile of every traced row (rows as in ``traced_values``) for block x block pixel tiles per camera:
+    (tile index per row, number of tiles), tiles numbered by (camera, tile row, tile column) and only
+    those that hold a traced pixel counted."""
+    wb = -(-width // block)
+    per_cam = -(-height // block) * wb
+    keys = np.concatenate([c * per_cam + (np.asarray(p, dtype=np.int64) // width // block) * wb
+                           + (np.asarray(p, dtype=np.int64) % width) // block for c, p in enumerate(pixels)])
+    tiles, tile_of = np.unique(keys, return_inverse=True)
+    return tile_of, len(tiles)
+
+
 def _accumulate(g: np.ndarray, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, w: np.ndarray) -> None:
     """g[cols[k, j]] += sum_c vals[k, j, c] * w[rows[k], c]."""
     if len(rows) == 0:

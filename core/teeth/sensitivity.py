@@ -21,7 +21,7 @@ import numpy as np
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .param_vector import ParamLayout, scene_to_vector, volume_pairs
-from .path_tracer import RenderSettings, render, traced_values
+from .path_tracer import RenderSettings, render, traced_tiles, traced_values
 from .scene import TeethScene
 
 
@@ -75,11 +75,7 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     k = len(directions)
     h, w = capture.masks.shape[1:]
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
-    wb = -(-w // block)
-    tile_of = np.concatenate([c * (-(-h // block)) * wb + (p // w // block) * wb + (p % w) // block
-                              for c, p in enumerate(pixels)])
-    tiles, tile_of = np.unique(tile_of, return_inverse=True)
-    n_tiles = len(tiles)
+    tile_of, n_tiles = traced_tiles(pixels, h, w, block)
     tile_pixels = np.bincount(tile_of, minlength=n_tiles).astype(np.float64)
     cs = CompiledScene(scene, layout=layout)
     s1 = s2 = None

@@ -54,12 +54,13 @@ def test_paired_errors_are_unbiased_by_render_noise():
 
 def test_tile_sums_match_a_loop_over_tiles():
     from material_structures.core.teeth.literature_init import _tile_sums
+    from material_structures.core.teeth.path_tracer import traced_tiles
 
     rng = np.random.default_rng(2)
     width, height, tile, n_l = 1300, 7, 3, 2  # wider than any fixed key stride would allow
     pixels = [np.sort(rng.choice(width * height, 500, replace=False)), np.array([5, width + 5, 3 * width - 1])]
     vals = rng.random((n_l, sum(len(p) for p in pixels), 3))
-    out = _tile_sums(vals, pixels, width, tile)
+    out = _tile_sums(vals, *traced_tiles(pixels, height, width, tile))
     ref, row = {}, 0
     for c, p in enumerate(pixels):
         for q in p:
