@@ -2,23 +2,27 @@
 parameter-recovery acceptance fit (2 teeth, 3 cameras at 96 x 64, 54 lights, perturbed start).
 
 Environment: TEETH_BENCH_ITERATIONS (default 200) and TEETH_BENCH_SYNTH_SPP (default 32) size the
-recovery fit (about 35 minutes on 2 cores); TEETH_BENCH_RECOVERY=0 skips it.
+recovery fit (about 55 minutes on 2 cores; progress on stderr); TEETH_BENCH_RECOVERY=0 skips it.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import numpy as np
 
 RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.dentin.albedo", "tooth*.c")
-# the acceptance fit's settings (besides iterations and free): 6 random lights at 4 spp per iteration
-# (per second of rendering, gradient variance about 2x lower than 27 lights at 1 spp, measured at the
-# stall point of the earlier fits), the anchor image control variate (8 spp of all lights, re-rendered
-# every 10 iterations)
-RECOVERY_SETTINGS = {"lr": 0.04, "lr_decay": 0.01, "spp": 4, "lights_per_iteration": 6, "anchor_spp": 8,
-                     "anchor_every": 10}
+# the acceptance fit's settings (besides iterations and free): 6 random lights per iteration; pass A
+# (the image in the adjoint 2 (C_A - C_ref)) at 32 spp, pass B (the gradient) at 4 spp, both traced
+# by 2 processes. Near the optimum the gradient's variance is mostly pass A's per-pixel noise times
+# the pixel's derivative: at the stall point of the earlier anchored fits (8-spp anchor image of all
+# lights every 10 iterations, 4-spp brackets), a fresh 32-spp pass A has about 2x lower gradient
+# variance per iteration even before counting the anchor's own noise, which the anchored gradients
+# shared for 10 iterations, for about the same time per iteration
+RECOVERY_SETTINGS = {"lr": 0.04, "lr_decay": 0.01, "spp": 4, "image_spp": 32, "lights_per_iteration": 6,
+                     "workers": 2}
 
 
 def recovery_errors(fit_scene, truth) -> dict:
@@ -69,8 +73,14 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     layout = ParamLayout(truth)
     ys: list = []
     t0 = time.perf_counter()
-    best, log = fit(start, capture, settings,
-                    callback=lambda e, s: ys.append(to_optimiser(scene_to_vector(s, layout), layout)))
+
+    def record(entry: dict, scene) -> None:
+        ys.append(to_optimiser(scene_to_vector(scene, layout), layout))
+        if len(ys) % 10 == 0:  # progress on stderr (stdout is the JSON result)
+            print(f"bench teeth: recovery iteration {len(ys)}/{iterations}, loss {entry['loss']:.3e}, "
+                  f"{(time.perf_counter() - t0) / len(ys):.1f} s per iteration", file=sys.stderr, flush=True)
+
+    best, log = fit(start, capture, settings, callback=record)
     out["recovery_seconds"] = time.perf_counter() - t0
     out["recovery_iterations"] = len(log)
     out["recovery_seconds_per_iteration"] = out["recovery_seconds"] / max(len(log), 1)
@@ -86,7 +96,7 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
 
 def bench_teeth() -> dict:
     from material_structures.core.teeth.gradient_check import fd_check
-    from material_structures.core.teeth.optimise import FitSettings, anchor_image, iteration_gradient
+    from material_structures.core.teeth.optimise import FitSettings, iteration_gradient
     from material_structures.core.teeth.param_vector import ParamLayout
     from material_structures.core.teeth.path_tracer import RenderSettings
     from material_structures.core.teeth.synthetic import perturbed_start
@@ -99,21 +109,19 @@ def bench_teeth() -> dict:
     start = perturbed_start(truth, seed=1)
     settings = FitSettings()
     lay = ParamLayout(start)
+    # path throughput: one process, 4 spp in both passes
     st = RenderSettings(spp=RECOVERY_SETTINGS["spp"], max_depth=settings.max_depth)
     ids = np.sort(np.random.default_rng(0).choice(54, RECOVERY_SETTINGS["lights_per_iteration"], replace=False))
-    t0 = time.perf_counter()
     _, _, stats = iteration_gradient(start, capture, ids, st, 0, lay)
+    # the acceptance fit's iteration (RECOVERY_SETTINGS: 32-spp pass A, 4-spp pass B, 2 processes)
+    st_fit = RenderSettings(spp=RECOVERY_SETTINGS["spp"], max_depth=settings.max_depth,
+                            workers=RECOVERY_SETTINGS["workers"])
+    t0 = time.perf_counter()
+    iteration_gradient(start, capture, ids, st_fit, 0, lay, image_spp=RECOVERY_SETTINGS["image_spp"])
     out["seconds_per_iteration"] = time.perf_counter() - t0
-    out["iteration_config"] = (f"2 teeth, 3 cameras 96x64 (masked pixels), {len(ids)} of 54 lights, {st.spp} spp, "
-                               "2 passes")
-    # the acceptance fit's iteration: anchored pass A (two CRN renders) + the anchor's amortised cost
-    t0 = time.perf_counter()
-    anchor = anchor_image(start, capture, RECOVERY_SETTINGS["anchor_spp"], settings.max_depth, 11, lay)
-    anchor_seconds = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    iteration_gradient(start, capture, ids, st, 0, lay, anchor=anchor)
-    out["seconds_per_iteration_anchored"] = (time.perf_counter() - t0
-                                             + anchor_seconds / RECOVERY_SETTINGS["anchor_every"])
+    out["iteration_config"] = (f"2 teeth, 3 cameras 96x64 (masked pixels), {len(ids)} of 54 lights, pass A "
+                               f"{RECOVERY_SETTINGS['image_spp']} spp, pass B {st.spp} spp, "
+                               f"{RECOVERY_SETTINGS['workers']} processes")
     half = stats["path_vertices"] / 2
     out["path_vertices_per_second"] = {"forward": half / stats["render_seconds"],
                                        "forward_and_gradient": half / stats["gradient_seconds"]}

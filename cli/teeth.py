@@ -46,6 +46,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--lr", type=float, default=0.05)
     f.add_argument("--lr-decay", type=float, default=0.02)
     f.add_argument("--spp", type=int, default=1)
+    f.add_argument("--image-spp", type=int, default=0,
+                   help="samples per pixel of pass A, the image in the loss gradient's adjoint (0 = --spp); "
+                        "near the optimum its noise dominates the gradient's (the acceptance fit uses 32 with --spp 4)")
     f.add_argument("--lights-per-iteration", type=int, default=18)
     f.add_argument("--max-depth", type=int, default=6)
     f.add_argument("--anchor-spp", type=int, default=0,
@@ -67,6 +70,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--dask-workers", type=int, default=None,
                    help="processes of the local Dask cluster (default: CPU count)")
     f.add_argument("--no-dask", action="store_true", help="render in this process instead of on Dask")
+    f.add_argument("--workers", type=int, default=1,
+                   help="with --no-dask: forked processes that trace each pass (e.g. the number of cores)")
     f.add_argument("--no-progress", action="store_true")
     f.set_defaults(func=run_fit)
 
@@ -132,7 +137,10 @@ def run_fit(args: argparse.Namespace) -> int:
                      texture_size=args.texture_size, lr=args.lr, lr_decay=args.lr_decay, spp=args.spp,
                      max_depth=args.max_depth, lights_per_iteration=args.lights_per_iteration, seed=args.seed,
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
-                     loss_block=args.loss_block, domain=args.domain)
+                     loss_block=args.loss_block, domain=args.domain, image_spp=args.image_spp,
+                     workers=args.workers)
+    if args.workers != 1 and not args.no_dask:
+        raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
     if not args.resume:
         if args.init == "literature":
             table, gs = literature_table()

@@ -22,17 +22,18 @@ from ..core.teeth.path_tracer import RenderSettings, render
 
 
 def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSettings, seed: int, layout, norm: float,
-                       anchor_scene=None, anchor_images=None, loss_block: int = 1):
+                       anchor_scene=None, anchor_images=None, loss_block: int = 1, image_spp: int = 0):
     """Loss share and physical-parameter gradient of one camera (runs on a worker); ``anchor_*``: the
     image control variate of ``optimise.Anchor`` (``anchor_images``: this camera, these lights);
-    ``loss_block``: tile size of the box-filtered L2 loss (``optimise.l2_loss``; tiles never span cameras)."""
+    ``loss_block``: tile size of the box-filtered L2 loss (``optimise.l2_loss``; tiles never span cameras);
+    ``image_spp``: pass A's samples per pixel (0 = ``st.spp``)."""
     cams = [capture.cameras[camera]]
     mask = capture.masks[camera]
     pixels = [np.flatnonzero(mask.ravel())]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[camera : camera + 1, light_ids].astype(np.float64)
     seed_a, seed_b = [int(s) for s in np.random.SeedSequence([seed, camera]).generate_state(2)]
-    sa = RenderSettings(st.spp, st.max_depth, seed_a, st.chunk, True)
+    sa = RenderSettings(image_spp or st.spp, st.max_depth, seed_a, st.chunk, True)
     t0 = time.perf_counter()
     img_a, vert_a = pass_a_image(scene, cams, capture.lights, sa, pixels, light_ids, cs, layout, anchor_scene,
                                  anchor_images)
@@ -77,7 +78,8 @@ class DaskGradient:
     def _scatter_capture(self):
         [self.capture_future] = self.client.scatter([self.capture], broadcast=True, hash=False)
 
-    def __call__(self, scene, capture, light_ids, st, seed, layout, anchor=None, loss_block: int = 1):
+    def __call__(self, scene, capture, light_ids, st, seed, layout, anchor=None, loss_block: int = 1,
+                 image_spp: int = 0):
         from distributed.client import FutureCancelledError
 
         light_ids = np.asarray(light_ids)
@@ -88,7 +90,7 @@ class DaskGradient:
             [scene_future] = self.client.scatter([scene], broadcast=True, hash=False)
             futures = [
                 self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
-                                   layout, norm, *_anchor_args(anchor, c, light_ids), loss_block, pure=False,
+                                   layout, norm, *_anchor_args(anchor, c, light_ids), loss_block, image_spp, pure=False,
                                    retries=3)
                 for c in range(len(capture.cameras))
             ]
@@ -112,11 +114,11 @@ class DaskGradient:
 def local_gradient(capture):
     """The same per-camera decomposition evaluated in this process (reference for the Dask path)."""
 
-    def gradient(scene, capture_, light_ids, st, seed, layout, anchor=None, loss_block: int = 1):
+    def gradient(scene, capture_, light_ids, st, seed, layout, anchor=None, loss_block: int = 1, image_spp: int = 0):
         light_ids = np.asarray(light_ids)
         norm = loss_normaliser(capture_, len(light_ids))
         results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm,
-                                      *_anchor_args(anchor, c, light_ids), loss_block)
+                                      *_anchor_args(anchor, c, light_ids), loss_block, image_spp)
                    for c in range(len(capture_.cameras))]
         return (float(sum(r[0] for r in results)), np.sum([r[1] for r in results], axis=0),
                 {"path_vertices": int(sum(r[2]["path_vertices"] for r in results))})

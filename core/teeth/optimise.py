@@ -17,7 +17,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -62,9 +62,21 @@ class FitSettings:
     # dominant noise near the optimum, the product of pass A's and pass B's independent per-pixel noise,
     # averages over each tile (see README, "Fit noise")
     loss_block: int = 1
+    # samples per pixel of pass A (the image that forms the adjoint 2 (C_A - C_ref)); 0 = ``spp``. Near
+    # the optimum the gradient's variance is mostly pass A's per-pixel noise times the pixel's
+    # derivative, so pass A gets more samples than pass B (forward only, no derivative bookkeeping)
+    image_spp: int = 0
+    # processes that trace each pass (``RenderSettings.workers``; 2 on a 2-core machine halves the time)
+    workers: int = 1
     # optimiser domain of sigma_t / albedo: "thesis" (log sigma_t, log10(1 - albedo), eq. 5.22-5.24)
     # or "absorption" (log sigma_s, log sigma_a; see param_vector.to_optimiser)
     domain: str = "thesis"
+
+    def __post_init__(self) -> None:
+        if self.image_spp < 0:
+            raise ValueError(f"image_spp must be >= 0 (0 = spp), got {self.image_spp}")
+        if self.workers < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
 
 
 @dataclass
@@ -198,11 +210,12 @@ class Anchor:
 
 
 def anchor_image(scene: TeethScene, capture: Capture, spp: int, max_depth: int, seed: int, layout: ParamLayout,
-                 iteration: int = 0) -> Anchor:
+                 iteration: int = 0, workers: int = 1) -> Anchor:
     """Render the masked pixels of every light at ``spp`` for an :class:`Anchor`."""
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
-    res = render(scene, capture.cameras, capture.lights, RenderSettings(spp=spp, max_depth=max_depth, seed=seed),
-                 pixels=pixels, compiled=CompiledScene(scene, layout=layout))
+    rs = RenderSettings(spp=spp, max_depth=max_depth, seed=seed, workers=workers)
+    res = render(scene, capture.cameras, capture.lights, rs, pixels=pixels,
+                 compiled=CompiledScene(scene, layout=layout))
     return Anchor(scene.copy(), res.images, spp, iteration)
 
 
@@ -236,23 +249,24 @@ def pass_a_image(scene: TeethScene, cameras: list, lights: list, sa: RenderSetti
 
 def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarray, st: RenderSettings,
                        seed: int, layout: ParamLayout, anchor: Anchor | None = None,
-                       loss_block: int = 1) -> tuple[float, np.ndarray, dict]:
+                       loss_block: int = 1, image_spp: int = 0) -> tuple[float, np.ndarray, dict]:
     """One stochastic loss + gradient evaluation (pass A image, pass B gradient).
 
     Returns the loss estimate mean((C_A - C_ref)(C_B - C_ref)) over the masked pixels, the physical
     gradient and timing statistics. ``anchor``: image control variate for pass A (see :class:`Anchor`);
-    ``loss_block``: tile size of the box-filtered L2 loss (see :func:`l2_loss`)."""
+    ``loss_block``: tile size of the box-filtered L2 loss (see :func:`l2_loss`); ``image_spp``: pass A's
+    samples per pixel (0 = ``st.spp``)."""
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[:, light_ids].astype(np.float64)
-    sa = RenderSettings(st.spp, st.max_depth, 2 * seed, st.chunk, True)
+    sa = replace(st, spp=image_spp or st.spp, seed=2 * seed, jitter=True)
     t0 = time.perf_counter()
     img_a, vert_a = pass_a_image(scene, capture.cameras, capture.lights, sa, pixels, light_ids, cs, layout,
                                  None if anchor is None else anchor.scene,
                                  None if anchor is None else anchor.images[:, light_ids])
     render_seconds = time.perf_counter() - t0
     loss_a, adj = l2_loss(img_a, ref, capture.masks, loss_block)
-    sb = RenderSettings(st.spp, st.max_depth, 2 * seed + 1, st.chunk, True)
+    sb = replace(st, seed=2 * seed + 1, jitter=True)
     rb = render(scene, capture.cameras, capture.lights, sb, pixels=pixels, light_ids=light_ids, adjoint=adj,
                 compiled=cs)
     # Monte Carlo noise adds Var(C) to (C_A - C_ref)^2; the product of the two independent passes
@@ -290,7 +304,10 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     if s.loss_block > 1 and gradient is not None and "loss_block" not in inspect.signature(gradient).parameters:
         raise ValueError("settings.loss_block > 1 needs a gradient function that takes loss_block=; "
                          "set loss_block=1 to use this one")
-    st = RenderSettings(spp=s.spp, max_depth=s.max_depth)
+    if s.image_spp > 0 and gradient is not None and "image_spp" not in inspect.signature(gradient).parameters:
+        raise ValueError("settings.image_spp > 0 needs a gradient function that takes image_spp=; "
+                         "set image_spp=0 to use this one")
+    st = RenderSettings(spp=s.spp, max_depth=s.max_depth, workers=s.workers)
     state: FitState | None = None
     ckpt = None if out_dir is None else os.path.join(out_dir, "checkpoint.json")
     if out_dir is not None:
@@ -318,7 +335,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             if s.anchor_spp > 0 and state.anchor_scene is not None:
                 # same scene, spp and seed as before the interruption: the same anchor image
                 anchor = anchor_image(TeethScene.from_dict(state.anchor_scene), capture, s.anchor_spp, s.max_depth,
-                                      _anchor_seed(s, pi, state.anchor_iteration), layout, state.anchor_iteration)
+                                      _anchor_seed(s, pi, state.anchor_iteration), layout, state.anchor_iteration,
+                                      s.workers)
             y = np.array(state.y)
             opt = Adam(s.lr, s.b1, s.b2, s.eps, None if state.adam_m is None else np.array(state.adam_m),
                        None if state.adam_v is None else np.array(state.adam_v), state.adam_n)
@@ -345,9 +363,12 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             cur = vector_to_scene(cur, x, layout)
             seed = s.seed * 100003 + 10007 * pi + it
             kw = {"loss_block": s.loss_block} if s.loss_block > 1 else {}
+            if s.image_spp > 0:
+                kw["image_spp"] = s.image_spp
             if s.anchor_spp > 0:
                 if anchor is None or it - anchor.iteration >= max(s.anchor_every, 1):
-                    anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, _anchor_seed(s, pi, it), layout, it)
+                    anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, _anchor_seed(s, pi, it), layout, it,
+                                          s.workers)
                 kw["anchor"] = anchor
             loss, g_phys, stats = (gradient or iteration_gradient)(cur, capture, light_ids, st, seed, layout, **kw)
             if loss < best_loss:

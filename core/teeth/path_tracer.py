@@ -26,6 +26,7 @@ evaluate the same estimator at theta +- h with the sampling fixed at theta_0 (co
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -57,6 +58,9 @@ class RenderSettings:
     seed: int = 0
     chunk: int = 4096  # camera paths per wavefront batch
     jitter: bool = True
+    # processes that trace the chunks (each chunk has its own random stream, so the result does not
+    # depend on this beyond floating-point summation order); > 1 forks (POSIX only)
+    workers: int = 1
 
 
 @dataclass
@@ -389,21 +393,76 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     if jacobian_cols is not None:
         n_rows = len(row_of) // settings.spp
         need = 8 * n_l * 3 * tr.n_j * (n_rows + 2 * min(settings.chunk, len(row_of)))  # result + chunk buffers
+        if settings.workers > 1:  # every worker fills a full Jacobian and the parent receives a copy of each
+            need += 2 * settings.workers * 8 * n_l * 3 * tr.n_j * n_rows
         if need > JACOBIAN_MAX_BYTES:
             raise ValueError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
                              f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
         jac = np.zeros((n_rows, n_l, 3, tr.n_j))
     t0 = time.perf_counter()
-    n_vertices = 0
-    for ci, start in enumerate(range(0, len(pix_of), settings.chunk)):
-        sl = slice(start, start + settings.chunk)
-        rng = np.random.Generator(np.random.PCG64([settings.seed, ci]))
-        n_vertices += _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad, hw,
-                                   jac, row_of[sl])
+    starts = list(range(0, len(pix_of), settings.chunk))
+
+    def trace(chunk_ids, img, grad, jac) -> tuple[int, int, int]:
+        n_vertices = 0
+        for ci in chunk_ids:
+            sl = slice(starts[ci], starts[ci] + settings.chunk)
+            rng = np.random.Generator(np.random.PCG64([settings.seed, ci]))
+            n_vertices += _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad,
+                                       hw, jac, row_of[sl])
+        return n_vertices, tr.n_shadow, tr.n_casts
+
+    if settings.workers > 1 and len(starts) > 1:
+        n_vertices, n_shadow, n_casts = _trace_forked(trace, len(starts), settings.workers, img, grad, jac)
+    else:
+        n_vertices, n_shadow, n_casts = trace(range(len(starts)), img, grad, jac)
     stats = {"seconds": time.perf_counter() - t0, "path_vertices": int(n_vertices),
-             "shadow_rays": int(tr.n_shadow), "ray_casts": int(tr.n_casts), "camera_paths": int(len(pix_of))}
+             "shadow_rays": int(n_shadow), "ray_casts": int(n_casts), "camera_paths": int(len(pix_of))}
     images = img.reshape(len(cameras), n_l, h, w, 3)
     return RenderResult(images, grad, stats, jac)
+
+
+_FORKED_TRACE = None  # the trace job a forked worker runs (set just before the fork, inherited)
+_FORK_LOCK = threading.Lock()  # one forked render at a time per process (the job is a global)
+
+
+def _run_forked_trace(chunk_ids: list[int]):
+    img, grad, jac = (None if a is None else np.zeros_like(a) for a in _FORKED_TRACE[1])
+    counts = _FORKED_TRACE[0](chunk_ids, img, grad, jac)
+    return img, grad, jac, counts
+
+
+def _trace_forked(trace, n_chunks: int, workers: int, img, grad, jac) -> tuple[int, int, int]:
+    """Run ``trace`` over the chunks in ``workers`` forked processes (chunk i on worker i mod workers)
+    and add their images, gradients and Jacobians into ``img``, ``grad``, ``jac`` in worker order."""
+    import multiprocessing
+    import warnings
+
+    global _FORKED_TRACE
+    if "fork" not in multiprocessing.get_all_start_methods():  # e.g. Windows: trace here
+        return trace(range(n_chunks), img, grad, jac)
+    workers = min(workers, n_chunks)
+    with _FORK_LOCK:
+        _FORKED_TRACE = (trace, (img, grad, jac))
+        try:
+            with warnings.catch_warnings():
+                # numpy's OpenBLAS thread pool makes every process "multi-threaded"; OpenBLAS re-initialises
+                # in the child (pthread_atfork) and the children take no lock another thread could hold
+                warnings.filterwarnings("ignore", message=".*use of fork\\(\\) may lead to deadlocks",
+                                        category=DeprecationWarning)
+                with multiprocessing.get_context("fork").Pool(workers) as pool:
+                    parts = pool.map(_run_forked_trace,
+                                     [list(range(k, n_chunks, workers)) for k in range(workers)])
+        finally:
+            _FORKED_TRACE = None
+    totals = np.zeros(3, dtype=np.int64)
+    for p_img, p_grad, p_jac, counts in parts:
+        img += p_img
+        if grad is not None:
+            grad += p_grad
+        if jac is not None:
+            jac += p_jac
+        totals += counts
+    return int(totals[0]), int(totals[1]), int(totals[2])
 
 
 def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings, img, adj, grad, hw,

@@ -102,3 +102,24 @@ def test_fit_starts_from_the_literature_search(tmp_path):
         np.testing.assert_allclose(t.dentin.albedo, e.dentin.albedo, rtol=1e-12)
         assert all(np.isclose(table[:, 0], s).any() for s in t.enamel.sigma_t)
         np.testing.assert_array_equal(t.c, 0.0)
+
+
+def test_fit_image_spp_and_workers_in_one_process(tmp_path, capsys):
+    """``--no-dask --workers 2`` traces each pass in 2 forked processes: the same losses as one
+    process; ``--image-spp`` reaches pass A (more path vertices per iteration); ``--workers`` without
+    ``--no-dask`` is a clear error."""
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
+                 "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "1",
+                 "--resolution", "12"]) == 0
+    common = ["teeth", "fit", str(cap_dir), "--init", "perturbed", "--lights-per-iteration", "2", "--no-progress",
+              "--max-depth", "3", "--iterations", "2", "--no-dask", "--image-spp", "6"]
+    logs = {}
+    for name, extra in (("one", []), ("two", ["--workers", "2"]), ("plain", ["--image-spp", "0"])):
+        assert main(common + ["--out", str(tmp_path / name), *extra]) == 0
+        logs[name] = json.loads((tmp_path / name / "loss.json").read_text())["log"]
+    assert [e["loss"] for e in logs["two"]] == pytest.approx([e["loss"] for e in logs["one"]], rel=1e-9)
+    assert logs["plain"][0]["path_vertices"] < logs["one"][0]["path_vertices"]
+    capsys.readouterr()
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), "--workers", "2"]) == 2
+    assert "--workers is for --no-dask" in capsys.readouterr().err

@@ -10,11 +10,11 @@ from material_structures.benchmarks.teeth import run_recovery
 
 @pytest.mark.slow
 @pytest.mark.timeout(3600)
-@pytest.mark.xfail(strict=True, reason="issue 8 acceptance not met yet: after 200 anchored Adam iterations "
-                   "(6 lights x 4 spp; bench/results/teeth.json) the errors are 21 % (sigma_t), 14 % (albedo), 0.14 "
-                   "(c): the capture barely constrains dentin absorption and the shape coefficients (`teeth "
-                   "sensitivity`: chi2 4-120 per +10 % sigma_a, 12-160 per +0.05 c, vs 6,600-14,000 for dentin "
-                   "sigma_s), and dentin green/blue sigma_a stay 0.4-2x off; remove this marker once it passes")
+@pytest.mark.xfail(strict=True, reason="issue 8 acceptance not met yet: after 200 Adam iterations (6 lights, "
+                   "32-spp pass A, 4-spp pass B; bench/results/teeth.json) the errors are 21 % (sigma_t), 16 % "
+                   "(albedo), 0.09 (c): the capture barely constrains dentin absorption and the shape coefficients "
+                   "(`teeth sensitivity`: chi2 4-120 per +10 % sigma_a, 12-160 per +0.05 c, vs 6,600-14,000 for "
+                   "dentin sigma_s), and dentin green/blue sigma_a stay 0.4-2x off; remove this marker once it passes")
 def test_parameter_recovery_acceptance():
     out = run_recovery()
     start = out["recovery_start"]

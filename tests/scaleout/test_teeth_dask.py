@@ -127,3 +127,19 @@ def test_anchored_fit_on_dask_matches_local_and_in_process_loss(problem, client)
     assert [e["loss"] for e in log_a] == [e["loss"] for e in log_b]
     assert a.to_dict() == b.to_dict()
     assert all(np.isfinite(e["loss"]) for e in log_a)
+
+
+def test_image_spp_reaches_the_dask_tasks(problem, client):
+    """``FitSettings.image_spp`` (pass A's samples) on Dask equals the local decomposition exactly and
+    changes the fit (the setting is not dropped on the way to the tasks)."""
+    from material_structures.core.teeth.optimise import FitSettings, fit
+
+    scene, capture = problem
+    fs = FitSettings(iterations=2, spp=1, max_depth=4, lights_per_iteration=2, seed=1, image_spp=3)
+    a, log_a = fit(scene, capture, fs, gradient=DaskGradient(client, capture))
+    b, log_b = fit(scene, capture, fs, gradient=local_gradient(capture))
+    assert [e["loss"] for e in log_a] == [e["loss"] for e in log_b]
+    assert a.to_dict() == b.to_dict()
+    _, log_1 = fit(scene, capture, FitSettings(iterations=2, spp=1, max_depth=4, lights_per_iteration=2, seed=1),
+                   gradient=local_gradient(capture))
+    assert log_a[0]["loss"] != log_1[0]["loss"]
