@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..forked_map import forked_map
 from .cie_colour import spectral_to_srgb_matrix
 from .light_integration import (
     DirectionalLight,
@@ -362,18 +363,7 @@ def scratch_radiance(
     workers = max(1, min(int(workers), n // max(1, chunk_points) or 1))
     bounds = np.linspace(0, n, workers + 1).astype(int)
     blocks = [(int(bounds[i]), int(bounds[i + 1])) for i in range(workers)]
-    if workers == 1:
-        parts = [_walk_block(ctx, *blocks[0])]
-    else:
-        import multiprocessing as mp
-
-        global _CTX
-        _CTX = ctx
-        try:
-            with mp.get_context("fork").Pool(workers) as pool:
-                parts = pool.map(_walk_block_forked, blocks)
-        finally:
-            _CTX = None
+    parts = forked_map(_walk_block_of, ctx, blocks, workers)
     spec = np.concatenate([p[0] for p in parts])
     rho_t = np.concatenate([p[1] for p in parts])
     rho_c = np.concatenate([p[2] for p in parts])
@@ -388,9 +378,6 @@ def scratch_radiance(
     return ScratchShading(lam_nm, spec, rgb, r, n_pairs)
 
 
-_CTX: dict | None = None
-
-
 def _cell_major_tables(s: ScratchSet) -> tuple[np.ndarray, np.ndarray]:
     """Segments and (width, depth) in cell-list order (contiguous per cell), cached on the set."""
     key = (s.cell_segments, s.segments, s.width_um, s.depth_um)
@@ -402,8 +389,8 @@ def _cell_major_tables(s: ScratchSet) -> tuple[np.ndarray, np.ndarray]:
     return cache[1], cache[2]
 
 
-def _walk_block_forked(block: tuple[int, int]):
-    return _walk_block(_CTX, *block)
+def _walk_block_of(ctx: dict, block: tuple[int, int]):
+    return _walk_block(ctx, *block)
 
 
 def _walk_block(ctx: dict, a0: int, b0: int):

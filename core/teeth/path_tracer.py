@@ -26,12 +26,12 @@ evaluate the same estimator at theta +- h with the sampling fixed at theta_0 (co
 
 from __future__ import annotations
 
-import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..forked_map import forked_map
 from .capture import Camera, PointLight
 from .compiled_scene import (
     KIND_DIELECTRIC,
@@ -421,39 +421,12 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     return RenderResult(images, grad, stats, jac)
 
 
-_FORKED_TRACE = None  # the trace job a forked worker runs (set just before the fork, inherited)
-_FORK_LOCK = threading.Lock()  # one forked render at a time per process (the job is a global)
-
-
-def _run_forked_trace(chunk_ids: list[int]):
-    img, grad, jac = (None if a is None else np.zeros_like(a) for a in _FORKED_TRACE[1])
-    counts = _FORKED_TRACE[0](chunk_ids, img, grad, jac)
-    return img, grad, jac, counts
-
-
 def _trace_forked(trace, n_chunks: int, workers: int, img, grad, jac) -> tuple[int, int, int]:
     """Run ``trace`` over the chunks in ``workers`` forked processes (chunk i on worker i mod workers)
     and add their images, gradients and Jacobians into ``img``, ``grad``, ``jac`` in worker order."""
-    import multiprocessing
-    import warnings
-
-    global _FORKED_TRACE
-    if "fork" not in multiprocessing.get_all_start_methods():  # e.g. Windows: trace here
-        return trace(range(n_chunks), img, grad, jac)
     workers = min(workers, n_chunks)
-    with _FORK_LOCK:
-        _FORKED_TRACE = (trace, (img, grad, jac))
-        try:
-            with warnings.catch_warnings():
-                # numpy's OpenBLAS thread pool makes every process "multi-threaded"; OpenBLAS re-initialises
-                # in the child (pthread_atfork) and the children take no lock another thread could hold
-                warnings.filterwarnings("ignore", message=".*use of fork\\(\\) may lead to deadlocks",
-                                        category=DeprecationWarning)
-                with multiprocessing.get_context("fork").Pool(workers) as pool:
-                    parts = pool.map(_run_forked_trace,
-                                     [list(range(k, n_chunks, workers)) for k in range(workers)])
-        finally:
-            _FORKED_TRACE = None
+    parts = forked_map(_trace_chunk_set, (trace, (img, grad, jac)),
+                       [list(range(k, n_chunks, workers)) for k in range(workers)], workers)
     totals = np.zeros(3, dtype=np.int64)
     for p_img, p_grad, p_jac, counts in parts:
         img += p_img
@@ -463,6 +436,13 @@ def _trace_forked(trace, n_chunks: int, workers: int, img, grad, jac) -> tuple[i
             jac += p_jac
         totals += counts
     return int(totals[0]), int(totals[1]), int(totals[2])
+
+
+def _trace_chunk_set(job, chunk_ids: list[int]):
+    """One worker's share: its chunks traced into zeroed copies of the image, gradient and Jacobian."""
+    trace, arrays = job
+    img, grad, jac = (None if a is None else np.zeros_like(a) for a in arrays)
+    return img, grad, jac, trace(chunk_ids, img, grad, jac)
 
 
 def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings, img, adj, grad, hw,
