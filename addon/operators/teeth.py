@@ -202,7 +202,9 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             self.report({"ERROR"}, "A teeth fit is already running")
             return None
         try:
-            job = FitJob(capture, out, fs.iterations, fs.init, fs.lights_per_iteration).start()
+            # the fit's renders use every core (forked per render; cancel stops them too)
+            job = FitJob(capture, out, fs.iterations, fs.init, fs.lights_per_iteration,
+                         workers=os.cpu_count() or 1).start()
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return None

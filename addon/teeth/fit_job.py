@@ -2,8 +2,9 @@
 
 Blender stays responsive: the fit runs in its own interpreter, its output (tqdm progress on stderr,
 messages on stdout) is read by a thread into ``OUT/fit_log.txt`` and parsed for the iteration count and
-loss; ``cancel()`` terminates the process (the core's checkpoint lets ``--resume`` continue). When it
-finishes the CLI has written ``scene_fit.json``, ``loss.json`` and ``loss.png`` into OUT.
+loss; ``cancel()`` terminates the process and the workers it forked (the core's checkpoint lets
+``--resume`` continue). When it finishes the CLI has written ``scene_fit.json``, ``loss.json`` and
+``loss.png`` into OUT.
 """
 
 from __future__ import annotations
@@ -45,12 +46,13 @@ def python_executable() -> str:
 
 
 def fit_command(capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
-                lights_per_iteration: int = 18, extra: list[str] | None = None) -> list[str]:
-    """The CLI call. ``--no-dask``: the fit renders in the one background process, so that cancelling
-    (terminate) stops all of it; pass ``extra=["--scheduler", ADDRESS]`` to use a Dask cluster instead."""
+                lights_per_iteration: int = 18, extra: list[str] | None = None, workers: int = 1) -> list[str]:
+    """The CLI call. ``--no-dask``: the fit renders in the one background process (with ``workers`` > 1
+    in that many processes it forks per render), so that cancelling stops all of it; pass
+    ``extra=["--scheduler", ADDRESS]`` to use a Dask cluster instead."""
     extra = list(extra or [])
     if "--scheduler" not in extra:
-        extra.insert(0, "--no-dask")
+        extra[:0] = ["--no-dask"] + (["--workers", str(int(workers))] if workers > 1 else [])
     return [python_executable(), "-m", "material_structures", "teeth", "fit", capture_dir, "--out", out_dir,
             "--iterations", str(int(iterations)), "--init", init, "--lights-per-iteration",
             str(int(lights_per_iteration)), *extra]
@@ -60,12 +62,12 @@ class FitJob:
     """One background fit. ``poll()`` -> state; ``cancel()``; ``result_path`` once finished."""
 
     def __init__(self, capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
-                 lights_per_iteration: int = 18, extra: list[str] | None = None):
+                 lights_per_iteration: int = 18, extra: list[str] | None = None, workers: int = 1):
         if not os.path.isfile(os.path.join(capture_dir, "capture.json")):
             raise FileNotFoundError(f"no capture.json in {capture_dir!r}")
         self.capture_dir, self.out_dir = capture_dir, out_dir
         self.iterations = int(iterations)
-        self.cmd = fit_command(capture_dir, out_dir, iterations, init, lights_per_iteration, extra)
+        self.cmd = fit_command(capture_dir, out_dir, iterations, init, lights_per_iteration, extra, workers)
         self.proc: subprocess.Popen | None = None
         self.done_iterations = 0
         self.loss: float | None = None
@@ -83,8 +85,9 @@ class FitJob:
         self._log = open(self.log_path, "w", encoding="utf-8")
         self._log.write("$ " + " ".join(self.cmd) + "\n")
         self._log.flush()
+        # POSIX: its own process group, so that cancel() reaches the render workers it forks
         self.proc = subprocess.Popen(self.cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-                                     cwd=package_parent())
+                                     cwd=package_parent(), start_new_session=os.name == "posix")
         for stream in (self.proc.stdout, self.proc.stderr):
             t = threading.Thread(target=self._read, args=(stream,), daemon=True)
             t.start()
@@ -148,11 +151,26 @@ class FitJob:
     def cancel(self) -> None:
         if self.proc is not None and self.proc.poll() is None:
             self.cancelled = True
-            self.proc.terminate()
+            self._signal("SIGTERM")
             try:
                 self.proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
+                self._signal("SIGKILL")
+                self.proc.wait(timeout=10)
+            if os.name == "posix":  # forked workers that outlived the fit process
+                self._signal("SIGKILL")
+
+    def _signal(self, name: str) -> None:
+        """Send SIGTERM / SIGKILL to the fit's process group (POSIX) or terminate / kill it."""
+        if os.name != "posix":
+            (self.proc.terminate if name == "SIGTERM" else self.proc.kill)()
+            return
+        import signal
+
+        try:
+            os.killpg(self.proc.pid, getattr(signal, name))
+        except ProcessLookupError:  # the group has ended
+            pass
 
     @property
     def result_path(self) -> str:

@@ -61,11 +61,31 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     assert fs.progress == pytest.approx(1.0) and not fs.running
 
 
+def _live_in_group(pgid: int) -> list[int]:
+    """Processes of process group ``pgid`` that are not zombies (Linux /proc)."""
+    live = []
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            live.append(int(d))
+    return live
+
+
 def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path):
+    """Progress and loss while it runs; cancel stops the fit process and the render workers it forks
+    (2 workers; a 64-spp pass A on 192 pixels is 3 chunks of paths, so every pass A forks)."""
     from material_structures.addon.teeth.fit_job import FitJob
 
     t0 = time.perf_counter()
-    job = FitJob(capture_dir, str(tmp_path / "fit"), iterations=10000, init="scene", lights_per_iteration=1).start()
+    job = FitJob(capture_dir, str(tmp_path / "fit"), iterations=10000, init="scene", lights_per_iteration=1,
+                 extra=["--image-spp", "64"], workers=2).start()
+    assert job.cmd[job.cmd.index("--workers") + 1] == "2"
     assert time.perf_counter() - t0 < 1.0  # returns at once: Blender keeps running
     deadline = time.time() + 90
     while job.done_iterations < 2 and job.poll() == "RUNNING" and time.time() < deadline:
@@ -74,9 +94,16 @@ def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path)
     assert job.done_iterations >= 2 and job.loss is not None and job.loss > 0
     assert 0.0 < job.progress < 0.01
     assert "iteration" in job.status_text()
+    if os.path.isdir("/proc"):
+        deadline = time.time() + 60  # catch a moment when the fit has forked its workers
+        while len(_live_in_group(job.proc.pid)) < 2 and time.time() < deadline:
+            time.sleep(0.01)
+        assert len(_live_in_group(job.proc.pid)) >= 2
     job.cancel()
     assert job.poll() == "CANCELLED"
     assert job.proc.returncode != 0
+    if os.path.isdir("/proc"):
+        assert _live_in_group(job.proc.pid) == []
 
 
 def test_fit_errors(addon_module, tmp_path):
