@@ -193,7 +193,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
     _timer = None
 
     def _start(self, context):
-        from ..teeth.fit_job import FitJob
+        from ..teeth.fit_job import FitJob, usable_cores
 
         fs = context.scene.ms_teeth_fit
         capture = bpy.path.abspath(fs.capture_dir)
@@ -204,7 +204,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)
             job = FitJob(capture, out, fs.iterations, fs.init, fs.lights_per_iteration,
-                         workers=os.cpu_count() or 1).start()
+                         workers=usable_cores()).start()
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return None

@@ -58,6 +58,14 @@ def fit_command(capture_dir: str, out_dir: str, iterations: int = 40, init: str 
             str(int(lights_per_iteration)), *extra]
 
 
+def usable_cores() -> int:
+    """Cores this process may run on (CPU affinity / container limits where the OS reports them)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
 class FitJob:
     """One background fit. ``poll()`` -> state; ``cancel()``; ``result_path`` once finished."""
 
@@ -156,7 +164,10 @@ class FitJob:
                 self.proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 self._signal("SIGKILL")
-                self.proc.wait(timeout=10)
+                try:
+                    self.proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:  # poll() keeps reporting it; nothing more to send
+                    pass
             if os.name == "posix":  # forked workers that outlived the fit process
                 self._signal("SIGKILL")
 

@@ -66,7 +66,8 @@ class FitSettings:
     # the optimum the gradient's variance is mostly pass A's per-pixel noise times the pixel's
     # derivative, so pass A gets more samples than pass B (forward only, no derivative bookkeeping)
     image_spp: int = 0
-    # processes that trace each pass (``RenderSettings.workers``; 2 on a 2-core machine halves the time)
+    # processes that trace each pass (``RenderSettings.workers``; on 2 cores a pass takes 1.4-2x less
+    # time: the chunks of paths are dealt round-robin, so few chunks balance unevenly)
     workers: int = 1
     # optimiser domain of sigma_t / albedo: "thesis" (log sigma_t, log10(1 - albedo), eq. 5.22-5.24)
     # or "absorption" (log sigma_s, log sigma_a; see param_vector.to_optimiser)
@@ -256,6 +257,8 @@ def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarra
     gradient and timing statistics. ``anchor``: image control variate for pass A (see :class:`Anchor`);
     ``loss_block``: tile size of the box-filtered L2 loss (see :func:`l2_loss`); ``image_spp``: pass A's
     samples per pixel (0 = ``st.spp``)."""
+    if image_spp < 0:
+        raise ValueError(f"image_spp must be >= 0 (0 = st.spp), got {image_spp}")
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[:, light_ids].astype(np.float64)

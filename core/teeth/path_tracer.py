@@ -393,8 +393,9 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     if jacobian_cols is not None:
         n_rows = len(row_of) // settings.spp
         need = 8 * n_l * 3 * tr.n_j * (n_rows + 2 * min(settings.chunk, len(row_of)))  # result + chunk buffers
-        if settings.workers > 1:  # every worker fills a full Jacobian and the parent receives a copy of each
-            need += 2 * settings.workers * 8 * n_l * 3 * tr.n_j * n_rows
+        n_workers = min(settings.workers, -(-len(row_of) // settings.chunk))
+        if n_workers > 1:  # every worker fills a full Jacobian, pickles it, and the parent receives it
+            need += 3 * n_workers * 8 * n_l * 3 * tr.n_j * n_rows
         if need > JACOBIAN_MAX_BYTES:
             raise ValueError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
                              f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
@@ -403,13 +404,14 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     starts = list(range(0, len(pix_of), settings.chunk))
 
     def trace(chunk_ids, img, grad, jac) -> tuple[int, int, int]:
-        n_vertices = 0
+        """Trace these chunks into img / grad / jac; (path vertices, shadow rays, ray casts) they added."""
+        n_vertices, shadow0, casts0 = 0, tr.n_shadow, tr.n_casts
         for ci in chunk_ids:
             sl = slice(starts[ci], starts[ci] + settings.chunk)
             rng = np.random.Generator(np.random.PCG64([settings.seed, ci]))
             n_vertices += _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad,
                                        hw, jac, row_of[sl])
-        return n_vertices, tr.n_shadow, tr.n_casts
+        return n_vertices, tr.n_shadow - shadow0, tr.n_casts - casts0
 
     if settings.workers > 1 and len(starts) > 1:
         n_vertices, n_shadow, n_casts = _trace_forked(trace, len(starts), settings.workers, img, grad, jac)

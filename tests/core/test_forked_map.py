@@ -43,3 +43,32 @@ def test_forked_map_raises_the_workers_error():
     with pytest.raises(ValueError, match="bad item 3"):
         forked_map(_fail_on_three, None, [1, 2, 3, 4], workers=2)
     assert forked_map(_fail_on_three, None, [1, 2], workers=2) == [1, 2]
+
+
+def _die(job, item):
+    if item == 1:
+        os._exit(3)  # as if killed (e.g. for memory)
+    return item
+
+
+def test_a_dying_worker_raises_instead_of_hanging():
+    from concurrent.futures.process import BrokenProcessPool
+
+    with pytest.raises(BrokenProcessPool):
+        forked_map(_die, None, [0, 1, 2], workers=2)
+
+
+def _nested(job, item):
+    return forked_map(_weighted_sum, job, [item], workers=2)[0][0], forked_map(_square, None, [1, 2, 3], workers=2)
+
+
+def _square(job, item):
+    return item * item, os.getpid()
+
+
+def test_a_map_inside_a_worker_runs_in_that_worker():
+    data = np.arange(100.0)
+    out = forked_map(_nested, (threading.Lock(), data), [(0, 10, 1), (10, 20, 2)], workers=2)
+    assert [v for v, _ in out] == [45.0, 2 * 145.0]
+    for _, inner in out:
+        assert [v for v, _ in inner] == [1, 4, 9] and len({pid for _, pid in inner}) == 1  # in-process
