@@ -299,17 +299,15 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     phases = [("homogeneous", s.iterations)]
     if s.textured_iterations > 0:
         phases.append(("textured", s.textured_iterations))
-    if s.anchor_spp > 0 and gradient is not None and "anchor" not in inspect.signature(gradient).parameters:
-        raise ValueError("settings.anchor_spp > 0 needs a gradient function that takes anchor=; "
-                         "set anchor_spp=0 to use this one")
     if s.loss_block < 1:
         raise ValueError(f"settings.loss_block must be >= 1, got {s.loss_block}")
-    if s.loss_block > 1 and gradient is not None and "loss_block" not in inspect.signature(gradient).parameters:
-        raise ValueError("settings.loss_block > 1 needs a gradient function that takes loss_block=; "
-                         "set loss_block=1 to use this one")
-    if s.image_spp > 0 and gradient is not None and "image_spp" not in inspect.signature(gradient).parameters:
-        raise ValueError("settings.image_spp > 0 needs a gradient function that takes image_spp=; "
-                         "set image_spp=0 to use this one")
+    # settings that reach the gradient function as keywords once above their "off" value: a
+    # replacement gradient function must accept them
+    for setting, off, keyword in (("anchor_spp", 0, "anchor"), ("loss_block", 1, "loss_block"),
+                                  ("image_spp", 0, "image_spp")):
+        if getattr(s, setting) > off and gradient is not None and keyword not in inspect.signature(gradient).parameters:
+            raise ValueError(f"settings.{setting} > {off} needs a gradient function that takes {keyword}=; "
+                             f"set {setting}={off} to use this one")
     st = RenderSettings(spp=s.spp, max_depth=s.max_depth, workers=s.workers)
     state: FitState | None = None
     ckpt = None if out_dir is None else os.path.join(out_dir, "checkpoint.json")
