@@ -23,6 +23,7 @@ import numpy as np
 
 from .capture import Capture
 from .compiled_scene import CompiledScene
+from .gauss_newton import PreconditionedMomentum, damped_inverse, gauss_newton_matrix
 from .param_vector import (
     ParamLayout,
     chain_to_optimiser,
@@ -72,12 +73,38 @@ class FitSettings:
     # optimiser domain of sigma_t / albedo: "thesis" (log sigma_t, log10(1 - albedo), eq. 5.22-5.24)
     # or "absorption" (log sigma_s, log sigma_a; see param_vector.to_optimiser)
     domain: str = "thesis"
+    # "adam" (the thesis) or "gauss-newton": steps gn_lr * P m (m averages the gradients with b1, P the
+    # damped inverse Gauss-Newton matrix of all lights, see gauss_newton.py), P estimated from gn_passes
+    # 1-spp Jacobian passes pooled in gn_block tiles at the phase's start and every gn_every iterations.
+    # Adam creeps along the loss valley in which enamel and dentin absorption trade off; this follows it.
+    # lr_decay applies to gn_lr as to lr
+    optimiser: str = "adam"
+    gn_lr: float = 0.3  # fraction of the Gauss-Newton step
+    gn_passes: int = 4
+    gn_block: int = 8
+    gn_damping: float = 0.03
+    gn_every: int = 50
+    gn_max_step: float = 0.05  # trust region: per-iteration move of each optimiser variable at most this
+    # the dentin coefficients keep Adam (lr, b1, b2): their Jacobian columns are mostly Monte Carlo
+    # noise at a few passes, so their Gauss-Newton rows and cross terms would be noise too
+    gn_adam_c: bool = True
 
     def __post_init__(self) -> None:
         if self.image_spp < 0:
             raise ValueError(f"image_spp must be >= 0 (0 = spp), got {self.image_spp}")
         if self.workers < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.optimiser not in ("adam", "gauss-newton"):
+            raise ValueError(f'optimiser must be "adam" or "gauss-newton", got {self.optimiser!r}')
+        if self.optimiser == "gauss-newton":
+            if not self.gn_lr > 0:
+                raise ValueError(f"gn_lr must be > 0, got {self.gn_lr}")
+            if self.gn_passes < 1 or self.gn_block < 1 or self.gn_every < 1:
+                raise ValueError("gn_passes, gn_block and gn_every must be >= 1")
+            if not self.gn_damping > 0:
+                raise ValueError(f"gn_damping must be > 0, got {self.gn_damping}")
+            if not self.gn_max_step > 0:
+                raise ValueError(f"gn_max_step must be > 0, got {self.gn_max_step}")
 
 
 @dataclass
@@ -181,6 +208,11 @@ class FitState:
     log: list = field(default_factory=list)
     anchor_scene: dict | None = None  # the image control variate's scene (re-rendered on resume)
     anchor_iteration: int = -1
+    # optimiser "gauss-newton": the preconditioner in use (over its variables) and its momentum
+    precond: list | None = None
+    precond_iteration: int = -1
+    gn_m: list | None = None
+    gn_n: int = 0
 
 
 def _save_json(path: str, obj) -> None:
@@ -223,6 +255,21 @@ def anchor_image(scene: TeethScene, capture: Capture, spp: int, max_depth: int, 
 def _anchor_seed(s: FitSettings, phase_index: int, iteration: int) -> int:
     """Seed of the anchor image refreshed at ``iteration``: odd and far from the passes' 2 seed, 2 seed + 1."""
     return 2 * (s.seed * 100003 + 10007 * phase_index + iteration + 7_000_003) + 1
+
+
+def _gn_seed(s: FitSettings, phase_index: int, iteration: int) -> int:
+    """Seed of the Gauss-Newton Jacobian passes estimated at ``iteration`` (their renders use this + up
+    to 1000 * passes + lights / 9; far above the pass A / B and anchor seeds)."""
+    return 3_000_000_000 + 10_000_000 * s.seed + 1_000_000 * phase_index + 10_000 * iteration
+
+
+def gauss_newton_preconditioner(scene: TeethScene, capture: Capture, layout: ParamLayout, gn_idx: np.ndarray,
+                                y: np.ndarray, s: FitSettings, seed: int) -> np.ndarray:
+    """The damped inverse Gauss-Newton matrix over the variables ``gn_idx`` that
+    ``optimiser="gauss-newton"`` steps with."""
+    hmat = gauss_newton_matrix(scene, capture, layout, gn_idx, y, s.domain, passes=s.gn_passes, block=s.gn_block,
+                               max_depth=s.max_depth, seed=seed, workers=s.workers)
+    return damped_inverse(hmat, s.gn_damping)
 
 
 def pass_a_image(scene: TeethScene, cameras: list, lights: list, sa: RenderSettings, pixels: list, light_ids,
@@ -341,6 +388,10 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             y = np.array(state.y)
             opt = Adam(s.lr, s.b1, s.b2, s.eps, None if state.adam_m is None else np.array(state.adam_m),
                        None if state.adam_v is None else np.array(state.adam_v), state.adam_n)
+            gn_opt = PreconditionedMomentum(s.gn_lr, s.b1, None if state.gn_m is None else np.array(state.gn_m),
+                                            state.gn_n, s.gn_max_step)
+            precond = None if state.precond is None else np.array(state.precond)
+            precond_it = state.precond_iteration
             state = None
         else:
             if phase == "textured":
@@ -349,7 +400,14 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             layout = ParamLayout(cur)
             y = to_optimiser(scene_to_vector(cur, layout), layout, s.domain)
             opt = Adam(s.lr, s.b1, s.b2, s.eps)
+            gn_opt = PreconditionedMomentum(s.gn_lr, s.b1, max_step=s.gn_max_step)
+            precond, precond_it = None, -1
         free = free_mask(layout, s.free)
+        # optimiser "gauss-newton": the variables it steps (the rest of the free ones keep Adam)
+        gn = np.zeros_like(free)
+        if s.optimiser == "gauss-newton":
+            gn = free & ((layout.kinds() != "c") if s.gn_adam_c else True)
+        gn_idx = np.flatnonzero(gn)
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
         if s.domain == "absorption":
@@ -371,6 +429,13 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                     anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, _anchor_seed(s, pi, it), layout, it,
                                           s.workers)
                 kw["anchor"] = anchor
+            if len(gn_idx) and (precond is None or it - precond_it >= s.gn_every):
+                t_gn = time.perf_counter()
+                precond = gauss_newton_preconditioner(cur, capture, layout, gn_idx, y, s, _gn_seed(s, pi, it))
+                precond_it = it
+                gn_seconds = time.perf_counter() - t_gn
+            else:
+                gn_seconds = 0.0
             loss, g_phys, stats = (gradient or iteration_gradient)(cur, capture, light_ids, st, seed, layout, **kw)
             if loss < best_loss:
                 best_loss = loss
@@ -378,10 +443,14 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             g = chain_to_optimiser(g_phys, y, layout, s.domain)
             g[~free] = 0.0
             lr = s.lr / (1.0 + s.lr_decay * it)
-            y_new = opt.step(y, g, lr)
-            y = np.where(free, y_new, y)
+            y_new = np.where(free & ~gn, opt.step(y, np.where(gn, 0.0, g), lr), y)
+            if len(gn_idx):
+                y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], precond, s.gn_lr / (1.0 + s.lr_decay * it))
+            y = y_new
             entry = {"phase": phase, "iteration": it, "loss": loss, "best_loss": best_loss,
                      "seconds": time.perf_counter() - t0, "lights": light_ids.tolist(), **stats}
+            if gn_seconds:
+                entry["gauss_newton_seconds"] = gn_seconds
             log.append(entry)
             if progress is not None:
                 progress(entry)
@@ -394,7 +463,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                                                  opt.m.tolist(), opt.v.tolist(), opt.n, best_loss,
                                                  best_scene.to_dict(), log,
                                                  None if anchor is None else anchor.scene.to_dict(),
-                                                 -1 if anchor is None else anchor.iteration)))
+                                                 -1 if anchor is None else anchor.iteration,
+                                                 None if precond is None else precond.tolist(), precond_it,
+                                                 None if gn_opt.m is None else gn_opt.m.tolist(), gn_opt.n)))
                 _save_json(os.path.join(out_dir, "loss.json"), {"log": log, "settings": asdict(s)})
                 _save_json(os.path.join(out_dir, "scene_fit.json"), best_scene.to_dict())
         cur = vector_to_scene(cur, from_optimiser(y, layout, s.domain), layout)

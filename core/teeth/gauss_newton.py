@@ -1,0 +1,118 @@
+"""Gauss-Newton preconditioning of the teeth fit (an option next to the thesis' Adam, Sec. 5.6).
+
+The L2 loss rho(y) = mean over masked pixels, lights and channels of (C(y) - C_ref)^2 has, near a
+good fit, the Gauss-Newton curvature
+
+    H = 2 / M * sum over pixels, lights, channels of J^T J,     J = dC / dy (optimiser variables).
+
+Its eigenvalues span several decades for teeth: enamel and dentin absorption trade off against each
+other in every channel, so the loss is a long, narrow valley. Adam scales every coordinate by its own
+gradient size, which does not follow a valley that runs diagonally through the coordinates, and the
+fit creeps along it. A step ``P g`` with ``P = (H + lambda diag H)^-1`` (Levenberg-Marquardt damping)
+does follow it.
+
+H is estimated from ``passes`` independent 1-spp forward-mode Jacobian passes (``path_tracer.render``
+with ``jacobian_cols``), pooled over ``block`` x ``block`` pixel tiles (the box-filtered images' H, a
+lower bound of the per-pixel one with far less Monte Carlo noise per entry). The average of the
+passes' own J_i^T J_i is used: it is positive definite, and its Monte Carlo variance term adds to the
+curvature exactly in the directions whose derivative estimate is noisy (the dentin coefficients),
+which damps the steps there instead of amplifying gradient noise (products of two independent
+passes are unbiased but indefinite at affordable pass counts).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .capture import Capture
+from .compiled_scene import CompiledScene
+from .param_vector import ParamLayout, chain_to_optimiser
+from .path_tracer import RenderSettings, render, traced_tiles
+from .scene import TeethScene
+
+
+def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray, domain: str = "thesis") -> np.ndarray:
+    """(k, k) dx[cols] / dy[cols] at ``y``: the physical Jacobian columns ``cols`` times this map are the
+    optimiser-variable columns (the map only mixes a volume's sigma_t and albedo, so ``cols`` must hold
+    both or neither of a pair)."""
+    eye = np.eye(layout.size)
+    return np.array([chain_to_optimiser(eye[i], y, layout, domain)[cols] for i in cols])
+
+
+def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, cols: np.ndarray, y: np.ndarray,
+                        domain: str = "thesis", *, passes: int = 4, block: int = 8, max_depth: int = 6,
+                        seed: int = 0, workers: int = 1, lights_per_render: int = 9,
+                        progress: Callable[[int, int], None] | None = None) -> np.ndarray:
+    """(k, k) Gauss-Newton matrix of the per-pixel L2 loss over all of ``capture``'s lights in the
+    optimiser variables ``y[cols]``, estimated from ``passes`` 1-spp Jacobian passes (module docstring).
+    ``progress(done, total)`` is called after every render."""
+    if passes < 1:
+        raise ValueError(f"passes must be >= 1, got {passes}")
+    if block < 1:
+        raise ValueError(f"block must be >= 1, got {block}")
+    if capture.masks is None:
+        raise ValueError("the capture needs masks")
+    cols = np.asarray(cols, dtype=np.int64)
+    k = len(cols)
+    chain = optimiser_jacobian_map(y, layout, cols, domain)
+    h, w = capture.masks.shape[1:]
+    pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
+    tile_of, n_tiles = traced_tiles(pixels, h, w, block)
+    inv_sqrt_n = 1.0 / np.sqrt(np.bincount(tile_of, minlength=n_tiles).astype(np.float64))
+    n_l = len(capture.lights)
+    m = len(tile_of) * n_l * 3
+    cs = CompiledScene(scene, layout=layout)
+    groups = [np.arange(i, min(i + lights_per_render, n_l)) for i in range(0, n_l, lights_per_render)]
+    total, done = passes * len(groups), 0
+    out = np.zeros((k, k))
+    for p in range(passes):
+        for gi, ids in enumerate(groups):
+            st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + 1000 * p + gi, workers=workers)
+            r = render(scene, capture.cameras, capture.lights, st, pixels=pixels, light_ids=ids, compiled=cs,
+                       jacobian_cols=cols)
+            jt = np.zeros((n_tiles,) + r.jacobian.shape[1:])  # (tiles, L, 3, k) tile sums
+            np.add.at(jt, tile_of, r.jacobian)
+            jt = (jt * inv_sqrt_n[:, None, None, None]).reshape(-1, k) @ chain
+            out += jt.T @ jt
+            done += 1
+            if progress is not None:
+                progress(done, total)
+    return out * (2.0 / (m * passes))
+
+
+def damped_inverse(hmat: np.ndarray, damping: float) -> np.ndarray:
+    """(H + damping diag H)^-1 (Levenberg-Marquardt); H must be symmetric positive semi-definite."""
+    if damping <= 0:
+        raise ValueError(f"damping must be > 0, got {damping}")
+    d = np.diag(hmat).copy()
+    if np.any(d <= 0) or not np.all(np.isfinite(hmat)):
+        raise ValueError("the Gauss-Newton matrix needs a positive, finite diagonal (does every free "
+                         "parameter change the masked pixels?)")
+    s = 1.0 / np.sqrt(d)
+    a = hmat * np.outer(s, s) + damping * np.eye(len(d))  # unit diagonal scaling: better conditioned
+    return np.linalg.inv(a) * np.outer(s, s)
+
+
+@dataclass
+class PreconditionedMomentum:
+    """y <- y - clip(lr P m_hat, +-max_step) with m = b1 m + (1 - b1) g (an average of the stochastic
+    gradients, bias-corrected like Adam's first moment); ``P`` the damped inverse Gauss-Newton matrix.
+    The clip is a trust region: along directions the estimated curvature calls flat, the gradient's
+    noise would otherwise take steps far outside the region where the curvature was estimated."""
+
+    lr: float
+    b1: float = 0.9
+    m: np.ndarray | None = None
+    n: int = 0
+    max_step: float = np.inf  # trust region: no coordinate moves further than this per step
+
+    def step(self, y: np.ndarray, g: np.ndarray, precond: np.ndarray, lr: float | None = None) -> np.ndarray:
+        if self.m is None:
+            self.m = np.zeros_like(y)
+        self.n += 1
+        self.m = self.b1 * self.m + (1 - self.b1) * g
+        mh = self.m / (1 - self.b1**self.n)
+        return y - np.clip((self.lr if lr is None else lr) * (precond @ mh), -self.max_step, self.max_step)
