@@ -67,6 +67,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "coefficients keep Adam), which follows the valley where enamel and dentin absorption "
                         "trade off; see core/teeth/gauss_newton.py")
     f.add_argument("--gn-lr", type=float, default=0.3, help="gauss-newton: fraction of the Gauss-Newton step")
+    f.add_argument("--gn-start", type=int, default=0,
+                   help="gauss-newton: Adam iterations before Gauss-Newton takes over (far from the optimum the "
+                        "linearised model misleads)")
     f.add_argument("--gn-every", type=int, default=50, help="gauss-newton: iterations between matrix estimates")
     f.add_argument("--gn-passes", type=int, default=4, help="gauss-newton: 1-spp Jacobian passes per estimate")
     f.add_argument("--gn-damping", type=float, default=0.03,
@@ -148,7 +151,8 @@ def run_fit(args: argparse.Namespace) -> int:
                      max_depth=args.max_depth, lights_per_iteration=args.lights_per_iteration, seed=args.seed,
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
                      loss_block=args.loss_block, domain=args.domain, image_spp=args.image_spp,
-                     workers=args.workers, optimiser=args.optimiser, gn_lr=args.gn_lr, gn_every=args.gn_every,
+                     workers=args.workers, optimiser=args.optimiser, gn_lr=args.gn_lr, gn_start=args.gn_start,
+                     gn_every=args.gn_every,
                      gn_passes=args.gn_passes, gn_damping=args.gn_damping)
     if args.workers != 1 and not args.no_dask:
         raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")

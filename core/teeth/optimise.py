@@ -80,6 +80,9 @@ class FitSettings:
     # lr_decay applies to gn_lr as to lr
     optimiser: str = "adam"
     gn_lr: float = 0.3  # fraction of the Gauss-Newton step
+    # Adam iterations before Gauss-Newton takes over (per phase): far from the optimum the linearised
+    # model's steps along its flat directions are long and wrong, Adam's bounded steps are not
+    gn_start: int = 0
     gn_passes: int = 4
     gn_block: int = 8
     gn_damping: float = 0.03
@@ -99,8 +102,8 @@ class FitSettings:
         if self.optimiser == "gauss-newton":
             if not self.gn_lr > 0:
                 raise ValueError(f"gn_lr must be > 0, got {self.gn_lr}")
-            if self.gn_passes < 1 or self.gn_block < 1 or self.gn_every < 1:
-                raise ValueError("gn_passes, gn_block and gn_every must be >= 1")
+            if self.gn_passes < 1 or self.gn_block < 1 or self.gn_every < 1 or self.gn_start < 0:
+                raise ValueError("gn_passes, gn_block and gn_every must be >= 1, gn_start >= 0")
             if not self.gn_damping > 0:
                 raise ValueError(f"gn_damping must be > 0, got {self.gn_damping}")
             if not self.gn_max_step > 0:
@@ -429,7 +432,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                     anchor = anchor_image(cur, capture, s.anchor_spp, s.max_depth, _anchor_seed(s, pi, it), layout, it,
                                           s.workers)
                 kw["anchor"] = anchor
-            if len(gn_idx) and (precond is None or it - precond_it >= s.gn_every):
+            gn_on = len(gn_idx) > 0 and it >= s.gn_start
+            if gn_on and (precond is None or it - precond_it >= s.gn_every):
                 t_gn = time.perf_counter()
                 precond = gauss_newton_preconditioner(cur, capture, layout, gn_idx, y, s, _gn_seed(s, pi, it))
                 precond_it = it
@@ -443,8 +447,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             g = chain_to_optimiser(g_phys, y, layout, s.domain)
             g[~free] = 0.0
             lr = s.lr / (1.0 + s.lr_decay * it)
-            y_new = np.where(free & ~gn, opt.step(y, np.where(gn, 0.0, g), lr), y)
-            if len(gn_idx):
+            by_gn = gn if gn_on else np.zeros_like(gn)
+            y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), lr), y)
+            if gn_on:
                 y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], precond, s.gn_lr / (1.0 + s.lr_decay * it))
             y = y_new
             entry = {"phase": phase, "iteration": it, "loss": loss, "best_loss": best_loss,

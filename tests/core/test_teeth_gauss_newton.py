@@ -125,9 +125,27 @@ def test_gauss_newton_fit_lowers_the_error_and_resumes_exactly(tmp_path):
     np.testing.assert_allclose(resumed.teeth[0].enamel.sigma_t, straight.teeth[0].enamel.sigma_t, rtol=1e-9)
 
 
+def test_gauss_newton_takes_over_from_adam_at_gn_start():
+    """Before ``gn_start`` the fit is Adam's, iteration for iteration; from it on the matrix is estimated."""
+    _, theta, cap = _problem()
+    base = dict(iterations=3, spp=1, lights_per_iteration=2, free=("slab.enamel.albedo",), seed=5, max_depth=4)
+    seen: dict = {"adam": [], "gn": []}
+    _, log_a = fit(theta, cap, FitSettings(**base), callback=lambda e, sc: seen["adam"].append(sc.copy()))
+    _, log_g = fit(theta, cap, FitSettings(**base, optimiser="gauss-newton", gn_start=2, gn_passes=1, gn_block=4),
+                   callback=lambda e, sc: seen["gn"].append(sc.copy()))
+    assert ["gauss_newton_seconds" in e for e in log_g] == [False, False, True]
+    np.testing.assert_allclose([e["loss"] for e in log_g[:2]], [e["loss"] for e in log_a[:2]], rtol=1e-12)
+    # the scene of iteration 2 is the result of two Adam steps in both fits
+    np.testing.assert_allclose(seen["gn"][2].teeth[0].enamel.albedo, seen["adam"][2].teeth[0].enamel.albedo,
+                               rtol=1e-12)
+
+
 @pytest.mark.parametrize("kw, match", [({"optimiser": "newton"}, "optimiser"),
                                        ({"optimiser": "gauss-newton", "gn_damping": 0.0}, "gn_damping"),
-                                       ({"optimiser": "gauss-newton", "gn_passes": 0}, "gn_passes")])
+                                       ({"optimiser": "gauss-newton", "gn_passes": 0}, "gn_passes"),
+                                       ({"optimiser": "gauss-newton", "gn_start": -1}, "gn_start"),
+                                       ({"optimiser": "gauss-newton", "gn_max_step": 0.0}, "gn_max_step"),
+                                       ({"optimiser": "gauss-newton", "gn_lr": 0.0}, "gn_lr")])
 def test_bad_optimiser_settings_are_clear_errors(kw, match):
     with pytest.raises(ValueError, match=match):
         FitSettings(iterations=1, **kw)
