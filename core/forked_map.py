@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import threading
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 _JOB: tuple[Callable, Any] | None = None
@@ -28,6 +29,18 @@ def _call(item):
     return fn(job, item)
 
 
+@contextmanager
+def fork_warning_silenced() -> Iterator[None]:
+    """Silence Python's "multi-threaded, use of fork() may lead to deadlocks" DeprecationWarning: numpy's
+    OpenBLAS thread pool (and an executor's manager thread) make this process "multi-threaded";
+    OpenBLAS re-initialises in the child (pthread_atfork) and our workers take no lock that another
+    thread of this process could hold."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*use of fork\(\) may lead to deadlocks",
+                                category=DeprecationWarning)
+        yield
+
+
 def forked_map(fn: Callable[[Any, Any], Any], job: Any, items: Sequence, workers: int) -> list:
     """``[fn(job, item) for item in items]`` in up to ``workers`` forked processes, results in item
     order. Runs in this process when ``workers`` <= 1, there is at most one item, fork is missing or
@@ -43,12 +56,7 @@ def forked_map(fn: Callable[[Any, Any], Any], job: Any, items: Sequence, workers
     with _LOCK:
         _JOB = (fn, job)
         try:
-            with warnings.catch_warnings():
-                # numpy's OpenBLAS thread pool (and the executor's manager thread) make this process
-                # "multi-threaded"; OpenBLAS re-initialises in the child (pthread_atfork) and the
-                # workers take no lock that another thread of this process could hold
-                warnings.filterwarnings("ignore", message=r".*use of fork\(\) may lead to deadlocks",
-                                        category=DeprecationWarning)
+            with fork_warning_silenced():
                 with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
                                          initializer=_mark_worker) as pool:
                     return list(pool.map(_call, items))

@@ -23,6 +23,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from ..forked_map import fork_warning_silenced
 from .btf_io import iter_btf_blocks, read_btf_header
 from .levenberg_marquardt import Samples
 from .ndf_extraction import NdfOperator, ndf_operator
@@ -147,8 +148,8 @@ def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int =
         else:
             method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
             ctx = multiprocessing.get_context(method)
-            with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx,
-                                     initializer=_init_worker, initargs=init_args) as pool:
+            with fork_warning_silenced(), ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx,
+                                                              initializer=_init_worker, initargs=init_args) as pool:
                 futures = [pool.submit(_fit_one, t, cache) for t in todo]
                 for fut in as_completed(futures):
                     iters.append(fut.result()[2])
