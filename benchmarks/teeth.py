@@ -78,8 +78,11 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     def record(entry: dict, scene) -> None:
         ys.append(to_optimiser(scene_to_vector(scene, layout), layout))
         if len(ys) % 10 == 0:  # progress on stderr (stdout is the JSON result)
+            err = recovery_errors(scene, truth)
             print(f"bench teeth: recovery iteration {len(ys)}/{iterations}, loss {entry['loss']:.3e}, "
-                  f"{(time.perf_counter() - t0) / len(ys):.1f} s per iteration", file=sys.stderr, flush=True)
+                  f"{(time.perf_counter() - t0) / len(ys):.1f} s per iteration; this iterate's sigma_t / albedo / c "
+                  f"errors {err['recovery_sigma_t_rel_err']:.3f} / {err['recovery_albedo_rel_err']:.3f} / "
+                  f"{err['recovery_dentin_abs_err']:.3f}", file=sys.stderr, flush=True)
 
     best, log = fit(start, capture, settings, callback=record)
     out["recovery_seconds"] = time.perf_counter() - t0

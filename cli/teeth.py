@@ -65,7 +65,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="adam (thesis) or gauss-newton: the material parameters step along the damped inverse "
                         "Gauss-Newton matrix (estimated from 1-spp Jacobian passes of all lights; the dentin "
                         "coefficients keep Adam), which follows the valley where enamel and dentin absorption "
-                        "trade off; see core/teeth/gauss_newton.py")
+                        "trade off; experimental (one acceptance fit diverged after its second matrix "
+                        "estimate, see README); see core/teeth/gauss_newton.py")
     f.add_argument("--gn-lr", type=float, default=0.3, help="gauss-newton: fraction of the Gauss-Newton step")
     f.add_argument("--gn-start", type=int, default=0,
                    help="gauss-newton: Adam iterations before Gauss-Newton takes over (far from the optimum the "

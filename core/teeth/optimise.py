@@ -77,7 +77,8 @@ class FitSettings:
     # damped inverse Gauss-Newton matrix of all lights, see gauss_newton.py), P estimated from gn_passes
     # 1-spp Jacobian passes pooled in gn_block tiles at the phase's start and every gn_every iterations.
     # Adam creeps along the loss valley in which enamel and dentin absorption trade off; this follows it.
-    # lr_decay applies to gn_lr as to lr
+    # lr_decay applies to gn_lr as to lr. Experimental: in the acceptance fit a re-estimated matrix let
+    # one sigma_t walk off at the gn_max_step cap (README, "Why Adam stalls"); watch the loss
     optimiser: str = "adam"
     gn_lr: float = 0.3  # fraction of the Gauss-Newton step
     # Adam iterations before Gauss-Newton takes over (per phase): far from the optimum the linearised
