@@ -18,6 +18,9 @@ passes' own J_i^T J_i is used: it is positive definite, and its Monte Carlo vari
 curvature exactly in the directions whose derivative estimate is noisy (the dentin coefficients),
 which damps the steps there instead of amplifying gradient noise (products of two independent
 passes are unbiased but indefinite at affordable pass counts).
+
+Experimental: in the acceptance fit it took the errors from 21 / 18 % and 0.11 to 12 / 11 % and 0.10
+in 20 iterations, then a sigma_t diverged (README, "Why Adam stalls"); there is no divergence guard yet.
 """
 
 from __future__ import annotations
