@@ -65,8 +65,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="adam (thesis) or gauss-newton: the material parameters step along the damped inverse "
                         "Gauss-Newton matrix (estimated from 1-spp Jacobian passes of all lights; the dentin "
                         "coefficients keep Adam), which follows the valley where enamel and dentin absorption "
-                        "trade off; experimental (one acceptance fit diverged after its second matrix "
-                        "estimate, see README); see core/teeth/gauss_newton.py")
+                        "trade off; experimental (an acceptance fit improved for 30 iterations, then a sigma_t "
+                        "diverged; see README); see core/teeth/gauss_newton.py")
     f.add_argument("--gn-lr", type=float, default=0.3, help="gauss-newton: fraction of the Gauss-Newton step")
     f.add_argument("--gn-start", type=int, default=0,
                    help="gauss-newton: Adam iterations before Gauss-Newton takes over (far from the optimum the "
@@ -153,8 +153,7 @@ def run_fit(args: argparse.Namespace) -> int:
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
                      loss_block=args.loss_block, domain=args.domain, image_spp=args.image_spp,
                      workers=args.workers, optimiser=args.optimiser, gn_lr=args.gn_lr, gn_start=args.gn_start,
-                     gn_every=args.gn_every,
-                     gn_passes=args.gn_passes, gn_damping=args.gn_damping)
+                     gn_every=args.gn_every, gn_passes=args.gn_passes, gn_damping=args.gn_damping)
     if args.workers != 1 and not args.no_dask:
         raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
     if not args.resume:
