@@ -25,7 +25,6 @@ in 20 iterations, then a sigma_t diverged (README, "Why Adam stalls"); there is 
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,11 +46,9 @@ def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray,
 
 def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, cols: np.ndarray, y: np.ndarray,
                         domain: str = "thesis", *, passes: int = 4, block: int = 8, max_depth: int = 6,
-                        seed: int = 0, workers: int = 1, lights_per_render: int = 9,
-                        progress: Callable[[int, int], None] | None = None) -> np.ndarray:
+                        seed: int = 0, workers: int = 1, lights_per_render: int = 9) -> np.ndarray:
     """(k, k) Gauss-Newton matrix of the per-pixel L2 loss over all of ``capture``'s lights in the
-    optimiser variables ``y[cols]``, estimated from ``passes`` 1-spp Jacobian passes (module docstring).
-    ``progress(done, total)`` is called after every render."""
+    optimiser variables ``y[cols]``, estimated from ``passes`` 1-spp Jacobian passes (module docstring)."""
     if passes < 1:
         raise ValueError(f"passes must be >= 1, got {passes}")
     if block < 1:
@@ -69,7 +66,6 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
     m = len(tile_of) * n_l * 3
     cs = CompiledScene(scene, layout=layout)
     groups = [np.arange(i, min(i + lights_per_render, n_l)) for i in range(0, n_l, lights_per_render)]
-    total, done = passes * len(groups), 0
     out = np.zeros((k, k))
     for p in range(passes):
         for gi, ids in enumerate(groups):
@@ -80,9 +76,6 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
             np.add.at(jt, tile_of, r.jacobian)
             jt = (jt * inv_sqrt_n[:, None, None, None]).reshape(-1, k) @ chain
             out += jt.T @ jt
-            done += 1
-            if progress is not None:
-                progress(done, total)
     return out * (2.0 / (m * passes))
 
 

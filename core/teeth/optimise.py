@@ -447,11 +447,11 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                 best_scene = cur.copy()
             g = chain_to_optimiser(g_phys, y, layout, s.domain)
             g[~free] = 0.0
-            lr = s.lr / (1.0 + s.lr_decay * it)
+            decay = 1.0 + s.lr_decay * it  # lr_n = lr / (1 + lr_decay * n), gn_lr likewise
             by_gn = gn if gn_on else np.zeros_like(gn)
-            y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), lr), y)
+            y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), s.lr / decay), y)
             if gn_on:
-                y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], precond, s.gn_lr / (1.0 + s.lr_decay * it))
+                y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], precond, s.gn_lr / decay)
             y = y_new
             entry = {"phase": phase, "iteration": it, "loss": loss, "best_loss": best_loss,
                      "seconds": time.perf_counter() - t0, "lights": light_ids.tolist(), **stats}
