@@ -82,7 +82,12 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
             print(f"bench teeth: recovery iteration {len(ys)}/{iterations}, loss {entry['loss']:.3e}, "
                   f"{(time.perf_counter() - t0) / len(ys):.1f} s per iteration; this iterate's sigma_t / albedo / c "
                   f"errors {err['recovery_sigma_t_rel_err']:.3f} / {err['recovery_albedo_rel_err']:.3f} / "
-                  f"{err['recovery_dentin_abs_err']:.3f}", file=sys.stderr, flush=True)
+                  f"{err['recovery_dentin_abs_err']:.3f}"
+                  + (f"; Gauss-Newton damping {entry['gauss_newton_damping']:.3g}"
+                     if "gauss_newton_damping" in entry else ""), file=sys.stderr, flush=True)
+        if entry.get("gauss_newton_rollback"):
+            print(f"bench teeth: iteration {entry['iteration']}: the loss rose, Gauss-Newton went back to its best "
+                  f"window (damping now {entry['gauss_newton_damping']:.3g})", file=sys.stderr, flush=True)
 
     best, log = fit(start, capture, settings, callback=record)
     out["recovery_seconds"] = time.perf_counter() - t0

@@ -75,6 +75,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--gn-passes", type=int, default=4, help="gauss-newton: 1-spp Jacobian passes per estimate")
     f.add_argument("--gn-damping", type=float, default=0.03,
                    help="gauss-newton: Levenberg-Marquardt damping, relative to the matrix diagonal")
+    f.add_argument("--gn-guard-window", type=int, default=10,
+                   help="gauss-newton: iterations per loss window of the divergence guard (a window whose mean loss "
+                        "rises more than --gn-guard-rise above the best one's goes back to the best window's mean "
+                        "iterate and raises the damping 4x); 0 = no guard")
+    f.add_argument("--gn-guard-rise", type=float, default=0.25,
+                   help="gauss-newton: relative loss rise that counts as a divergence")
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to optimise (default: all volume, a_t, c)")
     f.add_argument("--seed", type=int, default=0)
@@ -153,7 +159,8 @@ def run_fit(args: argparse.Namespace) -> int:
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
                      loss_block=args.loss_block, domain=args.domain, image_spp=args.image_spp,
                      workers=args.workers, optimiser=args.optimiser, gn_lr=args.gn_lr, gn_start=args.gn_start,
-                     gn_every=args.gn_every, gn_passes=args.gn_passes, gn_damping=args.gn_damping)
+                     gn_every=args.gn_every, gn_passes=args.gn_passes, gn_damping=args.gn_damping,
+                     gn_guard_window=args.gn_guard_window, gn_guard_rise=args.gn_guard_rise)
     if args.workers != 1 and not args.no_dask:
         raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
     if not args.resume:

@@ -23,7 +23,7 @@ import numpy as np
 
 from .capture import Capture
 from .compiled_scene import CompiledScene
-from .gauss_newton import PreconditionedMomentum, damped_inverse, gauss_newton_matrix
+from .gauss_newton import DivergenceGuard, PreconditionedMomentum, damped_inverse, gauss_newton_matrix
 from .param_vector import (
     ParamLayout,
     chain_to_optimiser,
@@ -77,8 +77,7 @@ class FitSettings:
     # damped inverse Gauss-Newton matrix of all lights, see gauss_newton.py), P estimated from gn_passes
     # 1-spp Jacobian passes pooled in gn_block tiles at the phase's start and every gn_every iterations.
     # Adam creeps along the loss valley in which enamel and dentin absorption trade off; this follows it.
-    # lr_decay applies to gn_lr as to lr. Experimental: in the acceptance fit a re-estimated matrix let
-    # one sigma_t walk off at the gn_max_step cap (README, "Why Adam stalls"); watch the loss
+    # lr_decay applies to gn_lr as to lr. Experimental (README, "Why Adam stalls"); watch the loss
     optimiser: str = "adam"
     gn_lr: float = 0.3  # fraction of the Gauss-Newton step
     # Adam iterations before Gauss-Newton takes over (per phase): far from the optimum the linearised
@@ -88,7 +87,14 @@ class FitSettings:
     gn_block: int = 8
     gn_damping: float = 0.03
     gn_every: int = 50
-    gn_max_step: float = 0.05  # trust region: per-iteration move of each optimiser variable at most this
+    gn_max_step: float = 0.05  # trust region: the step shrinks until no optimiser variable moves further
+    # divergence guard (gauss_newton.DivergenceGuard): windows of gn_guard_window iterations; a window whose
+    # mean loss is more than gn_guard_rise above the best window's goes back to that window's mean iterate
+    # and multiplies the damping by gn_guard_factor (a better window divides it, down to gn_damping);
+    # gn_guard_window = 0 turns the guard off
+    gn_guard_window: int = 10
+    gn_guard_rise: float = 0.25
+    gn_guard_factor: float = 4.0
     # the dentin coefficients keep Adam (lr, b1, b2): their Jacobian columns are mostly Monte Carlo
     # noise at a few passes, so their Gauss-Newton rows and cross terms would be noise too
     gn_adam_c: bool = True
@@ -109,6 +115,9 @@ class FitSettings:
                 raise ValueError(f"gn_damping must be > 0, got {self.gn_damping}")
             if not self.gn_max_step > 0:
                 raise ValueError(f"gn_max_step must be > 0, got {self.gn_max_step}")
+            if self.gn_guard_window < 0 or not self.gn_guard_rise > 0 or not self.gn_guard_factor > 1:
+                raise ValueError("gn_guard_window must be >= 0, gn_guard_rise > 0 and gn_guard_factor > 1, got "
+                                 f"{self.gn_guard_window}, {self.gn_guard_rise}, {self.gn_guard_factor}")
 
 
 @dataclass
@@ -212,11 +221,12 @@ class FitState:
     log: list = field(default_factory=list)
     anchor_scene: dict | None = None  # the image control variate's scene (re-rendered on resume)
     anchor_iteration: int = -1
-    # optimiser "gauss-newton": the preconditioner in use (over its variables) and its momentum
-    precond: list | None = None
+    # optimiser "gauss-newton": the Gauss-Newton matrix in use (over its variables), its momentum and guard
+    gn_hmat: list | None = None
     precond_iteration: int = -1
     gn_m: list | None = None
     gn_n: int = 0
+    gn_guard: dict | None = None
 
 
 def _save_json(path: str, obj) -> None:
@@ -267,13 +277,26 @@ def _gn_seed(s: FitSettings, phase_index: int, iteration: int) -> int:
     return 3_000_000_000 + 10_000_000 * s.seed + 1_000_000 * phase_index + 10_000 * iteration
 
 
-def gauss_newton_preconditioner(scene: TeethScene, capture: Capture, layout: ParamLayout, gn_idx: np.ndarray,
-                                y: np.ndarray, s: FitSettings, seed: int) -> np.ndarray:
-    """The damped inverse Gauss-Newton matrix over the variables ``gn_idx`` that
-    ``optimiser="gauss-newton"`` steps with."""
-    hmat = gauss_newton_matrix(scene, capture, layout, gn_idx, y, s.domain, passes=s.gn_passes, block=s.gn_block,
+def fit_gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, gn_idx: np.ndarray,
+                            y: np.ndarray, s: FitSettings, seed: int) -> np.ndarray:
+    """The Gauss-Newton matrix over the variables ``gn_idx`` that ``optimiser="gauss-newton"`` steps."""
+    return gauss_newton_matrix(scene, capture, layout, gn_idx, y, s.domain, passes=s.gn_passes, block=s.gn_block,
                                max_depth=s.max_depth, seed=seed, workers=s.workers)
-    return damped_inverse(hmat, s.gn_damping)
+
+
+def _new_guard(s: FitSettings) -> DivergenceGuard | None:
+    if s.optimiser != "gauss-newton" or s.gn_guard_window == 0:
+        return None
+    return DivergenceGuard(s.gn_guard_window, s.gn_guard_rise, s.gn_guard_factor, s.gn_damping, s.gn_damping)
+
+
+def _load_state(path: str) -> FitState:
+    with open(path) as f:
+        d = json.load(f)
+    if "precond" in d:
+        raise ValueError(f"{path!r} is a Gauss-Newton checkpoint of an earlier version (it stores the inverse, "
+                         "not the matrix); start the fit again")
+    return FitState(**d)
 
 
 def pass_a_image(scene: TeethScene, cameras: list, lights: list, sa: RenderSettings, pixels: list, light_ids,
@@ -367,8 +390,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     if resume:
         if ckpt is None or not os.path.exists(ckpt):
             raise FileNotFoundError(f"no checkpoint to resume from in {out_dir!r}")
-        with open(ckpt) as f:
-            state = FitState(**json.load(f))
+        state = _load_state(ckpt)
     log = [] if state is None else state.log
     best_loss = np.inf if state is None else state.best_loss
     best_scene = scene if state is None else TeethScene.from_dict(state.best_scene)
@@ -394,8 +416,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                        None if state.adam_v is None else np.array(state.adam_v), state.adam_n)
             gn_opt = PreconditionedMomentum(s.gn_lr, s.b1, None if state.gn_m is None else np.array(state.gn_m),
                                             state.gn_n, s.gn_max_step)
-            precond = None if state.precond is None else np.array(state.precond)
+            hmat = None if state.gn_hmat is None else np.array(state.gn_hmat)
             precond_it = state.precond_iteration
+            guard = None if state.gn_guard is None else DivergenceGuard.from_dict(state.gn_guard)
             state = None
         else:
             if phase == "textured":
@@ -405,7 +428,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             y = to_optimiser(scene_to_vector(cur, layout), layout, s.domain)
             opt = Adam(s.lr, s.b1, s.b2, s.eps)
             gn_opt = PreconditionedMomentum(s.gn_lr, s.b1, max_step=s.gn_max_step)
-            precond, precond_it = None, -1
+            hmat, precond_it, guard = None, -1, _new_guard(s)
         free = free_mask(layout, s.free)
         # optimiser "gauss-newton": the variables it steps (the rest of the free ones keep Adam)
         gn = np.zeros_like(free)
@@ -434,9 +457,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                                           s.workers)
                 kw["anchor"] = anchor
             gn_on = len(gn_idx) > 0 and it >= s.gn_start
-            if gn_on and (precond is None or it - precond_it >= s.gn_every):
+            if gn_on and (hmat is None or it - precond_it >= s.gn_every):
                 t_gn = time.perf_counter()
-                precond = gauss_newton_preconditioner(cur, capture, layout, gn_idx, y, s, _gn_seed(s, pi, it))
+                hmat = fit_gauss_newton_matrix(cur, capture, layout, gn_idx, y, s, _gn_seed(s, pi, it))
                 precond_it = it
                 gn_seconds = time.perf_counter() - t_gn
             else:
@@ -449,14 +472,27 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             g[~free] = 0.0
             decay = 1.0 + s.lr_decay * it  # lr_n = lr / (1 + lr_decay * n), gn_lr likewise
             by_gn = gn if gn_on else np.zeros_like(gn)
-            y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), s.lr / decay), y)
-            if gn_on:
-                y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], precond, s.gn_lr / decay)
+            back = guard.observe(loss, y) if gn_on and guard is not None else None
+            if back is not None:
+                # a divergence: no step from this iterate's gradient; back to the best window's mean
+                # iterate with more damping and a fresh gradient average (Adam's moments stay)
+                y_new = back
+                gn_opt.reset()
+            else:
+                y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), s.lr / decay), y)
+                if gn_on:
+                    damping = s.gn_damping if guard is None else guard.damping
+                    y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], damped_inverse(hmat, damping),
+                                                s.gn_lr / decay)
             y = y_new
             entry = {"phase": phase, "iteration": it, "loss": loss, "best_loss": best_loss,
                      "seconds": time.perf_counter() - t0, "lights": light_ids.tolist(), **stats}
             if gn_seconds:
                 entry["gauss_newton_seconds"] = gn_seconds
+            if gn_on and guard is not None:
+                entry["gauss_newton_damping"] = guard.damping
+                if back is not None:
+                    entry["gauss_newton_rollback"] = True
             log.append(entry)
             if progress is not None:
                 progress(entry)
@@ -470,8 +506,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                                                  best_scene.to_dict(), log,
                                                  None if anchor is None else anchor.scene.to_dict(),
                                                  -1 if anchor is None else anchor.iteration,
-                                                 None if precond is None else precond.tolist(), precond_it,
-                                                 None if gn_opt.m is None else gn_opt.m.tolist(), gn_opt.n)))
+                                                 None if hmat is None else hmat.tolist(), precond_it,
+                                                 None if gn_opt.m is None else gn_opt.m.tolist(), gn_opt.n,
+                                                 None if guard is None else guard.to_dict())))
                 _save_json(os.path.join(out_dir, "loss.json"), {"log": log, "settings": asdict(s)})
                 _save_json(os.path.join(out_dir, "scene_fit.json"), best_scene.to_dict())
         cur = vector_to_scene(cur, from_optimiser(y, layout, s.domain), layout)

@@ -136,12 +136,15 @@ def test_fit_gauss_newton_from_the_command_line(tmp_path, capsys):
     out = tmp_path / "gn"
     assert main(["teeth", "fit", str(cap_dir), "--out", str(out), "--init", "perturbed", "--no-progress", "--no-dask",
                  "--lights-per-iteration", "2", "--max-depth", "3", "--iterations", "3", "--optimiser", "gauss-newton",
-                 "--gn-start", "1", "--gn-every", "2", "--gn-passes", "1",
-                 "--free", "*.enamel.albedo,*.dentin.albedo,tooth0.c"]) == 0
-    log = json.loads((out / "loss.json").read_text())["log"]
+                 "--gn-start", "1", "--gn-every", "2", "--gn-passes", "1", "--gn-guard-window", "2",
+                 "--gn-guard-rise", "0.5", "--free", "*.enamel.albedo,*.dentin.albedo,tooth0.c"]) == 0
+    loss_json = json.loads((out / "loss.json").read_text())
+    log = loss_json["log"]
     assert ["gauss_newton_seconds" in e for e in log] == [False, True, False]
+    assert [loss_json["settings"][k] for k in ("gn_guard_window", "gn_guard_rise")] == [2, 0.5]
+    assert ["gauss_newton_damping" in e for e in log] == [False, True, True]
     ckpt = json.loads((out / "checkpoint.json").read_text())
-    assert np.array(ckpt["precond"]).shape == (6, 6)  # the albedos; the coefficients keep Adam
+    assert np.array(ckpt["gn_hmat"]).shape == (6, 6)  # the albedos; the coefficients keep Adam
     assert ckpt["precond_iteration"] == 1
     capsys.readouterr()
     assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), "--no-dask", "--optimiser",

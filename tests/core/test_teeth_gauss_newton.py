@@ -10,11 +10,12 @@ import pytest
 
 from material_structures.core.teeth.capture import Capture
 from material_structures.core.teeth.gauss_newton import (
+    DivergenceGuard,
     PreconditionedMomentum,
     damped_inverse,
     gauss_newton_matrix,
 )
-from material_structures.core.teeth.optimise import FitSettings, fit, free_mask
+from material_structures.core.teeth.optimise import FitSettings, fit, free_mask, iteration_gradient
 from material_structures.core.teeth.param_vector import ParamLayout, from_optimiser, scene_to_vector, to_optimiser
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import VolumeMaterial
@@ -98,6 +99,101 @@ def test_damped_inverse_and_momentum_step_closed_forms():
         damped_inverse(bad, 0.1)
 
 
+def test_momentum_step_is_shortened_as_a_whole():
+    """Over ``max_step`` the step keeps its direction (a descent direction): per-coordinate clipping would
+    turn this one, whose first coordinate is far over the bound, into an ascent direction."""
+    hmat = np.array([[1.0, 9.9], [9.9, 100.0]])  # correlated, unevenly scaled variables
+    p = np.linalg.inv(hmat)
+    g = hmat @ np.array([20.0, -1.0])
+    d = p @ g  # [20, -1]
+    y0 = np.zeros(2)
+    y1 = PreconditionedMomentum(1.0, b1=0.0, max_step=0.05).step(y0, g, p)
+    np.testing.assert_allclose(y1, -d * 0.05 / 20.0, rtol=1e-12)
+    assert g @ (y1 - y0) < 0  # the loss's first-order change is negative
+    clipped = -np.clip(d, -0.05, 0.05)
+    assert g @ clipped > 0  # what per-coordinate clipping would have done
+    # within the bound the step is the plain one
+    np.testing.assert_allclose(PreconditionedMomentum(0.5, b1=0.0, max_step=20.0).step(y0, g, p), -0.5 * d,
+                               rtol=1e-12)
+
+
+def test_divergence_guard_windows_rollback_and_damping():
+    g = DivergenceGuard(window=3, rise=0.25, factor=4.0, damping=0.12, min_damping=0.03)
+    ys = [np.array([float(i), -2.0 * i]) for i in range(12)]
+    # window 1 (loss mean 1.0): the first is the best; damping relaxes 0.12 -> 0.03
+    assert [g.observe(v, y) for v, y in zip([1.1, 0.9, 1.0], ys[:3], strict=True)] == [None] * 3
+    assert g.best_loss == pytest.approx(1.0) and g.damping == pytest.approx(0.03)
+    np.testing.assert_allclose(g.best_y, [1.0, -2.0])
+    # window 2 (mean 1.2): worse, within the 25 % rise: nothing; damping stays at its floor
+    assert [g.observe(v, y) for v, y in zip([1.2, 1.2, 1.2], ys[3:6], strict=True)] == [None] * 3
+    assert g.damping == pytest.approx(0.03) and g.best_loss == pytest.approx(1.0)
+    # window 3 (mean 1.3 > 1.25): back to window 1's mean iterate, damping x 4
+    out = [g.observe(v, y) for v, y in zip([1.3, 1.3, 1.3], ys[6:9], strict=True)]
+    assert out[:2] == [None, None]
+    np.testing.assert_allclose(out[2], [1.0, -2.0])
+    assert g.damping == pytest.approx(0.12) and g.rollbacks == 1
+    # window 4 better than the best: new best, damping divided again
+    assert [g.observe(v, y) for v, y in zip([0.5, 0.5, 0.5], ys[9:12], strict=True)] == [None] * 3
+    np.testing.assert_allclose(g.best_y, [10.0, -20.0])
+    assert g.damping == pytest.approx(0.03)
+    # the state survives a checkpoint mid-window
+    g.observe(0.7, ys[0])
+    h = DivergenceGuard.from_dict(g.to_dict())
+    for guard in (g, h):  # the window (0.7, 0.7, 9.0) rises: both go back to window 4's mean iterate
+        assert guard.observe(0.7, ys[1]) is None
+        np.testing.assert_allclose(guard.observe(9.0, ys[2]), [10.0, -20.0])
+        assert guard.damping == pytest.approx(0.12) and guard.rollbacks == 2
+
+
+def test_fit_goes_back_when_the_loss_rises(tmp_path):
+    """A loss that jumps (here: multiplied by 3 from iteration 6 on) sends the Gauss-Newton phase back
+    to the best window's mean iterate with 4x the damping; an interrupted fit resumes exactly across it."""
+    _, theta, cap = _problem()
+
+    def rising(scene, capture, light_ids, st, seed, layout, image_spp=0):
+        loss, g, stats = iteration_gradient(scene, capture, light_ids, st, seed, layout, image_spp=image_spp)
+        return (loss * 3.0 if seed % 100003 >= 6 else loss), g, stats
+
+    base = dict(iterations=9, spp=1, image_spp=2, lights_per_iteration=2, free=("slab.enamel.albedo",),
+                optimiser="gauss-newton", gn_lr=0.5, gn_passes=1, gn_block=4, gn_guard_window=3, seed=0,
+                max_depth=4, checkpoint_every=1)
+    layout = ParamLayout(theta)
+    seen: list = []
+    _, log = fit(theta, cap, FitSettings(**base), gradient=rising,
+                 callback=lambda e, sc: seen.append(to_optimiser(scene_to_vector(sc, layout), layout)))
+    assert [bool(e.get("gauss_newton_rollback")) for e in log] == [False] * 8 + [True]
+    assert [e["gauss_newton_damping"] for e in log] == pytest.approx([0.03] * 8 + [0.12])
+    losses = [e["loss"] for e in log]
+    best = int(np.argmin([np.mean(losses[0:3]), np.mean(losses[3:6])]))
+    # one more iteration shows where the rollback went
+    more, log2 = fit(theta, cap, FitSettings(**{**base, "iterations": 10}), gradient=rising, out_dir=str(tmp_path),
+                     callback=lambda e, sc: seen.append(to_optimiser(scene_to_vector(sc, layout), layout)))
+    np.testing.assert_allclose(seen[-1], np.mean(seen[3 * best:3 * best + 3], axis=0), rtol=1e-9)
+    np.testing.assert_allclose([e["loss"] for e in log2[:9]], losses, rtol=1e-12)
+    # interrupted after 7 iterations (mid-window), resumed: the same as straight through
+    out = str(tmp_path / "cut")
+    fit(theta, cap, FitSettings(**{**base, "iterations": 7}), gradient=rising, out_dir=out)
+    resumed, log_r = fit(theta, cap, FitSettings(**{**base, "iterations": 10}), gradient=rising, out_dir=out,
+                         resume=True)
+    np.testing.assert_allclose([e["loss"] for e in log_r], [e["loss"] for e in log2], rtol=1e-9)
+    assert log_r[8].get("gauss_newton_rollback")
+    np.testing.assert_allclose(resumed.teeth[0].enamel.albedo, more.teeth[0].enamel.albedo, rtol=1e-9)
+
+
+def test_checkpoint_of_the_earlier_gauss_newton_format_is_a_clear_error(tmp_path):
+    _, theta, cap = _problem()
+    base = dict(iterations=2, spp=1, lights_per_iteration=1, free=("slab.enamel.albedo",), optimiser="gauss-newton",
+                gn_passes=1, gn_block=4, seed=0, max_depth=3)
+    out = tmp_path / "fit"
+    fit(theta, cap, FitSettings(**base), out_dir=str(out))
+    ckpt = out / "checkpoint.json"
+    d = __import__("json").loads(ckpt.read_text())
+    d["precond"] = d.pop("gn_hmat")
+    ckpt.write_text(__import__("json").dumps(d))
+    with pytest.raises(ValueError, match="earlier version"):
+        fit(theta, cap, FitSettings(**{**base, "iterations": 3}), out_dir=str(out), resume=True)
+
+
 def _albedo_error(scene, truth) -> float:
     return float(np.abs(scene.teeth[0].enamel.albedo / truth.teeth[0].enamel.albedo - 1).max())
 
@@ -145,7 +241,9 @@ def test_gauss_newton_takes_over_from_adam_at_gn_start():
                                        ({"optimiser": "gauss-newton", "gn_passes": 0}, "gn_passes"),
                                        ({"optimiser": "gauss-newton", "gn_start": -1}, "gn_start"),
                                        ({"optimiser": "gauss-newton", "gn_max_step": 0.0}, "gn_max_step"),
-                                       ({"optimiser": "gauss-newton", "gn_lr": 0.0}, "gn_lr")])
+                                       ({"optimiser": "gauss-newton", "gn_lr": 0.0}, "gn_lr"),
+                                       ({"optimiser": "gauss-newton", "gn_guard_factor": 1.0}, "gn_guard"),
+                                       ({"optimiser": "gauss-newton", "gn_guard_window": -1}, "gn_guard")])
 def test_bad_optimiser_settings_are_clear_errors(kw, match):
     with pytest.raises(ValueError, match=match):
         FitSettings(iterations=1, **kw)
