@@ -14,8 +14,10 @@ import numpy as np
 from .parameterisation import albedo_from_kappa, dalbedo_dkappa, dsigma_dxi, kappa_from_albedo
 from .scene import TeethScene, VolumeMaterial
 
-RANGES = {"sigma_t": (1e-3, 1e3), "albedo": (0.0, 0.999), "g": (-0.9, 0.95), "beta": (0.0, 1.0),
-          "a_t": (0.02, 1.0), "c": (-0.8, 0.8), "rho": (0.0, 0.99)}
+# albedo and rho stay above 0: the path tracer weighs paths in log space (log albedo, log rho), and a
+# zero there makes the derivatives inf x 0 = NaN (a fit whose steps crossed zero got NaN parameters)
+RANGES = {"sigma_t": (1e-3, 1e3), "albedo": (1e-4, 0.999), "g": (-0.9, 0.95), "beta": (0.0, 1.0),
+          "a_t": (0.02, 1.0), "c": (-0.8, 0.8), "rho": (1e-3, 0.99)}
 
 
 @dataclass(frozen=True)
