@@ -47,7 +47,10 @@ class FitSettings:
     lr: float = 0.03
     b1: float = 0.9
     b2: float = 0.999
-    eps: float = 1e-8
+    # eq. 2.39's epsilon sits inside the square root, so it must stay far below the squared gradients:
+    # the loss is a mean over pixels, and near the optimum the gradients are 1e-6 to 1e-5; 1e-8 (the
+    # usual default) made sqrt(eps) = 1e-4 the divisor and Adam plain gradient descent there
+    eps: float = 1e-24
     spp: int = 1
     max_depth: int = 6  # must match the depth the capture was rendered with (synthetic: 6)
     lights_per_iteration: int = 18
@@ -77,7 +80,8 @@ class FitSettings:
     # damped inverse Gauss-Newton matrix of all lights, see gauss_newton.py), P estimated from gn_passes
     # 1-spp Jacobian passes pooled in gn_block tiles at the phase's start and every gn_every iterations.
     # Adam creeps along the loss valley in which enamel and dentin absorption trade off; this follows it.
-    # lr_decay applies to gn_lr as to lr. Experimental (README, "Why Adam stalls"); watch the loss
+    # lr_decay applies to gn_lr as to lr. The acceptance fit (benchmarks/teeth.py) uses gn_start 80,
+    # gn_every 40, gn_lr 0.5 (README, "Why Adam stalls")
     optimiser: str = "adam"
     gn_lr: float = 0.3  # fraction of the Gauss-Newton step
     # Adam iterations before Gauss-Newton takes over (per phase): far from the optimum the linearised
@@ -127,7 +131,7 @@ class Adam:
     lr: float
     b1: float = 0.9
     b2: float = 0.999
-    eps: float = 1e-8
+    eps: float = 1e-24  # inside the square root (eq. 2.39); see FitSettings.eps
     m: np.ndarray | None = None
     v: np.ndarray | None = None
     n: int = 0
