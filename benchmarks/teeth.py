@@ -21,9 +21,11 @@ RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.d
 # lights every 10 iterations, 4-spp brackets), a fresh 32-spp pass A has about 2x lower gradient
 # variance per iteration even before counting the anchor's own noise, which the anchored gradients
 # shared for 10 iterations; it costs about 2.6x the CPU time per iteration (16.4 s in 2 processes
-# against 12.6 s in one)
+# against 12.6 s in one). From iteration 80 the materials step along the damped inverse Gauss-Newton
+# matrix (estimated every 40 iterations; gauss_newton.py), which follows the valley where enamel and
+# dentin absorption trade off; Adam alone crept along it (README, "Why Adam stalls")
 RECOVERY_SETTINGS = {"lr": 0.04, "lr_decay": 0.01, "spp": 4, "image_spp": 32, "lights_per_iteration": 6,
-                     "workers": 2}
+                     "workers": 2, "optimiser": "gauss-newton", "gn_start": 80, "gn_every": 40, "gn_lr": 0.5}
 
 
 def recovery_errors(fit_scene, truth) -> dict:
@@ -49,7 +51,8 @@ def acceptance_setup(synth_spp: int = 8, seed: int = 12345):
 
 
 def run_recovery(iterations: int | None = None, synth_spp: int | None = None, seed: int = 1) -> dict:
-    """The acceptance fit: synthetic capture, perturbed start, Adam fit of sigma_t, albedo and c.
+    """The acceptance fit: synthetic capture, perturbed start, fit of sigma_t, albedo and c (Adam for 80
+    iterations, then Gauss-Newton steps for the materials while c keeps Adam; RECOVERY_SETTINGS).
 
     Reports the errors of the best-loss parameters (the thesis' choice) and of the average of the
     last quarter of the iterates (Polyak averaging, less sensitive to the Monte Carlo noise).
@@ -98,7 +101,8 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     out["recovery_best_loss_params"] = recovery_errors(best, truth)
     out["recovery_start"] = recovery_errors(start, truth)
     out["recovery_config"] = ("perturbed start (sigma_t x exp(+-0.25), kappa +-0.2, c = 0); free: enamel/dentin "
-                              f"sigma_t, albedo, c of both teeth; {iterations} Adam iterations, "
+                              f"sigma_t, albedo, c of both teeth; {iterations} iterations "
+                              f"({RECOVERY_SETTINGS.get('optimiser', 'adam')}), "
                               f"{RECOVERY_SETTINGS}; errors of the tail-averaged iterate")
     return out
 

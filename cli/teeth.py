@@ -65,8 +65,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="adam (thesis) or gauss-newton: the material parameters step along the damped inverse "
                         "Gauss-Newton matrix (estimated from 1-spp Jacobian passes of all lights; the dentin "
                         "coefficients keep Adam), which follows the valley where enamel and dentin absorption "
-                        "trade off; experimental (an acceptance fit improved for 30 iterations, then a sigma_t "
-                        "diverged; see README); see core/teeth/gauss_newton.py")
+                        "trade off; the acceptance fit runs Adam for 80 iterations, then gauss-newton "
+                        "(--gn-start 80 --gn-every 40 --gn-lr 0.5; README, 'Why Adam stalls'); see "
+                        "core/teeth/gauss_newton.py")
     f.add_argument("--gn-lr", type=float, default=0.3, help="gauss-newton: fraction of the Gauss-Newton step")
     f.add_argument("--gn-start", type=int, default=0,
                    help="gauss-newton: Adam iterations before Gauss-Newton takes over (far from the optimum the "
