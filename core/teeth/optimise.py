@@ -48,7 +48,7 @@ class FitSettings:
     b1: float = 0.9
     b2: float = 0.999
     # eq. 2.39's epsilon sits inside the square root, so it must stay far below the squared gradients:
-    # the loss is a mean over pixels, and near the optimum the gradients are 1e-6 to 1e-5; 1e-8 (the
+    # the loss is a mean over pixels, and near the optimum the gradients are 1e-6 to 3e-5; 1e-8 (the
     # usual default) made sqrt(eps) = 1e-4 the divisor and Adam plain gradient descent there
     eps: float = 1e-24
     spp: int = 1
