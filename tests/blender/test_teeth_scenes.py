@@ -27,8 +27,14 @@ def test_smile_scene_builds_and_renders(addon_module, tmp_path):
 def test_fit_demo_lowers_loss(tmp_path):
     pytest.importorskip("matplotlib")  # the loss plot (not in the 4.5 environment)
     pytest.importorskip("embreex")  # without it the core's numpy ray caster takes minutes
+    from material_structures.benchmarks.teeth import recovery_errors
     from material_structures.render.scenes_teeth import fit_demo
 
-    _, _, _, log = fit_demo(str(tmp_path), iterations=30)
+    truth, start, best, log = fit_demo(str(tmp_path), iterations=30)
     assert min(e["loss"] for e in log) < 0.9 * log[0]["loss"]
+    # the fitted materials are much closer to the truth than the start (measured 0.65 -> 0.19 for sigma_t,
+    # 0.59 -> 0.12 for albedo, relative)
+    e0, e1 = recovery_errors(start, truth), recovery_errors(best, truth)
+    for k in ("recovery_sigma_t_rel_err", "recovery_albedo_rel_err"):
+        assert e1[k] < 0.5 * e0[k], (k, e0[k], e1[k])
     assert (tmp_path / "teeth-fit" / "loss.png").exists()
