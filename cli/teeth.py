@@ -40,39 +40,48 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--init-error", choices=("scale-invariant", "absolute"), default="scale-invariant",
                    help="literature search error: scale-invariant (thesis; uncalibrated exposure) or absolute "
                         "(calibrated light intensities and camera)")
+    f.add_argument("--preset", choices=("thesis", "acceptance"), default="thesis",
+                   help="named settings: thesis (the defaults below: Adam, 1 spp, 18 lights) or acceptance (the "
+                        "settings that met the recovery acceptance: --lr 0.04 --lr-decay 0.01 --spp 4 --image-spp "
+                        "32 --lights-per-iteration 6 --loss-block 8 --optimiser gauss-newton --gn-start 80 "
+                        "--gn-every 40 --gn-lr 0.5; give --no-dask --workers N to trace on N cores); flags given "
+                        "explicitly win over the preset")
     f.add_argument("--iterations", type=int, default=100, help='"homogeneous" phase iterations')
     f.add_argument("--textured-iterations", type=int, default=0, help='"textured" phase iterations')
     f.add_argument("--texture-size", type=int, default=8)
-    f.add_argument("--lr", type=float, default=0.05)
-    f.add_argument("--lr-decay", type=float, default=0.02)
-    f.add_argument("--spp", type=int, default=1)
-    f.add_argument("--image-spp", type=int, default=0,
-                   help="samples per pixel of pass A, the image in the loss gradient's adjoint (0 = --spp); "
+    f.add_argument("--lr", type=float, default=None, help="Adam's learning rate (default 0.05)")
+    f.add_argument("--lr-decay", type=float, default=None, help="lr_n = lr / (1 + decay n) (default 0.02)")
+    f.add_argument("--spp", type=int, default=None, help="samples per pixel of the gradient pass (default 1)")
+    f.add_argument("--image-spp", type=int, default=None,
+                   help="samples per pixel of pass A, the image in the loss gradient's adjoint (default 0 = --spp); "
                         "near the optimum its noise dominates the gradient's (the acceptance fit uses 32 with --spp 4)")
-    f.add_argument("--lights-per-iteration", type=int, default=18)
+    f.add_argument("--lights-per-iteration", type=int, default=None, help="random lights per iteration (default 18)")
     f.add_argument("--max-depth", type=int, default=6)
     f.add_argument("--anchor-spp", type=int, default=0,
                    help="image control variate: spp of an anchor image of all lights (0 = off); cuts the "
                         "gradient noise of pass A, see core/teeth/optimise.py Anchor")
     f.add_argument("--anchor-every", type=int, default=20, help="iterations between anchor re-renders")
-    f.add_argument("--loss-block", type=int, default=1,
-                   help="L2 loss of box-filtered images over N x N pixel tiles (1 = per pixel, as in the thesis); "
-                        "averages the gradient's pass A x pass B noise over each tile")
+    f.add_argument("--loss-block", type=int, default=None,
+                   help="L2 loss of box-filtered images over N x N pixel tiles (default 1 = per pixel, as in the "
+                        "thesis); averages the gradient's pass A x pass B noise over each tile (8: 7-18x lower "
+                        "noise in the dentin coefficients' gradient on the acceptance capture)")
     f.add_argument("--domain", choices=("thesis", "absorption"), default="thesis",
                    help="optimiser variables of sigma_t/albedo: thesis (log sigma_t, log10(1 - albedo)) or "
                         "absorption (log sigma_s, log sigma_a)")
-    f.add_argument("--optimiser", choices=("adam", "gauss-newton"), default="adam",
-                   help="adam (thesis) or gauss-newton: the material parameters step along the damped inverse "
-                        "Gauss-Newton matrix (estimated from 1-spp Jacobian passes of all lights; the dentin "
+    f.add_argument("--optimiser", choices=("adam", "gauss-newton"), default=None,
+                   help="adam (thesis, the default) or gauss-newton: the material parameters step along the damped "
+                        "inverse Gauss-Newton matrix (estimated from 1-spp Jacobian passes of all lights; the dentin "
                         "coefficients keep Adam), which follows the valley where enamel and dentin absorption "
                         "trade off; the acceptance fit runs Adam for 80 iterations, then gauss-newton "
                         "(--gn-start 80 --gn-every 40 --gn-lr 0.5; README, 'Why Adam stalls'); see "
                         "core/teeth/gauss_newton.py")
-    f.add_argument("--gn-lr", type=float, default=0.3, help="gauss-newton: fraction of the Gauss-Newton step")
-    f.add_argument("--gn-start", type=int, default=0,
+    f.add_argument("--gn-lr", type=float, default=None,
+                   help="gauss-newton: fraction of the Gauss-Newton step (default 0.3)")
+    f.add_argument("--gn-start", type=int, default=None,
                    help="gauss-newton: Adam iterations before Gauss-Newton takes over (far from the optimum the "
-                        "linearised model misleads)")
-    f.add_argument("--gn-every", type=int, default=50, help="gauss-newton: iterations between matrix estimates")
+                        "linearised model misleads; default 0)")
+    f.add_argument("--gn-every", type=int, default=None,
+                   help="gauss-newton: iterations between matrix estimates (default 50)")
     f.add_argument("--gn-passes", type=int, default=4, help="gauss-newton: 1-spp Jacobian passes per estimate")
     f.add_argument("--gn-damping", type=float, default=0.03,
                    help="gauss-newton: Levenberg-Marquardt damping, relative to the matrix diagonal")
@@ -139,6 +148,20 @@ def run_synth(args: argparse.Namespace) -> int:
     return 0
 
 
+# ``teeth fit``'s defaults for the settings a --preset may set (flag None = not given on the command line)
+FIT_CLI_DEFAULTS = {"lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0, "lights_per_iteration": 18,
+                    "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3, "gn_start": 0, "gn_every": 50}
+
+
+def fit_preset_settings(args: argparse.Namespace) -> dict:
+    """FitSettings values of FIT_CLI_DEFAULTS' keys: the flag where given, else the preset's, else the default."""
+    from ..core.teeth.optimise import FIT_PRESETS
+
+    preset = FIT_PRESETS[args.preset]
+    return {k: getattr(args, k) if getattr(args, k) is not None else preset.get(k, default)
+            for k, default in FIT_CLI_DEFAULTS.items()}
+
+
 def run_fit(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -154,14 +177,12 @@ def run_fit(args: argparse.Namespace) -> int:
     if len(cap.cameras) == 0 or len(cap.lights) == 0:
         raise ValueError("the capture has no cameras or lights")
     free = tuple(p.strip() for p in args.free.split(",")) if args.free else DEFAULT_FREE
+    preset = fit_preset_settings(args)
     fs = FitSettings(iterations=args.iterations, textured_iterations=args.textured_iterations,
-                     texture_size=args.texture_size, lr=args.lr, lr_decay=args.lr_decay, spp=args.spp,
-                     max_depth=args.max_depth, lights_per_iteration=args.lights_per_iteration, seed=args.seed,
+                     texture_size=args.texture_size, max_depth=args.max_depth, seed=args.seed,
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
-                     loss_block=args.loss_block, domain=args.domain, image_spp=args.image_spp,
-                     workers=args.workers, optimiser=args.optimiser, gn_lr=args.gn_lr, gn_start=args.gn_start,
-                     gn_every=args.gn_every, gn_passes=args.gn_passes, gn_damping=args.gn_damping,
-                     gn_guard_window=args.gn_guard_window, gn_guard_rise=args.gn_guard_rise)
+                     domain=args.domain, workers=args.workers, gn_passes=args.gn_passes, gn_damping=args.gn_damping,
+                     gn_guard_window=args.gn_guard_window, gn_guard_rise=args.gn_guard_rise, **preset)
     if args.workers != 1 and not args.no_dask:
         raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
     if not args.resume:

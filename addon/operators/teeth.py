@@ -203,8 +203,9 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             return None
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)
-            job = FitJob(capture, out, fs.iterations, fs.init, fs.lights_per_iteration,
-                         workers=usable_cores()).start()
+            lights = fs.lights_per_iteration if fs.preset == "thesis" else None  # else the preset's
+            job = FitJob(capture, out, fs.iterations, fs.init, lights, workers=usable_cores(),
+                         preset=fs.preset).start()
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return None

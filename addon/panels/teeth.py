@@ -42,9 +42,11 @@ class VIEW3D_PT_material_structures_teeth(bpy.types.Panel):
         box.label(text="Fit to capture", icon="MOD_LENGTH")
         box.prop(fs, "capture_dir")
         box.prop(fs, "out_dir")
+        box.prop(fs, "preset")
         row = box.row(align=True)
         row.prop(fs, "iterations")
-        row.prop(fs, "lights_per_iteration", text="Lights")
+        if fs.preset == "thesis":
+            row.prop(fs, "lights_per_iteration", text="Lights")
         box.prop(fs, "init")
         if fs.running:
             box.prop(fs, "progress", slider=True)

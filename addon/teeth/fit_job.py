@@ -46,16 +46,18 @@ def python_executable() -> str:
 
 
 def fit_command(capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
-                lights_per_iteration: int = 18, extra: list[str] | None = None, workers: int = 1) -> list[str]:
+                lights_per_iteration: int | None = 18, extra: list[str] | None = None, workers: int = 1,
+                preset: str = "thesis") -> list[str]:
     """The CLI call. ``--no-dask``: the fit renders in the one background process (with ``workers`` > 1
     in that many processes it forks per render), so that cancelling stops all of it; pass
-    ``extra=["--scheduler", ADDRESS]`` to use a Dask cluster instead."""
+    ``extra=["--scheduler", ADDRESS]`` to use a Dask cluster instead. ``preset``: ``teeth fit --preset``
+    (``lights_per_iteration`` None leaves the preset's)."""
     extra = list(extra or [])
     if "--scheduler" not in extra:
         extra[:0] = ["--no-dask"] + (["--workers", str(int(workers))] if workers > 1 else [])
+    lights = [] if lights_per_iteration is None else ["--lights-per-iteration", str(int(lights_per_iteration))]
     return [python_executable(), "-m", "material_structures", "teeth", "fit", capture_dir, "--out", out_dir,
-            "--iterations", str(int(iterations)), "--init", init, "--lights-per-iteration",
-            str(int(lights_per_iteration)), *extra]
+            "--iterations", str(int(iterations)), "--init", init, "--preset", preset, *lights, *extra]
 
 
 def usable_cores() -> int:
@@ -70,12 +72,13 @@ class FitJob:
     """One background fit. ``poll()`` -> state; ``cancel()``; ``result_path`` once finished."""
 
     def __init__(self, capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
-                 lights_per_iteration: int = 18, extra: list[str] | None = None, workers: int = 1):
+                 lights_per_iteration: int | None = 18, extra: list[str] | None = None, workers: int = 1,
+                 preset: str = "thesis"):
         if not os.path.isfile(os.path.join(capture_dir, "capture.json")):
             raise FileNotFoundError(f"no capture.json in {capture_dir!r}")
         self.capture_dir, self.out_dir = capture_dir, out_dir
         self.iterations = int(iterations)
-        self.cmd = fit_command(capture_dir, out_dir, iterations, init, lights_per_iteration, extra, workers)
+        self.cmd = fit_command(capture_dir, out_dir, iterations, init, lights_per_iteration, extra, workers, preset)
         self.proc: subprocess.Popen | None = None
         self.done_iterations = 0
         self.loss: float | None = None

@@ -92,6 +92,15 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                                                        ("perturbed", "Perturbed", "perturbed scene values")],
                                  default="literature")
     lights_per_iteration: bpy.props.IntProperty(name="Lights / Iteration", default=18, min=1, max=1000)
+    preset: bpy.props.EnumProperty(
+        name="Settings",
+        items=[("thesis", "Thesis", "Adam with 1-sample gradients on the lights per iteration set here (fast "
+                                    "iterations, as in the thesis)"),
+               ("acceptance", "Accurate", "the settings that met the recovery acceptance (teeth fit --preset "
+                                          "acceptance): 6 lights per iteration at 32 / 4 samples, 8 x 8 tile "
+                                          "loss, Gauss-Newton steps for the materials from iteration 80; about "
+                                          "10 s per iteration on 2 cores, use 200 iterations")],
+        default="thesis")
     running: bpy.props.BoolProperty(name="Running", default=False, options={"SKIP_SAVE"})
     progress: bpy.props.FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
                                       options={"SKIP_SAVE"})

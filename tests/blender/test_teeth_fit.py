@@ -61,6 +61,31 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     assert fs.progress == pytest.approx(1.0) and not fs.running
 
 
+def test_fit_operator_accurate_settings_run_the_acceptance_preset(addon_module, capture_dir, tmp_path):
+    import json
+
+    from material_structures.core.teeth.optimise import FIT_PRESETS
+
+    _import(capture_dir)
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = capture_dir
+    fs.out_dir = str(tmp_path / "fit")
+    fs.iterations = 2
+    fs.lights_per_iteration = 2  # hidden and not passed with these settings: the preset's 6 (capped at 3 lights)
+    fs.init = "scene"
+    fs.preset = "acceptance"
+    try:
+        assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
+    finally:
+        fs.preset = "thesis"
+    ran = json.loads((tmp_path / "fit" / "loss.json").read_text())
+    for key, value in FIT_PRESETS["acceptance"].items():
+        assert ran["settings"][key] == value, key
+    assert len(ran["log"]) == 2 and len(ran["log"][0]["lights"]) == 3
+    cmd = open(tmp_path / "fit" / "fit_log.txt").readline()
+    assert "--preset acceptance" in cmd and "--lights-per-iteration" not in cmd
+
+
 def _live_in_group(pgid: int) -> list[int]:
     """Processes of process group ``pgid`` that are not zombies (Linux /proc)."""
     live = []

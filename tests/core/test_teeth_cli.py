@@ -150,3 +150,38 @@ def test_fit_gauss_newton_from_the_command_line(tmp_path, capsys):
     assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), "--no-dask", "--optimiser",
                  "gauss-newton", "--gn-damping", "0"]) == 2
     assert "gn_damping" in capsys.readouterr().err
+
+
+def test_fit_preset_sets_defaults_and_explicit_flags_win(tmp_path):
+    from material_structures.cli import build_parser
+    from material_structures.cli.teeth import FIT_CLI_DEFAULTS, fit_preset_settings
+    from material_structures.core.teeth.optimise import FIT_PRESETS
+
+    parser = build_parser()
+    base = ["teeth", "fit", "cap", "--out", "fit"]
+    # the CLI takes every preset core defines (its choices are literals: the parser does not import core)
+    for name in FIT_PRESETS:
+        assert parser.parse_args(base + ["--preset", name]).preset == name
+    with pytest.raises(SystemExit):
+        parser.parse_args(base + ["--preset", "fast"])
+    assert fit_preset_settings(parser.parse_args(base)) == FIT_CLI_DEFAULTS
+    acc = fit_preset_settings(parser.parse_args(base + ["--preset", "acceptance"]))
+    assert acc == {**FIT_CLI_DEFAULTS, **FIT_PRESETS["acceptance"]}
+    assert acc["loss_block"] == 8 and acc["optimiser"] == "gauss-newton" and acc["image_spp"] == 32
+    mixed = fit_preset_settings(parser.parse_args(base + ["--preset", "acceptance", "--lr", "0.01",
+                                                          "--loss-block", "1"]))
+    assert mixed == {**acc, "lr": 0.01, "loss_block": 1}
+
+    # end to end: the settings the fit ran with are the preset's (loss.json records them)
+    cap_dir, fit_dir = tmp_path / "cap", tmp_path / "fit"
+    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
+                 "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "1",
+                 "--resolution", "12"]) == 0
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--init", "perturbed", "--no-progress",
+                 "--no-dask", "--max-depth", "3", "--iterations", "2", "--preset", "acceptance",
+                 "--image-spp", "4", "--gn-start", "1"]) == 0
+    ran = json.loads((fit_dir / "loss.json").read_text())
+    s = ran["settings"]
+    assert (s["loss_block"], s["optimiser"], s["lr"], s["spp"], s["image_spp"], s["gn_start"]) == \
+        (8, "gauss-newton", 0.04, 4, 4, 1)
+    assert len(ran["log"]) == 2 and "gauss_newton_seconds" in ran["log"][1]
