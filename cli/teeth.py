@@ -202,6 +202,10 @@ def run_fit(args: argparse.Namespace) -> int:
             bar.update(1)
             bar.set_postfix(loss=f"{entry['loss']:.3e}", best=f"{entry['best_loss']:.3e}", phase=entry["phase"])
 
+    def status(text: str) -> None:
+        if bar is not None:
+            bar.set_description_str(f"fit: {text}" if text else "fit")
+
     os.makedirs(args.out, exist_ok=True)
     if args.resume and bar is not None:
         with open(os.path.join(args.out, "checkpoint.json")) as f:
@@ -214,9 +218,9 @@ def run_fit(args: argparse.Namespace) -> int:
 
         with dask_client(args.scheduler, args.dask_workers) as client:
             best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress,
-                            gradient=DaskGradient(client, cap))
+                            gradient=DaskGradient(client, cap), status=status)
     else:
-        best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress)
+        best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress, status=status)
     if bar is not None:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))

@@ -372,15 +372,17 @@ def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarra
 
 def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str | None = None,
         resume: bool = False, progress: Callable | None = None,
-        callback: Callable | None = None, gradient: Callable | None = None) -> tuple[TeethScene, list]:
+        callback: Callable | None = None, gradient: Callable | None = None,
+        status: Callable[[str], None] | None = None) -> tuple[TeethScene, list]:
     """Fit ``scene``'s free parameters to ``capture``; returns (best scene, log).
 
     With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json``,
     ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint. ``gradient``
     replaces :func:`iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``. ``progress(entry)``
-    and ``callback(entry, scene)`` are called after every iteration. With ``settings.anchor_spp`` the
-    gradient function also gets ``anchor=`` (an :class:`Anchor`, re-rendered every ``anchor_every``
-    iterations and after a resume).
+    and ``callback(entry, scene)`` are called after every iteration; ``status(text)`` says what the fit does
+    between iterations that takes long (the Gauss-Newton matrix estimate; "" when it is done). With
+    ``settings.anchor_spp`` the gradient function also gets ``anchor=`` (an :class:`Anchor`, re-rendered
+    every ``anchor_every`` iterations and after a resume).
     """
     if capture.images is None or capture.masks is None:
         raise ValueError("the capture needs images and masks to fit")
@@ -474,9 +476,13 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             gn_on = len(gn_idx) > 0 and it >= s.gn_start
             if gn_on and (hmat is None or it - precond_it >= s.gn_every):
                 t_gn = time.perf_counter()
+                if status is not None:
+                    status(f"estimating the Gauss-Newton matrix ({s.gn_passes} passes of all lights)")
                 hmat = fit_gauss_newton_matrix(cur, capture, layout, gn_idx, y, s, _gn_seed(s, pi, it))
                 precond_it = it
                 gn_seconds = time.perf_counter() - t_gn
+                if status is not None:
+                    status("")
             else:
                 gn_seconds = 0.0
             loss, g_phys, stats = (gradient or iteration_gradient)(cur, capture, light_ids, st, seed, layout, **kw)

@@ -159,8 +159,13 @@ def test_fit_goes_back_when_the_loss_rises(tmp_path):
                 max_depth=4, checkpoint_every=1)
     layout = ParamLayout(theta)
     seen: list = []
-    _, log = fit(theta, cap, FitSettings(**base), gradient=rising,
+    said: list = []  # status texts and iterations, in call order
+    _, log = fit(theta, cap, FitSettings(**base), gradient=rising, status=said.append,
+                 progress=lambda e: said.append(e["iteration"]),
                  callback=lambda e, sc: seen.append(to_optimiser(scene_to_vector(sc, layout), layout)))
+    # the Gauss-Newton matrix (gn_start 0, gn_every 50) is estimated once, before iteration 0, and said so
+    assert said[:2] == ["estimating the Gauss-Newton matrix (1 passes of all lights)", ""]
+    assert said[2:] == list(range(9))
     assert [bool(e.get("gauss_newton_rollback")) for e in log] == [False] * 8 + [True]
     assert [e["gauss_newton_damping"] for e in log] == pytest.approx([0.03] * 8 + [0.12])
     losses = [e["loss"] for e in log]
