@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(calibrated light intensities and camera)")
     f.add_argument("--preset", choices=("thesis", "acceptance"), default="thesis",
                    help="named settings: thesis (the defaults below: Adam, 1 spp, 18 lights) or acceptance (the "
-                        "settings that met the recovery acceptance: --lr 0.04 --lr-decay 0.01 --spp 4 --image-spp "
+                        "recovery acceptance fit's: --lr 0.04 --lr-decay 0.01 --spp 4 --image-spp "
                         "32 --lights-per-iteration 6 --loss-block 8 --optimiser gauss-newton --gn-start 80 "
                         "--gn-every 40 --gn-lr 0.5; give --no-dask --workers N to trace on N cores); flags given "
                         "explicitly win over the preset")

@@ -96,7 +96,7 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
         name="Settings",
         items=[("thesis", "Thesis", "Adam with 1-sample gradients on the lights per iteration set here (fast "
                                     "iterations, as in the thesis)"),
-               ("acceptance", "Accurate", "the settings that met the recovery acceptance (teeth fit --preset "
+               ("acceptance", "Accurate", "the recovery acceptance fit's settings (teeth fit --preset "
                                           "acceptance): 6 lights per iteration at 32 / 4 samples, 8 x 8 tile "
                                           "loss, Gauss-Newton steps for the materials from iteration 80; about "
                                           "10 s per iteration on 2 cores, use 200 iterations")],
