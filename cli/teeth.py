@@ -12,6 +12,10 @@ import argparse
 import json
 import os
 
+# ``teeth fit``'s defaults for the settings a --preset may set (flag None = not given on the command line)
+FIT_CLI_DEFAULTS = {"lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0, "lights_per_iteration": 18,
+                    "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3, "gn_start": 0, "gn_every": 50}
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("teeth", help="teeth appearance model: synthetic captures, fitting, rendering")
@@ -49,13 +53,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--iterations", type=int, default=100, help='"homogeneous" phase iterations')
     f.add_argument("--textured-iterations", type=int, default=0, help='"textured" phase iterations')
     f.add_argument("--texture-size", type=int, default=8)
-    f.add_argument("--lr", type=float, default=None, help="Adam's learning rate (default 0.05)")
-    f.add_argument("--lr-decay", type=float, default=None, help="lr_n = lr / (1 + decay n) (default 0.02)")
-    f.add_argument("--spp", type=int, default=None, help="samples per pixel of the gradient pass (default 1)")
+    f.add_argument("--lr", type=float, default=None,
+                   help=f"Adam's learning rate (default {FIT_CLI_DEFAULTS['lr']})")
+    f.add_argument("--lr-decay", type=float, default=None,
+                   help=f"lr_n = lr / (1 + decay n) (default {FIT_CLI_DEFAULTS['lr_decay']})")
+    f.add_argument("--spp", type=int, default=None,
+                   help=f"samples per pixel of the gradient pass (default {FIT_CLI_DEFAULTS['spp']})")
     f.add_argument("--image-spp", type=int, default=None,
                    help="samples per pixel of pass A, the image in the loss gradient's adjoint (default 0 = --spp); "
                         "near the optimum its noise dominates the gradient's (the acceptance fit uses 32 with --spp 4)")
-    f.add_argument("--lights-per-iteration", type=int, default=None, help="random lights per iteration (default 18)")
+    f.add_argument("--lights-per-iteration", type=int, default=None,
+                   help=f"random lights per iteration (default {FIT_CLI_DEFAULTS['lights_per_iteration']})")
     f.add_argument("--max-depth", type=int, default=6)
     f.add_argument("--anchor-spp", type=int, default=0,
                    help="image control variate: spp of an anchor image of all lights (0 = off); cuts the "
@@ -76,12 +84,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(--gn-start 80 --gn-every 40 --gn-lr 0.5; README, 'Why Adam stalls'); see "
                         "core/teeth/gauss_newton.py")
     f.add_argument("--gn-lr", type=float, default=None,
-                   help="gauss-newton: fraction of the Gauss-Newton step (default 0.3)")
+                   help=f"gauss-newton: fraction of the Gauss-Newton step (default {FIT_CLI_DEFAULTS['gn_lr']})")
     f.add_argument("--gn-start", type=int, default=None,
                    help="gauss-newton: Adam iterations before Gauss-Newton takes over (far from the optimum the "
                         "linearised model misleads; default 0)")
     f.add_argument("--gn-every", type=int, default=None,
-                   help="gauss-newton: iterations between matrix estimates (default 50)")
+                   help=f"gauss-newton: iterations between matrix estimates (default {FIT_CLI_DEFAULTS['gn_every']})")
     f.add_argument("--gn-passes", type=int, default=4, help="gauss-newton: 1-spp Jacobian passes per estimate")
     f.add_argument("--gn-damping", type=float, default=0.03,
                    help="gauss-newton: Levenberg-Marquardt damping, relative to the matrix diagonal")
@@ -146,11 +154,6 @@ def run_synth(args: argparse.Namespace) -> int:
     cap.save(args.out, scene.to_dict())
     print(f"wrote {len(cams)} x {len(lights)} images and masks to {args.out}")
     return 0
-
-
-# ``teeth fit``'s defaults for the settings a --preset may set (flag None = not given on the command line)
-FIT_CLI_DEFAULTS = {"lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0, "lights_per_iteration": 18,
-                    "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3, "gn_start": 0, "gn_every": 50}
 
 
 def fit_preset_settings(args: argparse.Namespace) -> dict:
