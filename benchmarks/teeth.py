@@ -1,7 +1,7 @@
 """``bench teeth``: path throughput, time per optimisation iteration, gradient FD check and the
 parameter-recovery acceptance fit (2 teeth, 3 cameras at 96 x 64, 54 lights, perturbed start).
 
-Environment: TEETH_BENCH_ITERATIONS (default 200) and TEETH_BENCH_SYNTH_SPP (default 32) size the
+Environment: TEETH_BENCH_ITERATIONS (default: the acceptance preset's) and TEETH_BENCH_SYNTH_SPP (default 32) size the
 recovery fit (about 55 minutes on 2 cores; progress on stderr); TEETH_BENCH_RECOVERY=0 skips it.
 """
 
@@ -13,10 +13,10 @@ import time
 
 import numpy as np
 
-from ..core.teeth.optimise import FIT_PRESETS
+from ..core.teeth.fit_presets import FIT_PRESETS
 
 RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.dentin.albedo", "tooth*.c")
-# the acceptance fit's settings (besides iterations and free): 6 random lights per iteration; pass A
+# the acceptance fit's settings (besides free): 6 random lights per iteration; pass A
 # (the image in the adjoint 2 (C_A - C_ref)) at 32 spp, pass B (the gradient) at 4 spp, both traced
 # by 2 processes. Near the optimum the gradient's variance is mostly pass A's per-pixel noise times
 # the pixel's derivative: at the stall point of the earlier anchored fits (8-spp anchor image of all
@@ -72,13 +72,13 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     )
     from material_structures.core.teeth.synthetic import perturbed_start
 
-    iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", "200"))
+    iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", RECOVERY_SETTINGS["iterations"]))
     synth_spp = synth_spp or int(os.environ.get("TEETH_BENCH_SYNTH_SPP", "32"))
     t0 = time.perf_counter()
     truth, capture = acceptance_setup(synth_spp)
     out: dict = {"synth_seconds": time.perf_counter() - t0}
     start = perturbed_start(truth, seed=seed, sigma_factor=0.25, kappa_shift=0.2)
-    settings = FitSettings(iterations=iterations, free=RECOVERY_FREE, **RECOVERY_SETTINGS)
+    settings = FitSettings(**{**RECOVERY_SETTINGS, "iterations": iterations}, free=RECOVERY_FREE)
     layout = ParamLayout(truth)
     ys: list = []
     t0 = time.perf_counter()
@@ -108,7 +108,8 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     out["recovery_config"] = ("perturbed start (sigma_t x exp(+-0.25), kappa +-0.2, c = 0); free: enamel/dentin "
                               f"sigma_t, albedo, c of both teeth; {iterations} iterations "
                               f"({RECOVERY_SETTINGS.get('optimiser', 'adam')}), "
-                              f"{RECOVERY_SETTINGS}; errors of the tail-averaged iterate")
+                              f"{ {k: v for k, v in RECOVERY_SETTINGS.items() if k != 'iterations'} }; errors of the "
+                              "tail-averaged iterate")
     return out
 
 

@@ -12,9 +12,12 @@ import argparse
 import json
 import os
 
+from ..core.teeth.fit_presets import FIT_PRESETS
+
 # ``teeth fit``'s defaults for the settings a --preset may set (flag None = not given on the command line)
-FIT_CLI_DEFAULTS = {"lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0, "lights_per_iteration": 18,
-                    "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3, "gn_start": 0, "gn_every": 50}
+FIT_CLI_DEFAULTS = {"iterations": 100, "lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0,
+                    "lights_per_iteration": 18, "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3,
+                    "gn_start": 0, "gn_every": 50}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -44,13 +47,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--init-error", choices=("scale-invariant", "absolute"), default="scale-invariant",
                    help="literature search error: scale-invariant (thesis; uncalibrated exposure) or absolute "
                         "(calibrated light intensities and camera)")
-    f.add_argument("--preset", choices=("thesis", "acceptance"), default="thesis",
+    acceptance = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in FIT_PRESETS["acceptance"].items())
+    f.add_argument("--preset", choices=tuple(FIT_PRESETS), default="thesis",
                    help="named settings: thesis (the defaults below: Adam, 1 spp, 18 lights) or acceptance (the "
-                        "recovery acceptance fit's: --lr 0.04 --lr-decay 0.01 --spp 4 --image-spp "
-                        "32 --lights-per-iteration 6 --loss-block 8 --optimiser gauss-newton --gn-start 80 "
-                        "--gn-every 40 --gn-lr 0.5; give --no-dask --workers N to trace on N cores); flags given "
-                        "explicitly win over the preset")
-    f.add_argument("--iterations", type=int, default=100, help='"homogeneous" phase iterations')
+                        f"recovery acceptance fit's: {acceptance}; give --no-dask --workers N to trace on N "
+                        "cores); flags given explicitly win over the preset")
+    f.add_argument("--iterations", type=int, default=None,
+                   help=f'"homogeneous" phase iterations (default {FIT_CLI_DEFAULTS["iterations"]})')
     f.add_argument("--textured-iterations", type=int, default=0, help='"textured" phase iterations')
     f.add_argument("--texture-size", type=int, default=8)
     f.add_argument("--lr", type=float, default=None,
@@ -158,8 +161,6 @@ def run_synth(args: argparse.Namespace) -> int:
 
 def fit_preset_settings(args: argparse.Namespace) -> dict:
     """FitSettings values of FIT_CLI_DEFAULTS' keys: the flag where given, else the preset's, else the default."""
-    from ..core.teeth.optimise import FIT_PRESETS
-
     preset = FIT_PRESETS[args.preset]
     return {k: getattr(args, k) if getattr(args, k) is not None else preset.get(k, default)
             for k, default in FIT_CLI_DEFAULTS.items()}
@@ -181,7 +182,7 @@ def run_fit(args: argparse.Namespace) -> int:
         raise ValueError("the capture has no cameras or lights")
     free = tuple(p.strip() for p in args.free.split(",")) if args.free else DEFAULT_FREE
     preset = fit_preset_settings(args)
-    fs = FitSettings(iterations=args.iterations, textured_iterations=args.textured_iterations,
+    fs = FitSettings(textured_iterations=args.textured_iterations,
                      texture_size=args.texture_size, max_depth=args.max_depth, seed=args.seed,
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
                      domain=args.domain, workers=args.workers, gn_passes=args.gn_passes, gn_damping=args.gn_damping,

@@ -12,6 +12,7 @@ from __future__ import annotations
 import bpy
 
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
+from ...core.teeth.fit_presets import FIT_PRESETS
 from ...core.teeth.param_vector import RANGES
 
 C_MIN, C_MAX = RANGES["c"]
@@ -79,6 +80,14 @@ class MS_ToothSettings(bpy.types.PropertyGroup):
         _update_coefficients(self, None)
 
 
+THESIS_FIT_ITERATIONS = 40  # the panel's default for the thesis settings (quick interactive fits)
+
+
+def _fit_preset_changed(self, _context) -> None:
+    """Choosing fit settings sets Iterations to theirs (the user may change it after)."""
+    self.iterations = FIT_PRESETS[self.preset].get("iterations", THESIS_FIT_ITERATIONS)
+
+
 class MS_TeethFitSettings(bpy.types.PropertyGroup):
     """Scene-wide settings of the fitting operator (``Scene.ms_teeth_fit``)."""
 
@@ -86,7 +95,7 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                                           description="capture folder (capture.json, images/, masks/, scene.json)")
     out_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH",
                                       description="fit folder: log, loss plot, checkpoint, scene_fit.json")
-    iterations: bpy.props.IntProperty(name="Iterations", default=40, min=1, max=100000)
+    iterations: bpy.props.IntProperty(name="Iterations", default=THESIS_FIT_ITERATIONS, min=1, max=100000)
     init: bpy.props.EnumProperty(name="Start", items=[("literature", "Literature", "literature-table search"),
                                                        ("scene", "Scene", "the capture's scene.json values"),
                                                        ("perturbed", "Perturbed", "perturbed scene values")],
@@ -99,8 +108,9 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                ("acceptance", "Accurate", "the recovery acceptance fit's settings (teeth fit --preset "
                                           "acceptance): 6 lights per iteration at 32 / 4 samples, 8 x 8 tile "
                                           "loss, Gauss-Newton steps for the materials from iteration 80; about "
-                                          "10 s per iteration on 2 cores, use 200 iterations")],
-        default="thesis")
+                                          "10 s per iteration on 2 cores")],
+        default="thesis", update=_fit_preset_changed,
+        description="fit settings; choosing them also sets Iterations to theirs")
     running: bpy.props.BoolProperty(name="Running", default=False, options={"SKIP_SAVE"})
     progress: bpy.props.FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
                                       options={"SKIP_SAVE"})

@@ -124,17 +124,6 @@ class FitSettings:
                                  f"{self.gn_guard_window}, {self.gn_guard_rise}, {self.gn_guard_factor}")
 
 
-# named FitSettings overrides for ``teeth fit --preset`` (explicit flags still win). "acceptance" is the
-# issue's parameter-recovery fit (benchmarks/teeth.py adds its 2 render processes): 6 random lights per
-# iteration, pass A at 32 spp and pass B at 4 spp, the L2 loss of 8 x 8 box-filtered images, Adam for 80
-# iterations, then Gauss-Newton steps for the materials (README, "Why Adam stalls")
-FIT_PRESETS: dict[str, dict] = {
-    "thesis": {},
-    "acceptance": {"lr": 0.04, "lr_decay": 0.01, "spp": 4, "image_spp": 32, "lights_per_iteration": 6,
-                   "loss_block": 8, "optimiser": "gauss-newton", "gn_start": 80, "gn_every": 40, "gn_lr": 0.5},
-}
-
-
 @dataclass
 class Adam:
     """Adam with bias correction (Kingma and Ba 2014; thesis eq. 2.38-2.39)."""

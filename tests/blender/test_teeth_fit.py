@@ -64,22 +64,26 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
 def test_fit_operator_accurate_settings_run_the_acceptance_preset(addon_module, capture_dir, tmp_path):
     import json
 
-    from material_structures.core.teeth.optimise import FIT_PRESETS
+    from material_structures.core.teeth.fit_presets import FIT_PRESETS
 
     _import(capture_dir)
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
-    fs.iterations = 2
-    fs.lights_per_iteration = 2  # hidden and not passed with these settings: the preset's 6 (capped at 3 lights)
-    fs.init = "scene"
+    fs.iterations = 7
     fs.preset = "acceptance"
     try:
+        # choosing the settings sets their iteration count (the user may change it after)
+        assert fs.iterations == FIT_PRESETS["acceptance"]["iterations"]
+        fs.iterations = 2
+        fs.lights_per_iteration = 2  # hidden and not passed with these settings: the preset's 6 (capped at 3 lights)
+        fs.init = "scene"
         assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
     finally:
         fs.preset = "thesis"
+    assert fs.iterations == 40  # back to the thesis settings' default
     ran = json.loads((tmp_path / "fit" / "loss.json").read_text())
-    for key, value in FIT_PRESETS["acceptance"].items():
+    for key, value in {**FIT_PRESETS["acceptance"], "iterations": 2}.items():
         assert ran["settings"][key] == value, key
     assert len(ran["log"]) == 2 and len(ran["log"][0]["lights"]) == 3
     cmd = open(tmp_path / "fit" / "fit_log.txt").readline()

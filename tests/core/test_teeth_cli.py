@@ -152,14 +152,13 @@ def test_fit_gauss_newton_from_the_command_line(tmp_path, capsys):
     assert "gn_damping" in capsys.readouterr().err
 
 
-def test_fit_preset_sets_defaults_and_explicit_flags_win(tmp_path):
+def test_fit_preset_sets_defaults_and_explicit_flags_win(tmp_path, capsys):
     from material_structures.cli import build_parser
     from material_structures.cli.teeth import FIT_CLI_DEFAULTS, fit_preset_settings
-    from material_structures.core.teeth.optimise import FIT_PRESETS
+    from material_structures.core.teeth.fit_presets import FIT_PRESETS
 
     parser = build_parser()
     base = ["teeth", "fit", "cap", "--out", "fit"]
-    # the CLI takes every preset core defines (its choices are literals: the parser does not import core)
     for name in FIT_PRESETS:
         assert parser.parse_args(base + ["--preset", name]).preset == name
     with pytest.raises(SystemExit):
@@ -168,6 +167,13 @@ def test_fit_preset_sets_defaults_and_explicit_flags_win(tmp_path):
     acc = fit_preset_settings(parser.parse_args(base + ["--preset", "acceptance"]))
     assert acc == {**FIT_CLI_DEFAULTS, **FIT_PRESETS["acceptance"]}
     assert acc["loss_block"] == 8 and acc["optimiser"] == "gauss-newton" and acc["image_spp"] == 32
+    assert acc["iterations"] == FIT_PRESETS["acceptance"]["iterations"] > FIT_CLI_DEFAULTS["iterations"]
+    # the help text lists the preset's values as the flags that would set them
+    with pytest.raises(SystemExit):
+        parser.parse_args(["teeth", "fit", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    for key, value in FIT_PRESETS["acceptance"].items():
+        assert f"--{key.replace('_', '-')} {value}" in help_text, key
     mixed = fit_preset_settings(parser.parse_args(base + ["--preset", "acceptance", "--lr", "0.01",
                                                           "--loss-block", "1"]))
     assert mixed == {**acc, "lr": 0.01, "loss_block": 1}
