@@ -40,6 +40,8 @@ from .param_vector import ParamLayout, chain_to_optimiser
 from .path_tracer import RenderSettings, render, traced_tiles
 from .scene import TeethScene
 
+ESTIMATORS = ("per-pass", "pooled")
+
 
 def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray, domain: str = "thesis") -> np.ndarray:
     """(k, k) dx[cols] / dy[cols] at ``y``: the physical Jacobian columns ``cols`` times this map are the
@@ -51,9 +53,16 @@ def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray,
 
 def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, cols: np.ndarray, y: np.ndarray,
                         domain: str = "thesis", *, passes: int = 4, block: int = 8, max_depth: int = 6,
-                        seed: int = 0, workers: int = 1, lights_per_render: int = 9) -> np.ndarray:
+                        seed: int = 0, workers: int = 1, lights_per_render: int = 9,
+                        estimator: str = "per-pass") -> np.ndarray:
     """(k, k) Gauss-Newton matrix of the per-pixel L2 loss over all of ``capture``'s lights in the
-    optimiser variables ``y[cols]``, estimated from ``passes`` 1-spp Jacobian passes (module docstring)."""
+    optimiser variables ``y[cols]``, estimated from ``passes`` 1-spp Jacobian passes (module docstring).
+
+    ``estimator``: "per-pass" averages the passes' own J_i^T J_i (Monte Carlo bias Sigma, the variance
+    of one pass's tile Jacobian); "pooled" is (mean_i J_i)^T (mean_i J_i), also positive semi-definite,
+    with bias Sigma / passes (module docstring)."""
+    if estimator not in ESTIMATORS:
+        raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
     if passes < 1:
         raise ValueError(f"passes must be >= 1, got {passes}")
     if block < 1:
@@ -72,6 +81,7 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
     cs = CompiledScene(scene, layout=layout)
     groups = [np.arange(i, min(i + lights_per_render, n_l)) for i in range(0, n_l, lights_per_render)]
     out = np.zeros((k, k))
+    pooled: list = [0.0] * len(groups)  # "pooled": per light group, the sum of the passes' tile Jacobians
     for p in range(passes):
         for gi, ids in enumerate(groups):
             st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + 1000 * p + gi, workers=workers)
@@ -80,7 +90,14 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
             jt = np.zeros((n_tiles,) + r.jacobian.shape[1:])  # (tiles, L, 3, k) tile sums
             np.add.at(jt, tile_of, r.jacobian)
             jt = (jt * inv_sqrt_n[:, None, None, None]).reshape(-1, k) @ chain
-            out += jt.T @ jt
+            if estimator == "pooled":
+                pooled[gi] = pooled[gi] + jt
+            else:
+                out += jt.T @ jt
+    if estimator == "pooled":
+        for jsum in pooled:
+            out += jsum.T @ jsum
+        return out * (2.0 / (m * passes * passes))
     return out * (2.0 / (m * passes))
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from .capture import Capture
 from .compiled_scene import CompiledScene
-from .gauss_newton import DivergenceGuard, PreconditionedMomentum, damped_inverse, gauss_newton_matrix
+from .gauss_newton import ESTIMATORS, DivergenceGuard, PreconditionedMomentum, damped_inverse, gauss_newton_matrix
 from .param_vector import (
     ParamLayout,
     chain_to_optimiser,
@@ -90,6 +90,9 @@ class FitSettings:
     gn_passes: int = 4
     gn_block: int = 8
     gn_damping: float = 0.03
+    # how the passes make the matrix: "per-pass" (mean of J_i^T J_i) or "pooled" ((mean J_i)^T (mean J_i));
+    # see gauss_newton.gauss_newton_matrix
+    gn_estimator: str = "per-pass"
     gn_every: int = 50
     gn_max_step: float = 0.05  # trust region: the step shrinks until no optimiser variable moves further
     # divergence guard (gauss_newton.DivergenceGuard): windows of gn_guard_window iterations; a window whose
@@ -119,6 +122,8 @@ class FitSettings:
                 raise ValueError(f"gn_damping must be > 0, got {self.gn_damping}")
             if not self.gn_max_step > 0:
                 raise ValueError(f"gn_max_step must be > 0, got {self.gn_max_step}")
+            if self.gn_estimator not in ESTIMATORS:
+                raise ValueError(f"gn_estimator must be one of {ESTIMATORS}, got {self.gn_estimator!r}")
             if self.gn_guard_window < 0 or not self.gn_guard_rise > 0 or not self.gn_guard_factor > 1:
                 raise ValueError("gn_guard_window must be >= 0, gn_guard_rise > 0 and gn_guard_factor > 1, got "
                                  f"{self.gn_guard_window}, {self.gn_guard_rise}, {self.gn_guard_factor}")
@@ -285,7 +290,7 @@ def fit_gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLa
                             y: np.ndarray, s: FitSettings, seed: int) -> np.ndarray:
     """The Gauss-Newton matrix over the variables ``gn_idx`` that ``optimiser="gauss-newton"`` steps."""
     return gauss_newton_matrix(scene, capture, layout, gn_idx, y, s.domain, passes=s.gn_passes, block=s.gn_block,
-                               max_depth=s.max_depth, seed=seed, workers=s.workers)
+                               max_depth=s.max_depth, seed=seed, workers=s.workers, estimator=s.gn_estimator)
 
 
 def _new_guard(s: FitSettings) -> DivergenceGuard | None:

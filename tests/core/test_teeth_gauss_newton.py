@@ -36,15 +36,16 @@ def _problem():
     return truth, theta, cap
 
 
-@pytest.mark.parametrize("domain", ["thesis", "absorption"])
-def test_gauss_newton_matrix_matches_brute_force(domain):
+@pytest.mark.parametrize("domain, estimator", [("thesis", "per-pass"), ("absorption", "per-pass"),
+                                               ("thesis", "pooled")])
+def test_gauss_newton_matrix_matches_brute_force(domain, estimator):
     _, theta, cap = _problem()
     layout = ParamLayout(theta)
     cols = np.flatnonzero(free_mask(layout, ("slab.enamel.sigma_t", "slab.enamel.albedo")))
     y = to_optimiser(scene_to_vector(theta, layout), layout, domain)
     passes, block, seed = 2, 4, 11
     hmat = gauss_newton_matrix(theta, cap, layout, cols, y, domain, passes=passes, block=block, max_depth=4,
-                               seed=seed, lights_per_render=2)
+                               seed=seed, lights_per_render=2, estimator=estimator)
     # optimiser map dx/dy by central differences of from_optimiser
     h = 1e-6
     dxdy = np.zeros((len(cols), len(cols)))
@@ -55,7 +56,7 @@ def test_gauss_newton_matrix_matches_brute_force(domain):
         dxdy[:, j] = (from_optimiser(yp, layout, domain) - from_optimiser(ym, layout, domain))[cols] / (2 * h)
     m = cap.masks[0]
     pix = [np.flatnonzero(m.ravel())]
-    ref = np.zeros((len(cols), len(cols)))
+    tiles = {}  # (light group, tile) -> per pass: the tile's Jacobian sum / sqrt(pixels), (L * 3, k)
     groups = [np.array([0, 1]), np.array([2])]
     for p in range(passes):
         for gi, ids in enumerate(groups):
@@ -70,7 +71,13 @@ def test_gauss_newton_matrix_matches_brute_force(domain):
                     if n == 0:
                         continue
                     t = full[ty:ty + block, tx:tx + block].sum(axis=(0, 1)).reshape(-1, len(cols))
-                    ref += t.T @ t / n
+                    tiles.setdefault((gi, ty, tx), []).append(t / np.sqrt(n))
+    ref = np.zeros((len(cols), len(cols)))
+    for ts in tiles.values():
+        if estimator == "pooled":  # (mean over passes of J)^T (mean over passes of J)
+            ref += np.mean(ts, axis=0).T @ np.mean(ts, axis=0) * passes
+        else:  # mean over passes of J^T J
+            ref += sum(t.T @ t for t in ts)
     ref *= 2.0 / (m.sum() * 3 * 3 * passes)
     np.testing.assert_allclose(hmat, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
     assert np.linalg.eigvalsh(hmat).min() > 0
@@ -246,6 +253,7 @@ def test_gauss_newton_takes_over_from_adam_at_gn_start():
                                        ({"optimiser": "gauss-newton", "gn_passes": 0}, "gn_passes"),
                                        ({"optimiser": "gauss-newton", "gn_start": -1}, "gn_start"),
                                        ({"optimiser": "gauss-newton", "gn_max_step": 0.0}, "gn_max_step"),
+                                       ({"optimiser": "gauss-newton", "gn_estimator": "mean"}, "gn_estimator"),
                                        ({"optimiser": "gauss-newton", "gn_lr": 0.0}, "gn_lr"),
                                        ({"optimiser": "gauss-newton", "gn_guard_factor": 1.0}, "gn_guard"),
                                        ({"optimiser": "gauss-newton", "gn_guard_window": -1}, "gn_guard")])
