@@ -17,7 +17,7 @@ from ..core.teeth.fit_presets import FIT_PRESETS
 # ``teeth fit``'s defaults for the settings a --preset may set (flag None = not given on the command line)
 FIT_CLI_DEFAULTS = {"iterations": 100, "lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0,
                     "lights_per_iteration": 18, "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3,
-                    "gn_start": 0, "gn_every": 50}
+                    "gn_start": 0, "gn_every": 50, "gn_passes": 4, "gn_damping": 0.03, "gn_estimator": "per-pass"}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -83,9 +83,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="adam (thesis, the default) or gauss-newton: the material parameters step along the damped "
                         "inverse Gauss-Newton matrix (estimated from 1-spp Jacobian passes of all lights; the dentin "
                         "coefficients keep Adam), which follows the valley where enamel and dentin absorption "
-                        "trade off; the acceptance fit runs Adam for 80 iterations, then gauss-newton "
-                        "(--gn-start 80 --gn-every 40 --gn-lr 0.5; README, 'Why Adam stalls'); see "
-                        "core/teeth/gauss_newton.py")
+                        "trade off; the acceptance fit (--preset acceptance) runs Adam first, then gauss-newton "
+                        "(README, 'Why Adam stalls'); see core/teeth/gauss_newton.py")
     f.add_argument("--gn-lr", type=float, default=None,
                    help=f"gauss-newton: fraction of the Gauss-Newton step (default {FIT_CLI_DEFAULTS['gn_lr']})")
     f.add_argument("--gn-start", type=int, default=None,
@@ -93,9 +92,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "linearised model misleads; default 0)")
     f.add_argument("--gn-every", type=int, default=None,
                    help=f"gauss-newton: iterations between matrix estimates (default {FIT_CLI_DEFAULTS['gn_every']})")
-    f.add_argument("--gn-passes", type=int, default=4, help="gauss-newton: 1-spp Jacobian passes per estimate")
-    f.add_argument("--gn-damping", type=float, default=0.03,
-                   help="gauss-newton: Levenberg-Marquardt damping, relative to the matrix diagonal")
+    f.add_argument("--gn-passes", type=int, default=None,
+                   help=f"gauss-newton: 1-spp Jacobian passes per estimate (default {FIT_CLI_DEFAULTS['gn_passes']})")
+    f.add_argument("--gn-damping", type=float, default=None,
+                   help="gauss-newton: Levenberg-Marquardt damping, relative to the matrix diagonal (default "
+                        f"{FIT_CLI_DEFAULTS['gn_damping']})")
+    f.add_argument("--gn-estimator", choices=("per-pass", "pooled"), default=None,
+                   help="gauss-newton: per-pass (the mean of the passes' J^T J; its Monte Carlo bias adds curvature "
+                        "and shortens the steps along the flattest directions 6-16x on the acceptance capture) or "
+                        "pooled ((mean J)^T (mean J), that bias divided by the passes; default "
+                        f"{FIT_CLI_DEFAULTS['gn_estimator']})")
     f.add_argument("--gn-guard-window", type=int, default=10,
                    help="gauss-newton: iterations per loss window of the divergence guard (a window whose mean loss "
                         "rises more than --gn-guard-rise above the best one's goes back to the best window's mean "
@@ -185,8 +191,8 @@ def run_fit(args: argparse.Namespace) -> int:
     fs = FitSettings(textured_iterations=args.textured_iterations,
                      texture_size=args.texture_size, max_depth=args.max_depth, seed=args.seed,
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
-                     domain=args.domain, workers=args.workers, gn_passes=args.gn_passes, gn_damping=args.gn_damping,
-                     gn_guard_window=args.gn_guard_window, gn_guard_rise=args.gn_guard_rise, **preset)
+                     domain=args.domain, workers=args.workers, gn_guard_window=args.gn_guard_window,
+                     gn_guard_rise=args.gn_guard_rise, **preset)
     if args.workers != 1 and not args.no_dask:
         raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
     if not args.resume:
