@@ -17,7 +17,8 @@ from ..core.teeth.fit_presets import FIT_PRESETS
 # ``teeth fit``'s defaults for the settings a --preset may set (flag None = not given on the command line)
 FIT_CLI_DEFAULTS = {"iterations": 100, "lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0,
                     "lights_per_iteration": 18, "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3,
-                    "gn_start": 0, "gn_every": 50, "gn_passes": 4, "gn_damping": 0.03, "gn_estimator": "per-pass"}
+                    "gn_start": 0, "gn_every": 50, "gn_passes": 4, "gn_damping": 0.03, "gn_estimator": "per-pass",
+                    "gn_c_lr": 1.0}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -102,6 +103,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "and shortens the steps along the flattest directions 6-16x on the acceptance capture) or "
                         "pooled ((mean J)^T (mean J), that bias divided by the passes; default "
                         f"{FIT_CLI_DEFAULTS['gn_estimator']})")
+    f.add_argument("--gn-c-lr", type=float, default=None,
+                   help="gauss-newton: factor on the dentin coefficients' Adam learning rate while Gauss-Newton steps "
+                        f"the materials (default {FIT_CLI_DEFAULTS['gn_c_lr']})")
     f.add_argument("--gn-guard-window", type=int, default=10,
                    help="gauss-newton: iterations per loss window of the divergence guard (a window whose mean loss "
                         "rises more than --gn-guard-rise above the best one's goes back to the best window's mean "

@@ -105,6 +105,10 @@ class FitSettings:
     # the dentin coefficients keep Adam (lr, b1, b2): their Jacobian columns are mostly Monte Carlo
     # noise at a few passes, so their Gauss-Newton rows and cross terms would be noise too
     gn_adam_c: bool = True
+    # factor on their Adam lr while Gauss-Newton steps the materials: with the materials following
+    # their conditional optimum, the coefficients sit in a flat valley (dentin shape against dentin
+    # absorption) along which steps of the normalised size lr random-walk (README, "Why Adam stalls")
+    gn_c_lr: float = 1.0
 
     def __post_init__(self) -> None:
         if self.image_spp < 0:
@@ -122,6 +126,8 @@ class FitSettings:
                 raise ValueError(f"gn_damping must be > 0, got {self.gn_damping}")
             if not self.gn_max_step > 0:
                 raise ValueError(f"gn_max_step must be > 0, got {self.gn_max_step}")
+            if not self.gn_c_lr > 0:
+                raise ValueError(f"gn_c_lr must be > 0, got {self.gn_c_lr}")
             if self.gn_estimator not in ESTIMATORS:
                 raise ValueError(f"gn_estimator must be one of {ESTIMATORS}, got {self.gn_estimator!r}")
             if self.gn_guard_window < 0 or not self.gn_guard_rise > 0 or not self.gn_guard_factor > 1:
@@ -141,7 +147,7 @@ class Adam:
     v: np.ndarray | None = None
     n: int = 0
 
-    def step(self, y: np.ndarray, g: np.ndarray, lr: float | None = None) -> np.ndarray:
+    def step(self, y: np.ndarray, g: np.ndarray, lr: float | np.ndarray | None = None) -> np.ndarray:
         if self.m is None:
             self.m = np.zeros_like(y)
             self.v = np.zeros_like(y)
@@ -446,6 +452,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
         if s.optimiser == "gauss-newton":
             gn = free & ((layout.kinds() != "c") if s.gn_adam_c else True)
         gn_idx = np.flatnonzero(gn)
+        is_c = layout.kinds() == "c"
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
         if s.domain == "absorption":
@@ -494,7 +501,10 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                 y_new = back
                 gn_opt.reset()
             else:
-                y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), s.lr / decay), y)
+                lr = s.lr / decay
+                if gn_on and s.gn_c_lr != 1.0:
+                    lr = np.where(is_c, lr * s.gn_c_lr, lr)
+                y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), lr), y)
                 if gn_on:
                     damping = s.gn_damping if guard is None else guard.damping
                     y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], damped_inverse(hmat, damping),
