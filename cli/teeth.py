@@ -18,7 +18,7 @@ from ..core.teeth.fit_presets import FIT_PRESETS
 FIT_CLI_DEFAULTS = {"iterations": 100, "lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0,
                     "lights_per_iteration": 18, "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3,
                     "gn_start": 0, "gn_every": 50, "gn_passes": 4, "gn_damping": 0.03, "gn_estimator": "per-pass",
-                    "gn_c_lr": 1.0}
+                    "gn_c_lr": 1.0, "gn_guard_rise": 0.25}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -110,8 +110,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="gauss-newton: iterations per loss window of the divergence guard (a window whose mean loss "
                         "rises more than --gn-guard-rise above the best one's goes back to the best window's mean "
                         "iterate and raises the damping 4x); 0 = no guard")
-    f.add_argument("--gn-guard-rise", type=float, default=0.25,
-                   help="gauss-newton: relative loss rise that counts as a divergence")
+    f.add_argument("--gn-guard-rise", type=float, default=None,
+                   help="gauss-newton: relative loss rise that counts as a divergence (default "
+                        f"{FIT_CLI_DEFAULTS['gn_guard_rise']})")
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to optimise (default: all volume, a_t, c)")
     f.add_argument("--seed", type=int, default=0)
@@ -195,8 +196,7 @@ def run_fit(args: argparse.Namespace) -> int:
     fs = FitSettings(textured_iterations=args.textured_iterations,
                      texture_size=args.texture_size, max_depth=args.max_depth, seed=args.seed,
                      free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
-                     domain=args.domain, workers=args.workers, gn_guard_window=args.gn_guard_window,
-                     gn_guard_rise=args.gn_guard_rise, **preset)
+                     domain=args.domain, workers=args.workers, gn_guard_window=args.gn_guard_window, **preset)
     if args.workers != 1 and not args.no_dask:
         raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
     if not args.resume:

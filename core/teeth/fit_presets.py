@@ -16,5 +16,5 @@ FIT_PRESETS: dict[str, dict] = {
     "acceptance": {"iterations": 200, "lr": 0.04, "lr_decay": 0.01, "spp": 4, "image_spp": 32,
                    "lights_per_iteration": 6, "loss_block": 8, "optimiser": "gauss-newton", "gn_start": 80,
                    "gn_every": 40, "gn_lr": 0.5, "gn_estimator": "pooled", "gn_passes": 8, "gn_damping": 0.01,
-                   "gn_c_lr": 0.3},
+                   "gn_c_lr": 0.3, "gn_guard_rise": 1.0},
 }
