@@ -29,7 +29,11 @@ RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.d
 # loss of 8 x 8 box-filtered images (loss_block 8): near the optimum most of the gradient's noise is the
 # product of the residual's per-pixel noise and pass B's per-pixel derivative noise, which averages over
 # a tile while the smooth signal does not; measured at the truth with c moved by 0.1 (8 gradients each),
-# the dentin coefficients' gradient sd is 7-18x lower than per pixel, the materials' 1.3-4.3x (median 1.9x)
+# the dentin coefficients' gradient sd is 7-18x lower than per pixel, the materials' 1.3-4.3x (median 1.9x).
+# The Gauss-Newton matrix is the pooled estimate of 8 passes (its Monte Carlo bias, extra curvature that
+# made the steps along the valley's flattest directions 3-10 % of Newton's, divided by 8), damped by
+# 0.01; the guard reacts to a doubled loss only (windows vary by +-10 % from noise), and the dentin
+# coefficients step at 0.3 of Adam's lr once Gauss-Newton runs (gauss_newton.py, README)
 RECOVERY_SETTINGS = {**FIT_PRESETS["acceptance"], "workers": 2}
 
 

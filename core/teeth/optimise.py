@@ -80,8 +80,8 @@ class FitSettings:
     # damped inverse Gauss-Newton matrix of all lights, see gauss_newton.py), P estimated from gn_passes
     # 1-spp Jacobian passes pooled in gn_block tiles at the phase's start and every gn_every iterations.
     # Adam creeps along the loss valley in which enamel and dentin absorption trade off; this follows it.
-    # lr_decay applies to gn_lr as to lr. The acceptance fit (benchmarks/teeth.py) uses gn_start 80,
-    # gn_every 40, gn_lr 0.5 (README, "Why Adam stalls")
+    # lr_decay applies to gn_lr as to lr. The acceptance fit's values: fit_presets.FIT_PRESETS["acceptance"]
+    # (README, "Why Adam stalls")
     optimiser: str = "adam"
     gn_lr: float = 0.3  # fraction of the Gauss-Newton step
     # Adam iterations before Gauss-Newton takes over (per phase): far from the optimum the linearised
