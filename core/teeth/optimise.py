@@ -449,10 +449,10 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
         free = free_mask(layout, s.free)
         # optimiser "gauss-newton": the variables it steps (the rest of the free ones keep Adam)
         gn = np.zeros_like(free)
-        if s.optimiser == "gauss-newton":
-            gn = free & ((layout.kinds() != "c") if s.gn_adam_c else True)
-        gn_idx = np.flatnonzero(gn)
         is_c = layout.kinds() == "c"
+        if s.optimiser == "gauss-newton":
+            gn = free & (~is_c if s.gn_adam_c else True)
+        gn_idx = np.flatnonzero(gn)
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
         if s.domain == "absorption":
@@ -501,9 +501,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                 y_new = back
                 gn_opt.reset()
             else:
-                lr = s.lr / decay
-                if gn_on and s.gn_c_lr != 1.0:
-                    lr = np.where(is_c, lr * s.gn_c_lr, lr)
+                lr = s.lr / decay * np.where(is_c & gn_on, s.gn_c_lr, 1.0)
                 y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), lr), y)
                 if gn_on:
                     damping = s.gn_damping if guard is None else guard.damping
