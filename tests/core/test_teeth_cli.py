@@ -191,3 +191,25 @@ def test_fit_preset_sets_defaults_and_explicit_flags_win(tmp_path, capsys):
     assert (s["loss_block"], s["optimiser"], s["lr"], s["spp"], s["image_spp"], s["gn_start"]) == \
         (8, "gauss-newton", 0.04, 4, 4, 1)
     assert len(ran["log"]) == 2 and "gauss_newton_seconds" in ran["log"][1]
+
+
+def test_fit_cli_gauss_newton_defaults_match_fit_settings():
+    """The CLI parser does not import the numpy core for --help, so FIT_CLI_DEFAULTS' gn_* values and
+    --gn-estimator's choices are written out in cli/teeth.py; they must stay those of FitSettings and
+    gauss_newton.ESTIMATORS."""
+    import dataclasses
+
+    from material_structures.cli import build_parser
+    from material_structures.cli.teeth import FIT_CLI_DEFAULTS
+    from material_structures.core.teeth.gauss_newton import ESTIMATORS
+    from material_structures.core.teeth.optimise import FitSettings
+
+    fields = {f.name: f.default for f in dataclasses.fields(FitSettings)}
+    gn_keys = [k for k in FIT_CLI_DEFAULTS if k.startswith("gn_")]
+    assert len(gn_keys) >= 7
+    for key in gn_keys:
+        assert FIT_CLI_DEFAULTS[key] == fields[key], key
+    fit_parser = build_parser()._subparsers._group_actions[0].choices["teeth"]
+    fit_parser = fit_parser._subparsers._group_actions[0].choices["fit"]
+    choices = {a.dest: a.choices for a in fit_parser._actions}
+    assert tuple(choices["gn_estimator"]) == tuple(ESTIMATORS)
