@@ -18,7 +18,7 @@ from ..core.teeth.fit_presets import FIT_PRESETS
 FIT_CLI_DEFAULTS = {"iterations": 100, "lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0,
                     "lights_per_iteration": 18, "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3,
                     "gn_start": 0, "gn_every": 50, "gn_passes": 4, "gn_damping": 0.03, "gn_estimator": "per-pass",
-                    "gn_c_lr": 1.0, "gn_guard_rise": 0.25}
+                    "gn_c_lr": 1.0, "gn_guard_rise": 0.25, "average_tail": 0.0}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -40,7 +40,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     f = tsub.add_parser("fit", help="fit the appearance model to a capture folder")
     f.add_argument("capture", help="capture folder with capture.json, images, masks and scene.json")
-    f.add_argument("--out", required=True, help="fit folder: checkpoint.json, loss.json, loss.png, scene_fit.json")
+    f.add_argument("--out", required=True,
+                   help="fit folder: checkpoint.json, loss.json, loss.png, scene_fit.json, scene_best.json")
     f.add_argument("--scene", default=None, help="scene JSON with geometry/start (default CAPTURE/scene.json)")
     f.add_argument("--init", choices=("literature", "scene", "perturbed"), default="literature",
                    help="start point: literature-table search (thesis), the scene's values, or a "
@@ -113,6 +114,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--gn-guard-rise", type=float, default=None,
                    help="gauss-newton: relative loss rise that counts as a divergence (default "
                         f"{FIT_CLI_DEFAULTS['gn_guard_rise']})")
+    f.add_argument("--average-tail", type=float, default=None,
+                   help="result = the mean of the iterates of this last fraction of the iterations (Polyak "
+                        "averaging; near the optimum it is closer than any one iterate or the best-loss one); 0 = "
+                        f"the best-loss parameters as in the thesis (default {FIT_CLI_DEFAULTS['average_tail']}; "
+                        "scene_best.json has the best-loss parameters either way)")
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to optimise (default: all volume, a_t, c)")
     f.add_argument("--seed", type=int, default=0)
@@ -238,7 +244,10 @@ def run_fit(args: argparse.Namespace) -> int:
     if bar is not None:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))
-    print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json, loss.json, loss.png")
+    result = (f"mean of the last {fs.average_tail:.0%} of the iterates" if fs.average_tail > 0
+              else "the best-loss parameters")
+    print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json ({result}), "
+          "scene_best.json, loss.json, loss.png")
     return 0
 
 

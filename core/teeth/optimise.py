@@ -109,8 +109,15 @@ class FitSettings:
     # their conditional optimum, the coefficients sit in a flat valley (dentin shape against dentin
     # absorption) along which steps of the normalised size lr random-walk (README, "Why Adam stalls")
     gn_c_lr: float = 1.0
+    # Polyak-Ruppert averaging: the result is the mean (in the optimiser domain) of the iterates of the
+    # last ``average_tail`` fraction of the last phase's iterations. Near the optimum the iterates wander
+    # by their gradient noise, and their mean is closer to the optimum than any one of them or than the
+    # best-loss iterate (whose loss estimate is itself noisy). 0 = the best-loss scene (the thesis)
+    average_tail: float = 0.0
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.average_tail < 1.0:
+            raise ValueError(f"average_tail must be in [0, 1), got {self.average_tail}")
         if self.image_spp < 0:
             raise ValueError(f"image_spp must be >= 0 (0 = spp), got {self.image_spp}")
         if self.workers < 1:
@@ -242,6 +249,16 @@ class FitState:
     gn_m: list | None = None
     gn_n: int = 0
     gn_guard: dict | None = None
+    # average_tail: the sum and count of the averaged iterates so far (optimiser domain)
+    avg_sum: list | None = None
+    avg_count: int = 0
+
+
+def tail_start(n_iterations: int, average_tail: float) -> int:
+    """First iteration of the last phase whose iterate enters the averaged result (``average_tail``)."""
+    if average_tail <= 0:
+        return n_iterations
+    return n_iterations - max(1, int(round(n_iterations * average_tail)))
 
 
 def _save_json(path: str, obj) -> None:
@@ -374,10 +391,13 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
         resume: bool = False, progress: Callable | None = None,
         callback: Callable | None = None, gradient: Callable | None = None,
         status: Callable[[str], None] | None = None) -> tuple[TeethScene, list]:
-    """Fit ``scene``'s free parameters to ``capture``; returns (best scene, log).
+    """Fit ``scene``'s free parameters to ``capture``; returns (result, log): the best-loss scene, or with
+    ``settings.average_tail`` the mean of the last iterates (Polyak-Ruppert averaging).
 
     With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json``,
-    ``scene_fit.json`` (best parameters); ``resume`` continues from the checkpoint. ``gradient``
+    ``scene_fit.json`` (the result so far: the best-loss scene until the averaged iterations begin, then
+    their running mean) and ``scene_best.json`` (the best-loss scene); ``resume`` continues from the
+    checkpoint. ``gradient``
     replaces :func:`iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``. ``progress(entry)``
     and ``callback(entry, scene)`` are called after every iteration; ``status(text)`` says what the fit does
     between iterations that takes long (the Gauss-Newton matrix estimate; "" when it is done). With
@@ -412,6 +432,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     best_loss = np.inf if state is None else state.best_loss
     best_scene = scene if state is None else TeethScene.from_dict(state.best_scene)
     cur = scene if state is None else TeethScene.from_dict(state.scene)
+    avg_sum = None if state is None or state.avg_sum is None else np.array(state.avg_sum)
+    avg_count = 0 if state is None else state.avg_count
     n_l = min(s.lights_per_iteration, len(capture.lights))
     names = [p for p, _ in phases]
     start_phase = 0 if state is None else names.index(state.phase)
@@ -490,6 +512,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             if loss < best_loss:
                 best_loss = loss
                 best_scene = cur.copy()
+            if pi == len(phases) - 1 and it >= tail_start(n_it, s.average_tail):
+                avg_sum = y.copy() if avg_sum is None else avg_sum + y
+                avg_count += 1
             g = chain_to_optimiser(g_phys, y, layout, s.domain)
             g[~free] = 0.0
             decay = 1.0 + s.lr_decay * it  # lr_n = lr / (1 + lr_decay * n), gn_lr likewise
@@ -531,11 +556,21 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                                                  -1 if anchor is None else anchor.iteration,
                                                  None if hmat is None else hmat.tolist(), precond_it,
                                                  None if gn_opt.m is None else gn_opt.m.tolist(), gn_opt.n,
-                                                 None if guard is None else guard.to_dict())))
+                                                 None if guard is None else guard.to_dict(),
+                                                 None if avg_sum is None else avg_sum.tolist(), avg_count)))
                 _save_json(os.path.join(out_dir, "loss.json"), {"log": log, "settings": asdict(s)})
-                _save_json(os.path.join(out_dir, "scene_fit.json"), best_scene.to_dict())
+                _save_json(os.path.join(out_dir, "scene_best.json"), best_scene.to_dict())
+                result = best_scene if avg_sum is None else _averaged(cur, avg_sum, avg_count, layout, s.domain)
+                _save_json(os.path.join(out_dir, "scene_fit.json"), result.to_dict())
         cur = vector_to_scene(cur, from_optimiser(y, layout, s.domain), layout)
+    if avg_sum is not None:
+        return _averaged(cur, avg_sum, avg_count, layout, s.domain), log
     return best_scene, log
+
+
+def _averaged(scene: TeethScene, y_sum: np.ndarray, count: int, layout: ParamLayout, domain: str) -> TeethScene:
+    """``scene`` with the mean ``y_sum / count`` of the averaged optimiser-domain iterates."""
+    return vector_to_scene(scene, from_optimiser(y_sum / count, layout, domain), layout)
 
 
 def plot_loss(log: list, path: str) -> None:

@@ -106,8 +106,10 @@ def tooth_masks(scene: TeethScene, cameras: list[Camera], compiled: CompiledScen
 
 
 def render_capture(scene: TeethScene, cameras: list[Camera], lights: list, spp: int = 16,
-                   spp_background: int = 2, seed: int = 12345, max_depth: int = 6, progress=None):
-    """Synthetic capture of ``scene``: masked tooth pixels at ``spp``, the rest at ``spp_background``."""
+                   spp_background: int = 2, seed: int = 12345, max_depth: int = 6, progress=None,
+                   workers: int = 1):
+    """Synthetic capture of ``scene``: masked tooth pixels at ``spp``, the rest at ``spp_background``;
+    ``workers`` processes trace each batch of lights (same images up to floating-point summation order)."""
     from .capture import Capture
     from .path_tracer import RenderSettings, render
 
@@ -121,7 +123,7 @@ def render_capture(scene: TeethScene, cameras: list[Camera], lights: list, spp: 
         pixels = [np.flatnonzero(m.ravel() == sel) for m in masks]
         for k, l0 in enumerate(range(0, len(lights), 9)):
             ids = np.arange(l0, min(l0 + 9, len(lights)))
-            res = render(scene, cameras, lights, RenderSettings(n, max_depth, seed + 1000 * part + k),
+            res = render(scene, cameras, lights, RenderSettings(n, max_depth, seed + 1000 * part + k, workers=workers),
                          pixels=pixels, light_ids=ids, compiled=cs)
             images[:, ids] += res.images
             if progress is not None:
