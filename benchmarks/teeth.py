@@ -7,6 +7,7 @@ recovery fit (about 55 minutes on 2 cores; progress on stderr); TEETH_BENCH_RECO
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -49,13 +50,13 @@ def recovery_errors(fit_scene, truth) -> dict:
             "recovery_dentin_abs_err": float(max(c_err))}
 
 
-def acceptance_setup(synth_spp: int = 8, seed: int = 12345):
+def acceptance_setup(synth_spp: int = 8, seed: int = 12345, workers: int = 1):
     from material_structures.core.teeth.capture import default_rig
     from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
 
     truth = make_scene(n_teeth=2)
     cams, lights = default_rig(target=scene_target(truth), width=96, height=64, fov_x_deg=4.8)
-    capture = render_capture(truth, cams, lights, spp=synth_spp, spp_background=0, seed=seed)
+    capture = render_capture(truth, cams, lights, spp=synth_spp, spp_background=0, seed=seed, workers=workers)
     return truth, capture
 
 
@@ -63,36 +64,32 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     """The acceptance fit: synthetic capture, perturbed start, fit of sigma_t, albedo and c (Adam for 80
     iterations, then Gauss-Newton steps for the materials while c keeps Adam; RECOVERY_SETTINGS).
 
-    Reports the errors of the best-loss parameters (the thesis' choice) and of the average of the
-    last quarter of the iterates (Polyak averaging, less sensitive to the Monte Carlo noise).
+    Reports the errors of the fit's result (the preset averages the last iterates, ``average_tail``)
+    and of its best-loss parameters (the thesis' choice).
     """
+    import tempfile
+
     from material_structures.core.teeth.optimise import FitSettings, fit
-    from material_structures.core.teeth.param_vector import (
-        ParamLayout,
-        from_optimiser,
-        scene_to_vector,
-        to_optimiser,
-        vector_to_scene,
-    )
+    from material_structures.core.teeth.scene import TeethScene
     from material_structures.core.teeth.synthetic import perturbed_start
 
     iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", RECOVERY_SETTINGS["iterations"]))
     synth_spp = synth_spp or int(os.environ.get("TEETH_BENCH_SYNTH_SPP", "32"))
     t0 = time.perf_counter()
-    truth, capture = acceptance_setup(synth_spp)
+    truth, capture = acceptance_setup(synth_spp, workers=RECOVERY_SETTINGS["workers"])
     out: dict = {"synth_seconds": time.perf_counter() - t0}
     start = perturbed_start(truth, seed=seed, sigma_factor=0.25, kappa_shift=0.2)
     settings = FitSettings(**{**RECOVERY_SETTINGS, "iterations": iterations}, free=RECOVERY_FREE)
-    layout = ParamLayout(truth)
-    ys: list = []
+    n_done = 0
     t0 = time.perf_counter()
 
     def record(entry: dict, scene) -> None:
-        ys.append(to_optimiser(scene_to_vector(scene, layout), layout))
-        if len(ys) % 10 == 0:  # progress on stderr (stdout is the JSON result)
+        nonlocal n_done
+        n_done += 1
+        if n_done % 10 == 0:  # progress on stderr (stdout is the JSON result)
             err = recovery_errors(scene, truth)
-            print(f"bench teeth: recovery iteration {len(ys)}/{iterations}, loss {entry['loss']:.3e}, "
-                  f"{(time.perf_counter() - t0) / len(ys):.1f} s per iteration; this iterate's sigma_t / albedo / c "
+            print(f"bench teeth: recovery iteration {n_done}/{iterations}, loss {entry['loss']:.3e}, "
+                  f"{(time.perf_counter() - t0) / n_done:.1f} s per iteration; this iterate's sigma_t / albedo / c "
                   f"errors {err['recovery_sigma_t_rel_err']:.3f} / {err['recovery_albedo_rel_err']:.3f} / "
                   f"{err['recovery_dentin_abs_err']:.3f}"
                   + (f"; Gauss-Newton damping {entry['gauss_newton_damping']:.3g}"
@@ -101,12 +98,14 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
             print(f"bench teeth: iteration {entry['iteration']}: the loss rose, Gauss-Newton went back to its best "
                   f"window (damping now {entry['gauss_newton_damping']:.3g})", file=sys.stderr, flush=True)
 
-    best, log = fit(start, capture, settings, callback=record)
+    with tempfile.TemporaryDirectory() as fit_dir:
+        result, log = fit(start, capture, settings, out_dir=fit_dir, callback=record)
+        with open(os.path.join(fit_dir, "scene_best.json")) as f:
+            best = TeethScene.from_dict(json.load(f))
     out["recovery_seconds"] = time.perf_counter() - t0
     out["recovery_iterations"] = len(log)
     out["recovery_seconds_per_iteration"] = out["recovery_seconds"] / max(len(log), 1)
-    avg = vector_to_scene(truth, from_optimiser(np.mean(ys[len(ys) * 3 // 4:], axis=0), layout), layout)
-    out.update(recovery_errors(avg, truth))
+    out.update(recovery_errors(result, truth))
     out["recovery_best_loss_params"] = recovery_errors(best, truth)
     out["recovery_start"] = recovery_errors(start, truth)
     out["recovery_config"] = ("perturbed start (sigma_t x exp(+-0.25), kappa +-0.2, c = 0); free: enamel/dentin "
