@@ -108,11 +108,12 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     out.update(recovery_errors(result, truth))
     out["recovery_best_loss_params"] = recovery_errors(best, truth)
     out["recovery_start"] = recovery_errors(start, truth)
-    out["recovery_config"] = ("perturbed start (sigma_t x exp(+-0.25), kappa +-0.2, c = 0); free: enamel/dentin "
-                              f"sigma_t, albedo, c of both teeth; {iterations} iterations "
-                              f"({RECOVERY_SETTINGS.get('optimiser', 'adam')}), "
-                              f"{ {k: v for k, v in RECOVERY_SETTINGS.items() if k != 'iterations'} }; errors of the "
-                              "tail-averaged iterate")
+    settings_text = {k: v for k, v in RECOVERY_SETTINGS.items() if k != "iterations"}
+    out["recovery_config"] = (f"capture {synth_spp} spp; perturbed start (sigma_t x exp(+-0.25), kappa +-0.2, "
+                              "c = 0); free: enamel/dentin sigma_t, albedo, c of both teeth; "
+                              f"{iterations} iterations ({RECOVERY_SETTINGS.get('optimiser', 'adam')}), "
+                              f"{settings_text}; errors of the fit's result (the mean of the last average_tail "
+                              "of the iterates)")
     return out
 
 

@@ -1,0 +1,19 @@
+"""Smoke test of ``bench teeth``'s recovery path (the acceptance scene and rig, 1-spp capture, 2 iterations):
+it runs, reports the fit's result, its best-loss parameters and the start, and says what it measured."""
+
+from __future__ import annotations
+
+from material_structures.benchmarks.teeth import RECOVERY_SETTINGS, run_recovery
+
+
+def test_run_recovery_reports_result_best_and_start():
+    out = run_recovery(iterations=2, synth_spp=1)
+    keys = ("recovery_sigma_t_rel_err", "recovery_albedo_rel_err", "recovery_dentin_abs_err")
+    assert out["recovery_iterations"] == 2
+    for part in (out, out["recovery_best_loss_params"], out["recovery_start"]):
+        assert all(0.0 <= part[k] < 1.0 for k in keys), part
+    # the start is the perturbed one (sigma_t x exp(+-0.25), c reset by 0.2), and two Adam steps of at
+    # most lr = 0.04 each in the optimiser domain cannot undo it
+    assert out["recovery_start"]["recovery_sigma_t_rel_err"] > 0.2
+    assert out["recovery_dentin_abs_err"] > 0.2 - 2 * RECOVERY_SETTINGS["lr"] - 1e-9
+    assert "capture 1 spp" in out["recovery_config"] and "average_tail" in out["recovery_config"]
