@@ -322,6 +322,20 @@ def _new_guard(s: FitSettings) -> DivergenceGuard | None:
     return DivergenceGuard(s.gn_guard_window, s.gn_guard_rise, s.gn_guard_factor, s.gn_damping, s.gn_damping)
 
 
+def _resumed_guard(saved: dict | None, s: FitSettings) -> DivergenceGuard | None:
+    """The checkpoint's divergence guard (its windows, best window and escalation) under the resuming
+    settings: their window, rise and factor, and their gn_damping times the checkpoint's escalation
+    (damping / min_damping); a new guard when the checkpoint had none, None when the settings turn it off."""
+    fresh = _new_guard(s)
+    if saved is None or fresh is None:
+        return fresh
+    guard = DivergenceGuard.from_dict(saved)
+    escalation = guard.damping / guard.min_damping
+    guard.window, guard.rise, guard.factor = fresh.window, fresh.rise, fresh.factor
+    guard.min_damping, guard.damping = fresh.min_damping, fresh.min_damping * escalation
+    return guard
+
+
 def _load_state(path: str) -> FitState:
     with open(path) as f:
         d = json.load(f)
@@ -457,7 +471,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
                                             state.gn_n, s.gn_max_step)
             hmat = None if state.gn_hmat is None else np.array(state.gn_hmat)
             precond_it = state.precond_iteration
-            guard = None if state.gn_guard is None else DivergenceGuard.from_dict(state.gn_guard)
+            guard = _resumed_guard(state.gn_guard, s)
             state = None
         else:
             if phase == "textured":

@@ -307,3 +307,32 @@ def test_gn_c_lr_scales_the_coefficients_adam_steps_once_gauss_newton_runs():
     assert np.abs(dc_full).min() > 1e-4
     np.testing.assert_allclose(dc_scaled, 0.25 * dc_full, rtol=1e-9)
     np.testing.assert_allclose(scaled[2].teeth[0].enamel.sigma_t, full[2].teeth[0].enamel.sigma_t, rtol=1e-12)
+
+
+def test_resumed_fit_takes_the_guard_settings_of_the_resuming_settings(tmp_path):
+    """The guard's windows and escalation survive a resume; its rise, factor and base damping are the
+    resuming settings' (the checkpoint's were kept before); a guard turned off stays off."""
+    import json
+
+    _, theta, cap = _problem()
+    base = dict(iterations=3, spp=1, image_spp=2, lights_per_iteration=2, free=("slab.enamel.albedo",),
+                optimiser="gauss-newton", gn_passes=1, gn_block=4, seed=0, max_depth=4, checkpoint_every=1,
+                gn_guard_rise=0.25, gn_damping=0.03)
+    out = str(tmp_path / "fit")
+    fit(theta, cap, FitSettings(**base), out_dir=out)
+    path = f"{out}/checkpoint.json"
+    with open(path) as f:
+        ck = json.load(f)
+    assert ck["gn_guard"]["rise"] == 0.25 and ck["gn_guard"]["n"] == 3
+    ck["gn_guard"]["damping"] = 0.12  # as after one rollback (4x the base 0.03)
+    with open(path, "w") as f:
+        json.dump(ck, f)
+    fit(theta, cap, FitSettings(**{**base, "iterations": 4, "gn_guard_rise": 1.0, "gn_damping": 0.01}), out_dir=out,
+        resume=True)
+    with open(path) as f:
+        guard = json.load(f)["gn_guard"]
+    assert guard["rise"] == 1.0 and guard["n"] == 4  # the window's first 3 iterations carried over
+    assert guard["min_damping"] == pytest.approx(0.01) and guard["damping"] == pytest.approx(0.04)
+    fit(theta, cap, FitSettings(**{**base, "iterations": 5, "gn_guard_window": 0}), out_dir=out, resume=True)
+    with open(path) as f:
+        assert json.load(f)["gn_guard"] is None
