@@ -31,3 +31,19 @@ def down_camera(width=16, height=16, fov=4.0, eye=(0.0, 0.0, 300.0), target=(0.0
 
 def light(pos, intensity=1.0e5):
     return PointLight(pos, np.full(3, intensity))
+
+
+def slab_fit_problem(size: int, capture_spp: int, start_enamel: VolumeMaterial, max_depth: int = 6):
+    """A slab over a floor seen by one size x size camera under 3 lights: (start scene, capture of the
+    truth at ``capture_spp``, no mask) with the start's enamel ``start_enamel``."""
+    from material_structures.core.teeth.capture import Capture
+    from material_structures.core.teeth.path_tracer import RenderSettings, render
+
+    truth = slab_scene([1.0, 1.3, 1.7], [0.95, 0.9, 0.8], floor_albedo=[0.4, 0.3, 0.2])
+    cams = [down_camera(size, size, fov=6.0)]
+    lights = [light((60.0 * np.cos(a), 60.0 * np.sin(a), 200.0)) for a in (0.0, 2.1, 4.2)]
+    img = render(truth, cams, lights, RenderSettings(capture_spp, max_depth, 999)).images
+    cap = Capture(cams, lights, img.astype(np.float32), np.ones((1, size, size), dtype=bool))
+    start = truth.copy()
+    start.teeth[0].enamel = start_enamel
+    return start, cap

@@ -10,24 +10,15 @@ import os
 import numpy as np
 import pytest
 
-from material_structures.core.teeth.capture import Capture
 from material_structures.core.teeth.optimise import FitSettings, fit, tail_start
 from material_structures.core.teeth.param_vector import ParamLayout, scene_to_vector, to_optimiser
-from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import TeethScene, VolumeMaterial
 
-from ._teeth_scenes import down_camera, light, slab_scene
+from ._teeth_scenes import slab_fit_problem
 
 
 def _problem():
-    truth = slab_scene([1.0, 1.3, 1.7], [0.95, 0.9, 0.8], floor_albedo=[0.4, 0.3, 0.2])
-    cams = [down_camera(8, 8, fov=6.0)]
-    lights = [light((60.0 * np.cos(a), 60.0 * np.sin(a), 200.0)) for a in (0.0, 2.1, 4.2)]
-    img = render(truth, cams, lights, RenderSettings(16, 4, 999)).images
-    cap = Capture(cams, lights, img.astype(np.float32), np.ones((1, 8, 8), dtype=bool))
-    theta = truth.copy()
-    theta.teeth[0].enamel = VolumeMaterial([1.5, 0.9, 2.4], [0.85, 0.95, 0.6], 0.5, -0.3, 0.7)
-    return theta, cap
+    return slab_fit_problem(8, 16, VolumeMaterial([1.5, 0.9, 2.4], [0.85, 0.95, 0.6], 0.5, -0.3, 0.7), max_depth=4)
 
 
 BASE = dict(iterations=6, spp=1, lights_per_iteration=2, free=("slab.enamel.sigma_t", "slab.enamel.albedo"),

@@ -5,24 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from material_structures.core.teeth.capture import Capture
 from material_structures.core.teeth.optimise import FitSettings, fit, iteration_gradient, l2_loss
 from material_structures.core.teeth.param_vector import ParamLayout
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import VolumeMaterial
 
-from ._teeth_scenes import down_camera, light, slab_scene
+from ._teeth_scenes import slab_fit_problem
 
 
 def _problem():
-    truth = slab_scene([1.0, 1.3, 1.7], [0.95, 0.9, 0.8], floor_albedo=[0.4, 0.3, 0.2])
-    cams = [down_camera(12, 12, fov=6.0)]
-    lights = [light((60.0 * np.cos(a), 60.0 * np.sin(a), 200.0)) for a in (0.0, 2.1, 4.2)]
-    img = render(truth, cams, lights, RenderSettings(64, 6, 999)).images
-    cap = Capture(cams, lights, img.astype(np.float32), np.ones((1, 12, 12), dtype=bool))
-    theta = truth.copy()
-    theta.teeth[0].enamel = VolumeMaterial([1.1, 1.2, 1.9], [0.93, 0.92, 0.75], 0.5, -0.3, 0.7)
-    return theta, cap
+    return slab_fit_problem(12, 64, VolumeMaterial([1.1, 1.2, 1.9], [0.93, 0.92, 0.75], 0.5, -0.3, 0.7))
 
 
 def test_forked_chunks_give_the_serial_render():
