@@ -106,6 +106,21 @@ def _live_in_group(pgid: int) -> list[int]:
     return live
 
 
+def _process_report(job) -> str:
+    """What the fit process was doing (for a failure message: a CI run once saw no forked workers for 60 s)."""
+    pid = job.proc.pid
+    lines = [f"iterations {job.done_iterations}, last line {job.last_line!r}"]
+    for name in ("status", "wchan", "stack"):
+        try:
+            with open(f"/proc/{pid}/{name}") as f:
+                text = f.read()
+        except OSError as e:
+            text = str(e)
+        lines.append(f"/proc/{pid}/{name}: " + (" ".join(ln for ln in text.splitlines() if ln.startswith(("State",
+                                                  "Threads"))) if name == "status" else text.strip()[:400]))
+    return "\n".join(lines)
+
+
 def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path):
     """Progress and loss while it runs; cancel stops the fit process and the render workers it forks
     (2 workers; a 64-spp pass A on 192 pixels is 3 chunks of paths, so every pass A forks)."""
@@ -127,7 +142,7 @@ def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path)
         deadline = time.time() + 60  # catch a moment when the fit has forked its workers
         while len(_live_in_group(job.proc.pid)) < 2 and time.time() < deadline:
             time.sleep(0.01)
-        assert len(_live_in_group(job.proc.pid)) >= 2
+        assert len(_live_in_group(job.proc.pid)) >= 2, _process_report(job)
     job.cancel()
     assert job.poll() == "CANCELLED"
     assert job.proc.returncode != 0
