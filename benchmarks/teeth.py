@@ -10,7 +10,6 @@ gradient standard deviation by 12 %, geometric mean; that model predicts 13 %).
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
@@ -71,10 +70,7 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     Reports the errors of the fit's result (the preset averages the last iterates, ``average_tail``)
     and of its best-loss parameters (the thesis' choice).
     """
-    import tempfile
-
     from material_structures.core.teeth.optimise import FitSettings, fit
-    from material_structures.core.teeth.scene import TeethScene
     from material_structures.core.teeth.synthetic import perturbed_start
 
     iterations = iterations or int(os.environ.get("TEETH_BENCH_ITERATIONS", RECOVERY_SETTINGS["iterations"]))
@@ -84,12 +80,14 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     out: dict = {"synth_seconds": time.perf_counter() - t0}
     start = perturbed_start(truth, seed=seed, sigma_factor=0.25, kappa_shift=0.2)
     settings = FitSettings(**{**RECOVERY_SETTINGS, "iterations": iterations}, free=RECOVERY_FREE)
-    n_done = 0
+    n_done, best = 0, start
     t0 = time.perf_counter()
 
     def record(entry: dict, scene) -> None:
-        nonlocal n_done
+        nonlocal n_done, best
         n_done += 1
+        if entry["loss"] == entry["best_loss"]:  # this iterate became the fit's best-loss scene
+            best = scene.copy()
         if n_done % 10 == 0:  # progress on stderr (stdout is the JSON result)
             err = recovery_errors(scene, truth)
             print(f"bench teeth: recovery iteration {n_done}/{iterations}, loss {entry['loss']:.3e}, "
@@ -102,10 +100,7 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
             print(f"bench teeth: iteration {entry['iteration']}: the loss rose, Gauss-Newton went back to its best "
                   f"window (damping now {entry['gauss_newton_damping']:.3g})", file=sys.stderr, flush=True)
 
-    with tempfile.TemporaryDirectory() as fit_dir:
-        result, log = fit(start, capture, settings, out_dir=fit_dir, callback=record)
-        with open(os.path.join(fit_dir, "scene_best.json")) as f:
-            best = TeethScene.from_dict(json.load(f))
+    result, log = fit(start, capture, settings, callback=record)
     out["recovery_seconds"] = time.perf_counter() - t0
     out["recovery_iterations"] = len(log)
     out["recovery_seconds_per_iteration"] = out["recovery_seconds"] / max(len(log), 1)

@@ -411,8 +411,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json``,
     ``scene_fit.json`` (the result so far: the best-loss scene until the averaged iterations begin, then
     their running mean) and ``scene_best.json`` (the best-loss scene); ``resume`` continues from the
-    checkpoint. ``gradient``
-    replaces :func:`iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``. ``progress(entry)``
+    checkpoint. ``gradient`` replaces :func:`iteration_gradient` (same signature), e.g.
+    ``scaleout.teeth.DaskGradient``. ``progress(entry)``
     and ``callback(entry, scene)`` are called after every iteration; ``status(text)`` says what the fit does
     between iterations that takes long (the Gauss-Newton matrix estimate; "" when it is done). With
     ``settings.anchor_spp`` the gradient function also gets ``anchor=`` (an :class:`Anchor`, re-rendered
@@ -489,6 +489,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
         if s.optimiser == "gauss-newton":
             gn = free & (~is_c if s.gn_adam_c else True)
         gn_idx = np.flatnonzero(gn)
+        # the last phase's iterations from this one on enter the averaged result (average_tail)
+        avg_from = tail_start(n_it, s.average_tail) if pi == len(phases) - 1 else n_it
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
         if s.domain == "absorption":
@@ -526,7 +528,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
             if loss < best_loss:
                 best_loss = loss
                 best_scene = cur.copy()
-            if pi == len(phases) - 1 and it >= tail_start(n_it, s.average_tail):
+            if it >= avg_from:
                 avg_sum = y.copy() if avg_sum is None else avg_sum + y
                 avg_count += 1
             g = chain_to_optimiser(g_phys, y, layout, s.domain)

@@ -116,8 +116,9 @@ def _process_report(job) -> str:
                 text = f.read()
         except OSError as e:
             text = str(e)
-        lines.append(f"/proc/{pid}/{name}: " + (" ".join(ln for ln in text.splitlines() if ln.startswith(("State",
-                                                  "Threads"))) if name == "status" else text.strip()[:400]))
+        if name == "status":  # the state and thread count only
+            text = " ".join(ln for ln in text.splitlines() if ln.startswith(("State", "Threads")))
+        lines.append(f"/proc/{pid}/{name}: {text.strip()[:400]}")
     return "\n".join(lines)
 
 
