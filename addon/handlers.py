@@ -1,4 +1,5 @@
-"""App handlers: keep lamp data in the exact-path shaders current (moving a lamp just works)."""
+"""App handlers: keep lamp data in the exact-path shaders current (moving a lamp just works), embedded
+shaders current after loading a file."""
 
 from __future__ import annotations
 
@@ -29,9 +30,18 @@ def on_render_pre(scene, *_args) -> None:
         sync_fabric_lamps(scene, update_matrices=False)
 
 
+@persistent
+def on_load_post(*_args) -> None:
+    """Shaders are embedded in the file; bring files from older versions (or an older extension) up to date."""
+    from ..render.osl import refresh_embedded_scripts
+
+    refresh_embedded_scripts(bpy.context.scene)
+
+
 HANDLERS = [
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
+    (bpy.app.handlers.load_post, on_load_post),
 ]
 
 from .scratch.handlers import SCRATCH_HANDLERS  # noqa: E402  (scratched metal: lamps, table cache)

@@ -1,10 +1,16 @@
-"""Loading OSL shaders into script nodes, headless."""
+"""Loading OSL shaders into script nodes, embedded in the .blend, headless."""
 
 from __future__ import annotations
 
+import glob
+import hashlib
+import os
+import re
 from collections.abc import Iterable
 
-from .session import ensure_bundled_paths, osl_shader_path
+from .session import OSL_DIR, ensure_bundled_paths, osl_shader_path
+
+_LOCAL_INCLUDE = re.compile(r'\s*#\s*include\s+"(ms_[A-Za-z0-9_]+\.h)"')
 
 
 class OslScriptError(RuntimeError):
@@ -21,44 +27,135 @@ def load_osl_script(
 ):
     """Add a ``ShaderNodeScript`` running ``shader`` (a name in ``cycles_osl/`` or a path).
 
-    Sets the engine to Cycles and enables OSL on ``scene`` (default: the context scene) *before*
-    assigning the file (and, for the compile, on the context scene too), calls ``node.update()``
-    and asserts that ``inputs`` and ``outputs`` exist.
+    The shader is embedded in the .blend (:func:`shader_text`): the node runs an internal text
+    datablock, and Cycles keeps the compiled bytecode in the node, so the file renders wherever it
+    is moved and whichever folder the extension is installed in. Sets the engine to Cycles and
+    enables OSL on ``scene`` (default: the context scene) before compiling, and asserts that
+    ``inputs`` and ``outputs`` exist.
     """
-    import os
-
     import bpy
 
     ensure_bundled_paths()
     scene = scene or bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.shading_system = True
-    path = shader if os.path.isabs(shader) else osl_shader_path(shader)
     node = node_tree.nodes.new("ShaderNodeScript")
     if name:
         node.name = node.label = name
-    node.mode = "EXTERNAL"
-    # Script nodes compile against the *context* scene's engine: lend it Cycles + OSL meanwhile.
+    node.mode = "INTERNAL"
+    node.script = shader_text(shader)
+    compile_script_node(node, scene)
+    have_in = {s.name for s in node.inputs}
+    have_out = {s.name for s in node.outputs}
+    missing = [s for s in inputs if s not in have_in] + [s for s in outputs if s not in have_out]
+    if missing or not (have_in or have_out):
+        raise OslScriptError(
+            f"OSL script {shader} is missing sockets {missing or '(all)'}; it has inputs {sorted(have_in)} "
+            f"and outputs {sorted(have_out)} (does it compile? is oslquery importable?)"
+        )
+    return node
+
+
+def compile_script_node(node, scene=None) -> None:
+    """(Re)compile a script node: sockets and, for internal scripts, the bytecode stored in the node.
+
+    Script nodes compile against the *context* scene's engine: lend it Cycles + OSL meanwhile.
+    """
+    import bpy
+
+    ensure_bundled_paths()
     ctx = bpy.context.scene
     saved = (ctx.render.engine, ctx.cycles.shading_system) if ctx is not None else None
     if ctx is not None:
         ctx.render.engine = "CYCLES"
         ctx.cycles.shading_system = True
     try:
-        node.filepath = path
         node.update()
     finally:
         if ctx is not None and ctx != scene:
             ctx.render.engine, ctx.cycles.shading_system = saved
-    have_in = {s.name for s in node.inputs}
-    have_out = {s.name for s in node.outputs}
-    missing = [s for s in inputs if s not in have_in] + [s for s in outputs if s not in have_out]
-    if missing or not (have_in or have_out):
-        raise OslScriptError(
-            f"OSL script {path} is missing sockets {missing or '(all)'}; it has inputs {sorted(have_in)} "
-            f"and outputs {sorted(have_out)} (does it compile? is oslquery importable?)"
-        )
-    return node
+
+
+TEXT_MARKER = "material_structures_osl"  # ID property on embedded shader texts: the source's hash
+
+
+def shader_source(shader: str) -> str:
+    """The source of ``shader`` with this project's ``#include "ms_*.h"`` headers inlined (an
+    embedded script is compiled from a temporary file, where relative includes are not found);
+    Cycles' own headers (``stdcycles.h``, ``stdosl.h``) stay includes."""
+    path = shader if os.path.isabs(shader) else osl_shader_path(shader)
+    folder = os.path.dirname(path)
+    seen = {path}
+
+    def expand(file: str) -> list[str]:
+        out = []
+        with open(file, encoding="utf-8") as f:
+            for line in f:
+                m = _LOCAL_INCLUDE.match(line)
+                header = os.path.join(folder, m.group(1)) if m else None
+                if header and os.path.isfile(header):
+                    if header not in seen:  # each header once, like an include guard
+                        seen.add(header)
+                        out += expand(header)
+                    continue
+                out.append(line if line.endswith("\n") else line + "\n")
+        return out
+
+    return "".join(expand(path))
+
+
+def shader_text(shader: str):
+    """The text datablock holding ``shader`` (created, or refreshed when the shipped source changed)."""
+    import bpy
+
+    base = os.path.basename(shader)
+    name = base if base.endswith(".osl") else base + ".osl"
+    text = bpy.data.texts.get(name)
+    if text is None or text.library is not None:
+        text = bpy.data.texts.new(name)
+    _refresh_text(text, shader)
+    return text
+
+
+def _refresh_text(text, shader: str) -> bool:
+    """Write the shipped source of ``shader`` into ``text`` unless it holds it already; whether it wrote."""
+    source = shader_source(shader)
+    digest = hashlib.sha1(source.encode()).hexdigest()[:16]
+    if text.get(TEXT_MARKER) == digest:
+        return False
+    text.from_string(source)
+    text[TEXT_MARKER] = digest
+    return True
+
+
+def refresh_embedded_scripts(scene=None) -> int:
+    """After a file is loaded: bring every script node of ours to the installed extension's shaders.
+
+    Nodes of files written before shaders were embedded (external mode, a path ending in one of the
+    shipped ``cycles_osl/*.osl``) become internal; embedded texts whose source differs from the
+    shipped one (the extension was updated) are refreshed and their nodes recompiled. Returns the
+    number of nodes recompiled.
+    """
+    import bpy
+
+    shipped = {os.path.basename(p) for p in glob.glob(os.path.join(OSL_DIR, "*.osl"))}
+    stale = {t.name for t in bpy.data.texts
+             if t.library is None and t.get(TEXT_MARKER) is not None and t.name in shipped and _refresh_text(t, t.name)}
+    n = 0
+    trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None and m.library is None]
+    trees += [g for g in bpy.data.node_groups if g.library is None]
+    for tree in trees:
+        for node in tree.nodes:
+            if node.type != "SCRIPT":
+                continue
+            if node.mode == "EXTERNAL" and os.path.basename(bpy.path.abspath(node.filepath)) in shipped:
+                node.script = shader_text(os.path.basename(bpy.path.abspath(node.filepath)))
+                node.mode = "INTERNAL"
+            elif not (node.mode == "INTERNAL" and node.script is not None and node.script.name in stale):
+                continue
+            compile_script_node(node, scene)
+            n += 1
+    return n
 
 
 def link_uv(node_tree, script_node, socket: str = "UV"):

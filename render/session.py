@@ -7,7 +7,7 @@ import os
 import sys
 import tempfile
 
-_OSL_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cycles_osl")
+OSL_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cycles_osl")
 
 
 def prepare_user_resources() -> str:
@@ -54,7 +54,7 @@ def osl_shader_path(name: str) -> str:
     """Absolute path of a shader shipped in ``cycles_osl/`` (``name`` with or without ``.osl``)."""
     if not name.endswith(".osl"):
         name += ".osl"
-    path = os.path.join(_OSL_DIR, name)
+    path = os.path.join(OSL_DIR, name)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"OSL shader not found: {path}")
     return path

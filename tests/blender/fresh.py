@@ -39,12 +39,15 @@ RESULT = None
 
 
 def run_fresh(snippet: str, blend: str | None = None, repo_dir: str | None = None, enable: bool = True,
-              timeout: float = 600) -> object:
-    """Run ``snippet`` in a new interpreter (after opening ``blend``); return its ``RESULT``."""
+              timeout: float = 600, env: dict[str, str] | None = None) -> object:
+    """Run ``snippet`` in a new interpreter (after opening ``blend``); return its ``RESULT``.
+
+    ``env``: variables to set in the child (e.g. ``TMPDIR``: another machine's temporary folder)."""
     repo_dir = repo_dir or tempfile.mkdtemp(prefix="ms-fresh-repo-")
     code = _PRELUDE.format(repo_dir=repo_dir, root=ROOT, enable=enable, blend=blend or "")
     code += textwrap.dedent(snippet) + f"\nprint({_MARK!r} + json.dumps(RESULT))\n"
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout,
+                          env={**os.environ, **(env or {})})
     for line in proc.stdout.splitlines():
         if line.startswith(_MARK):
             return json.loads(line[len(_MARK):])

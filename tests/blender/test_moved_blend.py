@@ -1,0 +1,84 @@
+"""A .blend using every library material renders identically after it is moved to another folder (or
+machine) and after the extension is reinstalled elsewhere: the shaders are embedded in the file."""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+import bpy
+import numpy as np
+from fresh import run_fresh
+
+RENDER = """
+from material_structures.render import render_to_array
+scene = bpy.context.scene
+RESULT = {"pixels": render_to_array(scene).tolist(),
+          "external": [n.name for m in bpy.data.materials if m.node_tree for n in m.node_tree.nodes
+                       if n.type == "SCRIPT" and n.mode == "EXTERNAL"]
+                      + [n.name for g in bpy.data.node_groups for n in g.nodes
+                         if n.type == "SCRIPT" and n.mode == "EXTERNAL"]}
+"""
+
+
+def _library_scene(work: str) -> list[str]:
+    """One small sphere per library material in a row, a point and an area light, a camera."""
+    from material_structures import render as R
+    from material_structures.render import library
+    from material_structures.render.library import MATERIALS, _sync_exact_lamps
+
+    scene = R.reset_scene()
+    R.configure_cycles(scene, resolution=(160, 24), samples=4)
+    R.dark_world(scene, 0.2)
+    names = library.available_materials()
+    for i, name in enumerate(names):
+        mat = MATERIALS[name].build(scene, work)
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.45, location=(i - (len(names) - 1) / 2, 0.0, 0.0),
+                                             segments=24, ring_count=12)
+        obj = bpy.context.active_object
+        obj.data.materials.append(mat)
+    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    light.data.energy = 300.0
+    light.location = (1.0, -3.0, 3.0)
+    scene.collection.objects.link(light)
+    area = bpy.data.objects.new("Fill", bpy.data.lights.new("Fill", "AREA"))
+    area.data.energy = 200.0
+    area.location = (-2.0, -2.0, 2.0)
+    scene.collection.objects.link(area)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = len(names) + 0.2
+    cam.location = (0.0, -10.0, 0.0)
+    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    _sync_exact_lamps(scene)
+    return names
+
+
+def test_moved_blend_renders_identically(addon_module, tmp_path):
+    names = _library_scene(str(tmp_path / "work"))
+    saved = tmp_path / "project" / "scene.blend"
+    saved.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(saved))
+    before = run_fresh(RENDER, blend=str(saved))
+    ref = np.asarray(before["pixels"])
+    assert before["external"] == []
+    # Every material is visible: its sphere's column block is lit (not black, as a lost shader renders).
+    w = ref.shape[1] // len(names)
+    means = [float(ref[8:16, i * w + w // 3 : i * w + 2 * w // 3, :3].mean()) for i in range(len(names))]
+    assert min(means) > 0.003, dict(zip(names, means, strict=True))  # a lost shader renders 0
+
+    # Moved one folder deeper, opened with the extension installed in another folder and another
+    # temporary folder (another machine: the scratch tables' cache is gone).
+    moved = tmp_path / "elsewhere" / "deeper" / "scene.blend"
+    moved.parent.mkdir(parents=True)
+    shutil.copy(saved, moved)
+    shutil.rmtree(saved.parent)
+    other_tmp = tmp_path / "other-tmp"
+    other_tmp.mkdir()
+    after = run_fresh(RENDER, blend=str(moved), repo_dir=str(tmp_path / "other-repo"),
+                      env={"TMPDIR": str(other_tmp)})
+    diff = np.abs(np.asarray(after["pixels"]) - ref)
+    assert float(diff.max()) == 0.0, {n: float(diff[:, i * w:(i + 1) * w].max()) for i, n in enumerate(names)}
+    assert os.listdir(other_tmp), "the scratch tables were not re-extracted into the new temporary folder"
