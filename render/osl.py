@@ -44,22 +44,24 @@ def load_osl_script(
         node.name = node.label = name
     node.mode = "INTERNAL"
     node.script = shader_text(shader)
-    compile_script_node(node, scene)
+    errors = compile_script_node(node, scene)
     have_in = {s.name for s in node.inputs}
     have_out = {s.name for s in node.outputs}
     missing = [s for s in inputs if s not in have_in] + [s for s in outputs if s not in have_out]
     if missing or not (have_in or have_out):
         raise OslScriptError(
             f"OSL script {shader} is missing sockets {missing or '(all)'}; it has inputs {sorted(have_in)} "
-            f"and outputs {sorted(have_out)} (does it compile? is oslquery importable?)"
+            f"and outputs {sorted(have_out)} ({'; '.join(errors) or 'does it compile? is oslquery importable?'})"
         )
     return node
 
 
-def compile_script_node(node, scene=None) -> None:
-    """(Re)compile a script node: sockets and, for internal scripts, the bytecode stored in the node.
+def compile_script_node(node, scene=None) -> list[str]:
+    """(Re)compile a script node: its sockets and, for internal scripts, the bytecode kept in the node.
 
-    Script nodes compile against the *context* scene's engine: lend it Cycles + OSL meanwhile.
+    Calls Cycles' own compile step (``node.update()`` does not reach it in every state, e.g. from a
+    load handler). Script nodes compile against the *context* scene's engine: lend it Cycles + OSL
+    meanwhile. Returns the compiler's error messages (empty when it succeeded).
     """
     import bpy
 
@@ -69,11 +71,18 @@ def compile_script_node(node, scene=None) -> None:
     if ctx is not None:
         ctx.render.engine = "CYCLES"
         ctx.cycles.shading_system = True
+    errors: list[str] = []
     try:
-        node.update()
+        try:
+            from cycles import osl as cycles_osl
+        except ImportError:  # Cycles' add-on missing: Blender's generic update
+            node.update()
+        else:
+            cycles_osl.update_script_node(node, lambda kind, msg: errors.append(msg) if "ERROR" in kind else None)
     finally:
         if ctx is not None and ctx != scene:
             ctx.render.engine, ctx.cycles.shading_system = saved
+    return errors
 
 
 TEXT_MARKER = "material_structures_osl"  # ID property on embedded shader texts: the source's hash
@@ -145,17 +154,40 @@ def refresh_embedded_scripts(scene=None) -> int:
     trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None and m.library is None]
     trees += [g for g in bpy.data.node_groups if g.library is None]
     for tree in trees:
-        for node in tree.nodes:
+        for node in list(tree.nodes):
             if node.type != "SCRIPT":
                 continue
-            if node.mode == "EXTERNAL" and os.path.basename(bpy.path.abspath(node.filepath)) in shipped:
-                node.script = shader_text(os.path.basename(bpy.path.abspath(node.filepath)))
-                node.mode = "INTERNAL"
-            elif not (node.mode == "INTERNAL" and node.script is not None and node.script.name in stale):
+            external = os.path.basename(bpy.path.abspath(node.filepath)) if node.mode == "EXTERNAL" else ""
+            if external in shipped:
+                _embed(tree, node, external, scene)
+            elif node.mode == "INTERNAL" and node.script is not None and node.script.name in stale:
+                compile_script_node(node, scene)
+            else:
                 continue
-            compile_script_node(node, scene)
             n += 1
     return n
+
+
+def _embed(tree, node, shader: str, scene) -> None:
+    """Replace an external script node by an embedded one with the same inputs, values and links (a
+    node switched from external to internal mode in place gets no bytecode)."""
+    new = tree.nodes.new("ShaderNodeScript")
+    new.mode = "INTERNAL"
+    new.script = shader_text(shader)
+    compile_script_node(new, scene)
+    new.location, new.label, new.parent = node.location, node.label, node.parent
+    for sock in node.inputs:
+        if sock.name in new.inputs and hasattr(sock, "default_value"):
+            new.inputs[sock.name].default_value = sock.default_value
+    links = [(link.from_socket, new.inputs[link.to_socket.name]) for link in tree.links
+             if link.to_node == node and link.to_socket.name in new.inputs]
+    links += [(new.outputs[link.from_socket.name], link.to_socket) for link in tree.links
+              if link.from_node == node and link.from_socket.name in new.outputs]
+    name = node.name
+    tree.nodes.remove(node)
+    new.name = name
+    for a, b in links:
+        tree.links.new(a, b)
 
 
 def link_uv(node_tree, script_node, socket: str = "UV"):

@@ -82,3 +82,37 @@ def test_moved_blend_renders_identically(addon_module, tmp_path):
     diff = np.abs(np.asarray(after["pixels"]) - ref)
     assert float(diff.max()) == 0.0, {n: float(diff[:, i * w:(i + 1) * w].max()) for i, n in enumerate(names)}
     assert os.listdir(other_tmp), "the scratch tables were not re-extracted into the new temporary folder"
+
+
+def test_file_from_before_embedding_is_converted_on_load(addon_module, tmp_path):
+    """A file whose script node points into the extension folder (as saved before shaders were
+    embedded) renders after a move: loading it embeds the installed extension's shader."""
+    from material_structures import render as R
+    from material_structures.render.osl import compile_script_node
+    from material_structures.render.session import osl_shader_path
+
+    scene = R.reset_scene()
+    R.configure_cycles(scene, resolution=(8, 8), samples=1)
+    R.dark_world(scene)
+    mat = R.new_material("Old")
+    tree = mat.node_tree
+    R.ensure_bundled_paths()
+    node = tree.nodes.new("ShaderNodeScript")
+    node.mode = "EXTERNAL"
+    node.filepath = osl_shader_path("ms_constant_emission")
+    compile_script_node(node, scene)
+    node.inputs["Color"].default_value = (0.2, 0.4, 0.6, 1.0)
+    out = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
+    tree.links.new(node.outputs[0], out.inputs["Surface"])
+    obj = R.add_textured_plane(scene, 2.0)
+    obj.data.materials.append(mat)
+    R.add_orthographic_camera(scene, 2.0)
+    saved = tmp_path / "a" / "old.blend"
+    saved.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(saved), relative_remap=True)
+    moved = tmp_path / "b" / "c" / "old.blend"
+    moved.parent.mkdir(parents=True)
+    shutil.copy(saved, moved)
+    got = run_fresh(RENDER, blend=str(moved), repo_dir=str(tmp_path / "other-repo"))
+    assert got["external"] == []
+    np.testing.assert_allclose(np.asarray(got["pixels"])[..., :3].mean(axis=(0, 1)), [0.2, 0.4, 0.6], atol=1e-4)
