@@ -6,11 +6,15 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from .fabric.material import fabric_script_nodes, sync_fabric_lamps
+from .fabric.material import fabric_script_nodes, has_fabric_links, sync_fabric_lamps
+
+# Updates that can change which lamps the fabric evaluates or which objects wear it: lamps, objects,
+# meshes (material slots on the data), materials, and the scene (render engine, OSL switch).
+_FABRIC_UPDATES = (bpy.types.Light, bpy.types.Object, bpy.types.Mesh, bpy.types.Material, bpy.types.Scene)
 
 
 def _has_fabric() -> bool:
-    return next(fabric_script_nodes(), None) is not None
+    return next(fabric_script_nodes(), None) is not None or has_fabric_links()
 
 
 @persistent
@@ -19,7 +23,8 @@ def on_depsgraph_update(scene, depsgraph) -> None:
         return
     for update in depsgraph.updates:
         idb = update.id
-        if isinstance(idb, bpy.types.Light) or (isinstance(idb, bpy.types.Object) and idb.type in {"LIGHT", "MESH"}):
+        is_other_object = isinstance(idb, bpy.types.Object) and idb.type not in {"LIGHT", "MESH"}
+        if isinstance(idb, _FABRIC_UPDATES) and not is_other_object:
             sync_fabric_lamps(scene, update_matrices=False)
             return
 
@@ -28,6 +33,22 @@ def on_depsgraph_update(scene, depsgraph) -> None:
 def on_render_pre(scene, *_args) -> None:
     if _has_fabric():
         sync_fabric_lamps(scene, update_matrices=False)
+
+
+@persistent
+def on_save_pre(*_args) -> None:
+    """Pack painted fabric maps that changed since their last pack (a save in the middle of a stroke)."""
+    from .operators.fabric_brush import pack_sessions
+
+    pack_sessions()
+
+
+@persistent
+def on_load_pre(*_args) -> None:
+    """Brush sessions hold the images of the file being closed: drop them."""
+    from .operators.fabric_brush import drop_sessions
+
+    drop_sessions()
 
 
 @persistent
@@ -42,6 +63,8 @@ HANDLERS = [
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
     (bpy.app.handlers.load_post, on_load_post),
+    (bpy.app.handlers.save_pre, on_save_pre),
+    (bpy.app.handlers.load_pre, on_load_pre),
 ]
 
 from .scratch.handlers import SCRATCH_HANDLERS  # noqa: E402  (scratched metal: lamps, table cache)

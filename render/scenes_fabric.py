@@ -42,9 +42,7 @@ def _mapped_material(maps, name, scene, strokes=(), btf_frame=False):
             session.begin_stroke()
             for a, b in zip(points[:-1], points[1:], strict=True):
                 session.segment(a, b, settings)
-            session.end_stroke()
-        session.flush()
-        session.pack()
+            session.end_stroke()  # uploads and packs
     return create_fabric_material(name, maps=images, scene=scene)
 
 

@@ -65,7 +65,8 @@ class BrushSession:
             self.top[key] = top
         self.undo_stack: list[_Stroke] = []
         self._stroke: _Stroke | None = None
-        self._dirty: set[str] = set()
+        self._dirty: set[str] = set()  # changed, not uploaded to the images yet
+        self._unpacked: set[str] = set()  # uploaded, not packed into the .blend yet
 
     # -- coordinates -------------------------------------------------------------------------
     def uv_to_pixel(self, uv) -> np.ndarray:
@@ -82,10 +83,13 @@ class BrushSession:
         self._stroke = _Stroke()
 
     def end_stroke(self) -> None:
+        """Close the stroke (one undo step), upload and pack what it changed: saving is safe after it."""
         if self._stroke is not None and self._stroke.saved:
             self.undo_stack.append(self._stroke)
             del self.undo_stack[:-MAX_UNDO]
         self._stroke = None
+        self.flush()
+        self.pack()
 
     def segment(self, uv0, uv1, settings: BrushSettings, pressure: float = 1.0) -> bool:
         """Apply one stroke segment from ``uv0`` to ``uv1``; returns whether any texel changed."""
@@ -151,6 +155,7 @@ class BrushSession:
         for key, r0, r1, c0, c1, old in reversed(stroke.saved):
             self._write(key, r0, r1, c0, c1, old, MAP_FILES[key][1])
         self.flush()
+        self.pack()
         return True
 
     def flush(self) -> None:
@@ -159,12 +164,15 @@ class BrushSession:
             image = self.images[key]
             image.pixels.foreach_set(self.buffers[key].ravel())
             image.update()
+        self._unpacked |= self._dirty
         self._dirty.clear()
 
     def pack(self) -> None:
-        """Store the current pixels in the .blend (packed images), e.g. before saving."""
-        for image in self.images.values():
-            image.pack()
+        """Store the uploaded pixels of the changed maps in the .blend (packed images): what save,
+        autosave and undo keep. About 0.15 s per 2048 x 2048 map, so once per stroke, not per segment."""
+        for key in sorted(self._unpacked):
+            self.images[key].pack()
+        self._unpacked.clear()
 
 
 def load_brush_states(folder: str) -> core_brush.BrushStates:

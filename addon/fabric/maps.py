@@ -28,8 +28,11 @@ def btf_quat_to_mesh(quat: np.ndarray) -> np.ndarray:
 mesh_quat_to_btf = btf_quat_to_mesh  # the reflection is its own inverse
 
 
-def array_to_image(array: np.ndarray, name: str, pack: bool = True):
-    """A float, Non-Color, channel-packed image holding ``array`` (H, W, C<=4), row 0 = top."""
+def array_to_image(array: np.ndarray, name: str, pack: bool = True, replace: bool = True):
+    """A float, Non-Color, channel-packed image holding ``array`` (H, W, C<=4), row 0 = top.
+
+    ``replace``: overwrite the image called ``name`` if there is one; else always a new image (Blender
+    makes its name unique), so no other material's image changes."""
     a = np.asarray(array, dtype=np.float32)
     if a.ndim != 3 or not 1 <= a.shape[2] <= 4:
         raise ValueError(f"{name}: expected an (H, W, C<=4) map, got shape {a.shape}")
@@ -37,7 +40,7 @@ def array_to_image(array: np.ndarray, name: str, pack: bool = True):
     rgba = np.zeros((h, w, 4), dtype=np.float32)
     rgba[..., 3] = 1.0
     rgba[..., :c] = a
-    image = bpy.data.images.get(name)
+    image = bpy.data.images.get(name) if replace else None
     if image is None or tuple(image.size) != (w, h) or not image.is_float:
         if image is not None:
             bpy.data.images.remove(image)
@@ -60,10 +63,11 @@ def image_to_array(image, channels: int) -> np.ndarray:
 
 
 def maps_to_images(maps: FabricMaps, prefix: str, btf_frame: bool = True) -> dict:
-    """Create the four images of a parameter set (basis converted to the mesh frame)."""
+    """Four new images of a parameter set (basis converted to the mesh frame), owned by the material
+    about to use them: importing the same maps again never touches an earlier import's (painted) images."""
     basis = btf_quat_to_mesh(maps.basis) if btf_frame else maps.basis
     arrays = {"kd": maps.kd, "ks": maps.ks, "sigma": maps.sigma, "basis": basis}
-    return {key: array_to_image(arrays[key], f"{prefix} {key}") for key in MAP_FILES}
+    return {key: array_to_image(arrays[key], f"{prefix} {key}", replace=False) for key in MAP_FILES}
 
 
 def images_to_maps(images: dict, btf_frame: bool = True) -> FabricMaps:

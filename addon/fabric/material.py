@@ -2,8 +2,16 @@
 
 Inside the group an OSL script node (``cycles_osl/ms_sggx_fabric.osl``) computes the exact lamp
 contribution (emission) and the closure approximation for world/indirect light; a Tangent node
-gives the UV frame. Materials made here add an EEVEE/viewport output (Principled with sheen) so the
-fabric never shows pink or black outside Cycles + OSL.
+gives the UV frame. The group's second output, "Viewport", is an EEVEE / Material Preview look built
+from the same inputs (so from the same maps, and brushing shows while painting): a Principled BSDF
+with base colour Tint (k_d + k_s / 2), sheen tinted k_s, roughness s / (1 + s) for the mean sigma s,
+anisotropy |sigma_x - sigma_y| / (sigma_x + sigma_y) along the basis' x axis, and the shading normal
+halfway between the surface normal and the fibre axis (combed pile leans the highlight).
+
+Light links: the exact path evaluates up to 4 lamps itself, so those lamps are light-linked off the
+fabric objects, in Cycles with OSL only (elsewhere nothing evaluates them: EEVEE, or Cycles without
+OSL, see every lamp). The add-on owns these links (collections it made, or the entries it added to a
+user's collection, recorded on it) and removes them as soon as an object no longer needs them.
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ from ...render.osl import load_osl_script
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 
 GROUP_NAME = "SGGX Fabric"
+VIEWPORT_OUTPUT = "Viewport"
 SCRIPT_NODE = "SGGX Exact"
 MARKER = "material_structures_fabric"  # custom property on groups/materials made here
 
@@ -46,6 +55,7 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     scene = scene or bpy.context.scene
     group = bpy.data.node_groups.get(GROUP_NAME)
     if group is not None and group.get(MARKER):
+        ensure_viewport_look(group)
         return group
     group = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
     group[MARKER] = 1
@@ -55,6 +65,7 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
         if lo is not None:
             sock.min_value, sock.max_value = lo, hi
     group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
     nodes, links = group.nodes, group.links
     gin = nodes.new("NodeGroupInput")
     gout = nodes.new("NodeGroupOutput")
@@ -70,7 +81,102 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     links.new(add.outputs[0], gout.inputs["Shader"])
     gin.location, script.location, tangent.location = (-500, 0), (-150, 0), (-500, -350)
     add.location, gout.location = (150, 0), (350, 0)
+    _build_viewport_look(group)
     return group
+
+
+def ensure_viewport_look(group) -> None:
+    """Give a group from an older file its "Viewport" output (EEVEE look from the same inputs)."""
+    if VIEWPORT_OUTPUT not in group.interface.items_tree:
+        group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
+        _build_viewport_look(group)
+
+
+class _Nodes:
+    """Math-node arithmetic inside a node tree: operands are sockets or numbers."""
+
+    def __init__(self, tree, x: float, y: float):
+        self.tree, self.x, self.y = tree, x, y
+
+    def _node(self, kind: str, op: str, *args):
+        node = self.tree.nodes.new(kind)
+        node.operation = op
+        node.location = (self.x, self.y)
+        self.y -= 40
+        for i, a in enumerate(args):
+            if isinstance(a, (int, float)):
+                node.inputs[i].default_value = a if kind == "ShaderNodeMath" else (a, a, a)
+            else:
+                self.tree.links.new(a, node.inputs[i])
+        return node
+
+    def f(self, op: str, *args):
+        return self._node("ShaderNodeMath", op, *args).outputs[0]
+
+    def v(self, op: str, *args):
+        node = self._node("ShaderNodeVectorMath", op, *args)
+        return node.outputs["Value" if op in {"DOT_PRODUCT", "LENGTH"} else "Vector"]
+
+    def scale(self, vec, factor):
+        node = self._node("ShaderNodeVectorMath", "SCALE", vec)
+        if isinstance(factor, (int, float)):
+            node.inputs["Scale"].default_value = factor
+        else:
+            self.tree.links.new(factor, node.inputs["Scale"])
+        return node.outputs["Vector"]
+
+
+def _build_viewport_look(group) -> None:
+    """The "Viewport" output: a Principled BSDF driven by the group's inputs (module docstring)."""
+    nodes, links = group.nodes, group.links
+    gin = next(n for n in nodes if n.type == "GROUP_INPUT")
+    gout = next(n for n in nodes if n.type == "GROUP_OUTPUT")
+    m = _Nodes(group, -300, -700)
+    # Quaternion (w, x, y, z) of the fibre basis in the UV frame (x = UV tangent, z = normal).
+    q = nodes.new("ShaderNodeSeparateXYZ")
+    q.location = (-500, -700)
+    links.new(gin.outputs["QuatWXY"], q.inputs[0])
+    w, x, y, z = q.outputs[0], q.outputs[1], q.outputs[2], gin.outputs["QuatZ"]
+    xx, yy, zz = m.f("MULTIPLY", x, x), m.f("MULTIPLY", y, y), m.f("MULTIPLY", z, z)
+    ax_x = m.f("SUBTRACT", 1.0, m.f("MULTIPLY", 2.0, m.f("ADD", yy, zz)))  # basis x axis, tangent-plane part
+    ax_y = m.f("MULTIPLY", 2.0, m.f("ADD", m.f("MULTIPLY", x, y), m.f("MULTIPLY", w, z)))
+    fz_x = m.f("MULTIPLY", 2.0, m.f("ADD", m.f("MULTIPLY", x, z), m.f("MULTIPLY", w, y)))  # fibre (z) axis
+    fz_y = m.f("MULTIPLY", 2.0, m.f("SUBTRACT", m.f("MULTIPLY", y, z), m.f("MULTIPLY", w, x)))
+    fz_z = m.f("SUBTRACT", 1.0, m.f("MULTIPLY", 2.0, m.f("ADD", xx, yy)))
+    # World frame: UV tangent T, normal N, bitangent N x T.
+    tangent = nodes.new("ShaderNodeTangent")
+    tangent.direction_type = "UV_MAP"
+    tangent.location = (-500, -1000)
+    geo = nodes.new("ShaderNodeNewGeometry")
+    geo.location = (-500, -1200)
+    t, n = tangent.outputs["Tangent"], geo.outputs["Normal"]
+    b = m.v("CROSS_PRODUCT", n, t)
+    axis = m.v("NORMALIZE", m.v("ADD", m.scale(t, ax_x), m.scale(b, ax_y)))
+    fibre = m.v("ADD", m.v("ADD", m.scale(t, fz_x), m.scale(b, fz_y)), m.scale(n, fz_z))
+    normal = m.v("NORMALIZE", m.v("ADD", n, fibre))
+    # Colour, roughness, anisotropy.
+    half_ks = m.scale(gin.outputs["Ks"], 0.5)
+    base = m.v("MULTIPLY", gin.outputs["Tint"], m.v("ADD", gin.outputs["Kd"], half_ks))
+    sheen = m.v("MULTIPLY", gin.outputs["Tint"], gin.outputs["Ks"])
+    sx, sy = gin.outputs["SigmaX"], gin.outputs["SigmaY"]
+    ssum = m.f("ADD", sx, sy)
+    s_mean = m.f("MULTIPLY", m.f("MULTIPLY", ssum, 0.5), gin.outputs["SigmaScale"])
+    rough = m.f("DIVIDE", s_mean, m.f("ADD", s_mean, 1.0))
+    aniso = m.f("DIVIDE", m.f("ABSOLUTE", m.f("SUBTRACT", sx, sy)), m.f("MAXIMUM", ssum, 1e-6))
+    bsdf = nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.location = (100, -700)
+    ins = bsdf.inputs
+    links.new(base, ins["Base Color"])
+    links.new(rough, ins["Roughness"])
+    links.new(normal, ins["Normal"])
+    for key, sock in (("Anisotropic", aniso), ("Tangent", axis), ("Sheen Tint", sheen)):
+        if key in ins:
+            links.new(sock, ins[key])
+    for key in ("Sheen Weight", "Sheen"):
+        if key in ins:
+            ins[key].default_value = 1.0
+            break
+    links.new(bsdf.outputs[0], gout.inputs[VIEWPORT_OUTPUT])
 
 
 def load_map_image(path: str, name: str | None = None):
@@ -122,21 +228,11 @@ def create_fabric_material(
     tree.links.new(gnode.outputs["Shader"], out_cycles.inputs["Surface"])
     out_cycles.location = (400, 100)
 
-    # EEVEE / viewport fallback: principled with sheen, coloured by the constants.
-    bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
-    base = [min(1.0, d + 0.5 * s) for d, s in zip(kd[:3], ks[:3], strict=True)]
-    bsdf.inputs["Base Color"].default_value = (*base, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.9
-    for key in ("Sheen Weight", "Sheen"):
-        if key in bsdf.inputs:
-            bsdf.inputs[key].default_value = 1.0
-            break
-    if "Sheen Tint" in bsdf.inputs and len(bsdf.inputs["Sheen Tint"].default_value) == 4:
-        bsdf.inputs["Sheen Tint"].default_value = (*ks[:3], 1.0)
+    # EEVEE / Material Preview: the group's viewport look, from the same inputs and maps.
     out_eevee = tree.nodes.new("ShaderNodeOutputMaterial")
     out_eevee.target = "EEVEE"
-    tree.links.new(bsdf.outputs[0], out_eevee.inputs["Surface"])
-    bsdf.location, out_eevee.location = (0, -400), (400, -400)
+    tree.links.new(gnode.outputs[VIEWPORT_OUTPUT], out_eevee.inputs["Surface"])
+    out_eevee.location = (400, -200)
     out_cycles.is_active_output = True
 
     if maps:
@@ -206,8 +302,14 @@ def fabric_objects(scene, exact_only: bool = False):
     return out
 
 
+def exact_path_renders(scene) -> bool:
+    """Whether the scene renders the exact lamp path (Cycles with OSL); elsewhere nothing evaluates it."""
+    return scene.render.engine == "CYCLES" and bool(scene.cycles.shading_system)
+
+
 def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
-    """Copy the scene's lamps into every fabric shader and light-link them off fabric objects.
+    """Copy the scene's lamps into every fabric shader; light-link them off the objects whose shader
+    evaluates them (Cycles with OSL, exact path on) and off no other object.
 
     ``update_matrices`` evaluates the view layer first so freshly moved lamps have current world
     matrices (pass False from depsgraph handlers, where they are current already).
@@ -220,30 +322,53 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
     lamps = [lamp for _, lamp in pairs]
     for node in fabric_script_nodes():
         write_lamp_inputs(node, lamps)
-    # Exact path on: the lamp is light-linked off (the shader has it). Fast preview: closures see it.
-    receivers = fabric_objects(scene, exact_only=True)
-    previews = [o for o in fabric_objects(scene) if o not in receivers]
-    for lamp_obj, _ in pairs:
-        _exclude_receivers(lamp_obj, receivers)
-        coll = lamp_obj.light_linking.receiver_collection
-        for obj in previews:
-            if coll is not None and obj.name in coll.objects:
-                coll.objects.unlink(obj)
+    receivers = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
+    in_shader = {obj.name for obj, _ in pairs}
+    for obj in scene.objects:
+        if obj.type == "LIGHT":
+            _link_off(obj, receivers if obj.name in in_shader else [])
     return len(lamps)
 
 
-def _exclude_receivers(lamp_obj, receivers) -> None:
-    """Light-link ``lamp_obj`` off ``receivers`` (their closures must not see it: the shader has it)."""
+LINKS_MADE = "material_structures_links"  # on a receiver collection the add-on made for a lamp
+LINKS_ADDED = "material_structures_excluded"  # names of the objects the add-on excluded in a user's one
+
+
+def has_fabric_links() -> bool:
+    """Whether any lamp carries light links that the fabric made (they may need cleaning up)."""
+    return any(c.get(LINKS_MADE) or c.get(LINKS_ADDED) for c in bpy.data.collections)
+
+
+def _link_off(lamp_obj, receivers) -> None:
+    """Make the fabric's exclusions on ``lamp_obj`` exactly ``receivers``, touching nothing else."""
     link = lamp_obj.light_linking
     coll = link.receiver_collection
     if coll is None:
+        if not receivers:
+            return
         coll = bpy.data.collections.new(f"MS Exact Lamp {lamp_obj.name}")
+        coll[LINKS_MADE] = 1
         link.receiver_collection = coll
+    made = bool(coll.get(LINKS_MADE))
+    added = {o.name for o in coll.objects} if made else set(coll.get(LINKS_ADDED, []))
+    want = {obj.name for obj in receivers}
+    for obj in list(coll.objects):
+        if obj.name in added and obj.name not in want:
+            coll.objects.unlink(obj)
     for obj in receivers:
         if obj.name not in coll.objects:
             coll.objects.link(obj)
-    names = {obj.name for obj in receivers}
+            added.add(obj.name)
     # collection_objects runs parallel to objects (its entries do not name their object).
     for obj, entry in zip(coll.objects, coll.collection_objects, strict=True):
-        if obj.name in names and entry.light_linking.link_state != "EXCLUDE":
+        if obj.name in want and entry.light_linking.link_state != "EXCLUDE":
             entry.light_linking.link_state = "EXCLUDE"
+    if made and not coll.objects:
+        link.receiver_collection = None
+        bpy.data.collections.remove(coll)
+    elif not made:
+        names = sorted(added & want)
+        if names:
+            coll[LINKS_ADDED] = names
+        elif LINKS_ADDED in coll:
+            del coll[LINKS_ADDED]

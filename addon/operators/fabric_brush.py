@@ -1,8 +1,10 @@
 """The fabric brushing tool: a modal viewport operator with an EXEC path that replays recorded strokes.
 
 Drag with the left mouse button over a fabric-mapped mesh to paint; Ctrl+Z inside the tool (or the
-"Undo Stroke" button) takes back the last stroke; Esc / right click leaves the tool and packs the
-painted maps into the .blend. Headless: pass the stroke as properties and call EXEC.
+"Undo Stroke" button) takes back the last stroke; Esc / right click leaves the tool. Every finished
+stroke and every undo packs the changed maps into the .blend, so saving is safe at any time (a save
+in the middle of a stroke packs through the save handler). Headless: pass the stroke as properties
+and call EXEC.
 """
 
 from __future__ import annotations
@@ -40,6 +42,13 @@ def session_for(mat) -> BrushSession:
 
 def drop_sessions() -> None:
     _SESSIONS.clear()
+
+
+def pack_sessions() -> None:
+    """Upload and pack whatever the brush sessions changed and have not packed yet."""
+    for session in _SESSIONS.values():
+        session.flush()
+        session.pack()
 
 
 def brush_settings(scene) -> BrushSettings:
@@ -98,10 +107,13 @@ class MS_OT_fabric_brush(bpy.types.Operator):
             return {"CANCELLED"}
         session = self.session
         session.begin_stroke()
+        changed = False
         for (uv0, _), (uv1, p1) in zip(points[:-1], points[1:], strict=True):
-            session.segment(uv0, uv1, self.settings, p1 if self.use_pressure else 1.0)
+            changed |= session.segment(uv0, uv1, self.settings, p1 if self.use_pressure else 1.0)
         session.end_stroke()
-        session.flush()
+        if not changed:
+            self.report({"ERROR"}, "The stroke changed no texel (it misses the map, or strength is 0)")
+            return {"CANCELLED"}
         return {"FINISHED"}
 
     def _stroke_uvs(self, context):
@@ -177,7 +189,6 @@ class MS_OT_fabric_brush(bpy.types.Operator):
 
     def _finish(self, context):
         self.session.end_stroke()
-        self.session.pack()
         context.area.header_text_set(None)
         return {"FINISHED"}
 

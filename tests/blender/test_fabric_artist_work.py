@@ -1,0 +1,221 @@
+"""An artist's fabric work survives: painted maps after save and reopen, re-imports, light links after
+the material changes, and the EEVEE look follows the maps (issue: artists losing work in Blender)."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+from fresh import run_fresh
+
+from material_structures.core.fabric.parameter_maps import make_maps, save_params
+
+UVS = [(0.2, 0.3), (0.35, 0.4), (0.5, 0.45), (0.7, 0.4)]
+READ_MAPS = """
+import numpy as np
+from material_structures.addon.fabric.maps import images_to_maps
+from material_structures.addon.operators.fabric import material_map_images
+RESULT = {}
+for obj in bpy.data.objects:
+    if obj.active_material is not None:
+        m = images_to_maps(material_map_images(obj.active_material))
+        RESULT[obj.name] = [m.kd.tolist(), m.basis.tolist()]
+"""
+
+
+def _fit_folder(tmp_path, h=24, w=32, seed=3):
+    rng = np.random.default_rng(seed)
+    maps = make_maps(
+        kd=rng.uniform(0, 0.3, (h, w, 3)),
+        ks=rng.uniform(0.1, 1, (h, w, 3)),
+        sigma=rng.uniform(0.3, 2, (h, w, 2)),
+        basis=np.tile([1.0, 0.0, 0.0, 0.0], (h, w, 1)) + rng.normal(scale=0.1, size=(h, w, 4)),
+    )
+    save_params(tmp_path / "fit", maps)
+    return str(tmp_path / "fit")
+
+
+def _plane(scene, name, x=0.0):
+    from material_structures import render as R
+
+    obj = R.add_textured_plane(scene, 2.0, name=name)
+    obj.location.x = x
+    bpy.context.view_layer.objects.active = obj
+    return obj
+
+
+def _stroke(uvs=UVS, pressure=1.0):
+    return {"stroke": [{"name": "", "uv": uv, "location": (0, 0, 0), "pressure": pressure} for uv in uvs],
+            "stroke_space": "UV"}
+
+
+def _maps(obj):
+    from material_structures.addon.fabric.maps import images_to_maps
+    from material_structures.addon.operators.fabric import material_map_images
+
+    return images_to_maps(material_map_images(obj.active_material))
+
+
+def _brush(scene, mode="COMB", **kw):
+    brush = scene.material_structures.fabric_brush
+    brush.mode, brush.radius, brush.strength = mode, 0.08, 1.0
+    for k, v in kw.items():
+        setattr(brush, k, v)
+    return bpy.ops.material_structures.fabric_brush(**_stroke())
+
+
+def test_replayed_strokes_and_undo_survive_save_and_reopen(addon_module, tmp_path):
+    from material_structures import render as R
+
+    fit = _fit_folder(tmp_path)
+    scene = R.reset_scene()
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    imported = _maps(a)
+    assert _brush(scene, "COMB") == {"FINISHED"}
+    combed = _maps(a)
+    changed = np.any(combed.basis != imported.basis, axis=-1)
+    assert changed.sum() > 20
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "painted.blend"))
+    got = run_fresh(READ_MAPS, blend=str(tmp_path / "painted.blend"))
+    np.testing.assert_allclose(np.asarray(got["A"][1]), combed.basis, atol=1e-6)
+
+    # Undo Stroke pressed after the stroke (outside the modal tool): the undo is what gets saved.
+    assert _brush(scene, "RECOLOR", kd=(0.0, 0.9, 0.0), ks=(0.0, 0.9, 0.0)) == {"FINISHED"}
+    assert bpy.ops.material_structures.fabric_brush_undo() == {"FINISHED"}
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "undone.blend"))
+    got = run_fresh(READ_MAPS, blend=str(tmp_path / "undone.blend"))
+    np.testing.assert_allclose(np.asarray(got["A"][0]), combed.kd, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(got["A"][1]), combed.basis, atol=1e-6)
+
+
+def test_save_in_the_middle_of_a_stroke_keeps_the_painted_texels(addon_module, tmp_path):
+    """The modal tool uploads each segment; a Ctrl+S before the button is released must save them."""
+    from material_structures import render as R
+    from material_structures.addon.fabric.brushing import BrushSettings
+
+    fit = _fit_folder(tmp_path)
+    scene = R.reset_scene()
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    from importlib import import_module
+
+    brush_mod = import_module(f"{addon_module}.addon.operators.fabric_brush")
+    session = brush_mod.session_for(a.active_material)
+    session.begin_stroke()
+    assert session.segment((0.2, 0.3), (0.7, 0.4), BrushSettings(mode="COMB", radius=0.08))
+    session.flush()  # what the modal tool does per segment; the stroke is still open
+    painted = _maps(a).basis
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "mid.blend"))
+    got = run_fresh(READ_MAPS, blend=str(tmp_path / "mid.blend"))
+    np.testing.assert_allclose(np.asarray(got["A"][1]), painted, atol=1e-6)
+
+
+def test_reimport_keeps_earlier_painting_and_materials_paint_separately(addon_module, tmp_path):
+    from material_structures import render as R
+
+    fit = _fit_folder(tmp_path)
+    scene = R.reset_scene()
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    imported = _maps(a)
+    assert _brush(scene, "COMB") == {"FINISHED"}
+    combed = _maps(a)
+    b = _plane(scene, "B", x=3.0)
+    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    np.testing.assert_array_equal(_maps(a).basis, combed.basis)  # A's painting kept
+    np.testing.assert_array_equal(_maps(b).basis, imported.basis)  # B starts from the fit
+    assert _brush(scene, "RECOLOR", kd=(0.0, 0.9, 0.0), ks=(0.0, 0.9, 0.0)) == {"FINISHED"}  # paints B
+    np.testing.assert_array_equal(_maps(a).kd, combed.kd)
+    assert float(np.abs(_maps(b).kd - imported.kd).max()) > 0.1
+
+
+def test_stroke_that_misses_the_map_is_cancelled(addon_module, tmp_path):
+    from material_structures import render as R
+
+    fit = _fit_folder(tmp_path)
+    scene = R.reset_scene()
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    before = _maps(a)
+    scene.material_structures.fabric_brush.radius = 0.01
+    with pytest.raises(RuntimeError, match="changed no texel"):  # an ERROR report, CANCELLED
+        bpy.ops.material_structures.fabric_brush(**_stroke([(3.0, 3.0), (3.5, 3.2)]))
+    np.testing.assert_array_equal(_maps(a).basis, before.basis)
+
+
+def _lit_scene():
+    from material_structures import render as R
+
+    scene = R.reset_scene()
+    R.configure_cycles(scene, resolution=(16, 16), samples=4)
+    R.dark_world(scene)
+    obj = _plane(scene, "Cloth")
+    R.add_orthographic_camera(scene, 2.0)
+    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    light.data.energy = 100.0
+    light.location = (0.3, -0.3, 2.0)
+    scene.collection.objects.link(light)
+    return scene, obj, light
+
+
+def _excluded(light, obj) -> bool:
+    coll = light.light_linking.receiver_collection
+    if coll is None:
+        return False
+    return any(o.name == obj.name and e.light_linking.link_state == "EXCLUDE"
+               for o, e in zip(coll.objects, coll.collection_objects, strict=True))
+
+
+def test_plain_material_after_fabric_is_lit_again(addon_module):
+    from material_structures import render as R
+
+    scene, obj, light = _lit_scene()
+    plain = R.new_material("Plain", clear=False)
+    obj.data.materials.append(plain)
+    reference = float(R.render_to_array(scene)[..., :3].mean())
+    assert reference > 0.05
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    assert _excluded(light, obj)
+    obj.material_slots[0].material = plain  # back to the plain material, as an artist would
+    bpy.context.view_layer.update()
+    assert not _excluded(light, obj)
+    np.testing.assert_allclose(float(R.render_to_array(scene)[..., :3].mean()), reference, rtol=1e-6)
+    assert light.light_linking.receiver_collection is None  # the link collection the fabric made is gone
+
+
+def test_lamps_light_the_fabric_outside_cycles_osl(addon_module):
+    """EEVEE (and Cycles without OSL) does not evaluate the exact path: no lamp may be linked off."""
+    scene, obj, light = _lit_scene()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    assert _excluded(light, obj)
+    scene.render.engine = "BLENDER_EEVEE_NEXT" if bpy.app.version < (5, 0, 0) else "BLENDER_EEVEE"
+    bpy.context.view_layer.update()
+    assert not _excluded(light, obj)
+    scene.render.engine = "CYCLES"
+    bpy.context.view_layer.update()
+    assert _excluded(light, obj)
+
+
+def test_viewport_look_follows_the_painted_maps(addon_module, tmp_path):
+    """The EEVEE output reads the same maps: render it (with Cycles, OSL off: the lamp lights it as in
+    EEVEE) before and after a green recolor."""
+    from material_structures import render as R
+
+    fit = _fit_folder(tmp_path)
+    scene, obj, light = _lit_scene()
+    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    scene.cycles.shading_system = False  # the render (render_pre) lets the lamp reach the object again
+    tree = obj.active_material.node_tree
+    eevee = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.target == "EEVEE")
+    cycles = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.target == "CYCLES")
+    tree.links.new(eevee.inputs["Surface"].links[0].from_socket, cycles.inputs["Surface"])
+    before = R.render_to_array(scene)[..., :3]
+    assert not _excluded(light, obj)
+    assert _brush(scene, "RECOLOR", kd=(0.0, 0.9, 0.0), ks=(0.0, 0.9, 0.0)) == {"FINISHED"}
+    after = R.render_to_array(scene)[..., :3]
+    greener = (after[..., 1] - after[..., 0]) - (before[..., 1] - before[..., 0])
+    assert float(greener.max()) > 0.05, float(greener.max())
+    assert _brush(scene, "COMB") == {"FINISHED"}
+    combed = R.render_to_array(scene)[..., :3]
+    assert float(np.abs(combed - after).max()) > 1e-3  # combing changes the viewport look too
