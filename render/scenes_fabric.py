@@ -13,20 +13,9 @@ MAP_SIZE = 256
 
 
 def _preset_maps(preset: str, size: int = MAP_SIZE, seed: int = 0):
-    """Constant maps from a preset, with a little texel-level variation (real pile is never uniform)."""
-    from ..addon.fabric.presets import PRESETS, tilted_quat
-    from ..core.fabric.parameter_maps import make_maps
+    from ..core.fabric.preset_maps import preset_maps
 
-    p = PRESETS[preset]
-    rng = np.random.default_rng(seed)
-    jitter = 1.0 + 0.08 * rng.standard_normal((size, size, 1))
-    basis = np.broadcast_to(tilted_quat(*p["tilt"]), (size, size, 4))
-    return make_maps(
-        kd=np.clip(np.asarray(p["kd"]) * jitter, 0, 1),
-        ks=np.clip(np.asarray(p["ks"]) * jitter, 0, 1),
-        sigma=np.broadcast_to(np.asarray(p["sigma"]), (size, size, 2)),
-        basis=basis,
-    )
+    return preset_maps(preset, size, seed)
 
 
 def _mapped_material(maps, name, scene, strokes=(), btf_frame=False):
@@ -68,18 +57,7 @@ def velvet_material(scene, workdir: str = ""):
 
 def corduroy_material(scene, workdir: str = ""):
     """Corduroy: ridges (wales) across u, the pile leaning to either flank of each ridge."""
-    from ..addon.fabric.presets import tilted_quat
-    from ..core.fabric.parameter_maps import make_maps
-
     maps = _preset_maps("CORDUROY", seed=1)
-    u = (np.arange(MAP_SIZE) + 0.5) / MAP_SIZE
-    phase = (u * 24.0) % 1.0
-    lean = np.where(phase < 0.5, 1.0, -1.0) * 25.0 * np.abs(np.sin(np.pi * phase * 2.0))
-    quats = np.stack([tilted_quat(abs(a), 0.0 if a >= 0 else 180.0) for a in lean])
-    basis = np.broadcast_to(quats[None, :, :], (MAP_SIZE, MAP_SIZE, 4))
-    groove = (np.abs(phase - 0.5) > 0.42)[None, :, None]
-    kd = np.where(groove, maps.kd * 0.5, maps.kd)
-    maps = make_maps(kd=kd, ks=maps.ks, sigma=maps.sigma, basis=basis)
     return _mapped_material(maps, "Corduroy", scene)
 
 

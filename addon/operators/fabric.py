@@ -13,7 +13,7 @@ from ..fabric.material import (
     ensure_fabric_group,
     sync_fabric_lamps,
 )
-from ..fabric.presets import PRESET_ITEMS, PRESETS, tilted_quat
+from ..fabric.presets import PRESET_ITEMS, preset_maps
 
 
 def require_uv_mesh(op, obj) -> bool:
@@ -34,7 +34,7 @@ def assign_material(obj, mat) -> None:
 
 
 class MS_OT_fabric_new_material(bpy.types.Operator):
-    """Give the active mesh a new SGGX pile-fabric material (eq. 3.9) from a preset"""
+    """Give the active mesh a new pile-fabric material from a preset, with its own parameter maps to brush"""
 
     bl_idname = "material_structures.fabric_new_material"
     bl_label = "New Fabric Material"
@@ -46,11 +46,11 @@ class MS_OT_fabric_new_material(bpy.types.Operator):
         obj = context.active_object
         if not require_uv_mesh(self, obj):
             return {"CANCELLED"}
-        p = PRESETS[self.preset]
-        quat = tuple(tilted_quat(*p["tilt"]))
-        mat = create_fabric_material(
-            f"Fabric {self.preset.title()}", kd=p["kd"], ks=p["ks"], sigma=p["sigma"], quat=quat, scene=context.scene
-        )
+        from ..fabric.maps import maps_to_images
+
+        name = f"Fabric {self.preset.title()}"
+        images = maps_to_images(preset_maps(self.preset), name, btf_frame=False)  # preset bases: mesh frame
+        mat = create_fabric_material(name, maps=images, scene=context.scene)
         assign_material(obj, mat)
         sync_fabric_lamps(context.scene)
         return {"FINISHED"}

@@ -219,3 +219,20 @@ def test_viewport_look_follows_the_painted_maps(addon_module, tmp_path):
     assert _brush(scene, "COMB") == {"FINISHED"}
     combed = R.render_to_array(scene)[..., :3]
     assert float(np.abs(combed - after).max()) > 1e-3  # combing changes the viewport look too
+
+
+def test_corduroy_preset_has_wales_like_the_library(addon_module):
+    from material_structures import render as R
+    from material_structures.core.fabric.preset_maps import CORDUROY_WALES
+    from material_structures.render.scenes_fabric import _preset_maps
+
+    scene = R.reset_scene()
+    obj = _plane(scene, "Bolster")
+    assert bpy.ops.material_structures.fabric_new_material(preset="CORDUROY") == {"FINISHED"}
+    maps = _maps(obj)  # BTF frame (y down the image)
+    q = maps.basis[0].astype(np.float64)  # one row across u
+    lean_x = 2.0 * (q[:, 1] * q[:, 3] + q[:, 0] * q[:, 2])  # x component of the fibre axis
+    flips = int(np.count_nonzero(np.diff(np.sign(lean_x[np.abs(lean_x) > 0.05])) != 0))
+    assert flips >= 2 * CORDUROY_WALES - 1, flips  # leaning to either flank of every ridge
+    library = _preset_maps("CORDUROY", seed=1)
+    np.testing.assert_allclose(np.abs(maps.basis), np.abs(library.basis), atol=1e-6)
