@@ -37,7 +37,7 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
 
     def execute(self, context):
         from ...core.teeth.tooth_mesh import make_tooth
-        from ..teeth.geometry import build_tooth_pair, tooth_from_mesh_object
+        from ..teeth.geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
 
         scene = context.scene
         mm = _mm_per_unit(scene)
@@ -47,7 +47,11 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
                 if src is None or src.type != "MESH":
                     self.report({"ERROR"}, "Select a closed mesh object (the enamel surface)")
                     return {"CANCELLED"}
+                context.view_layer.update()  # src.matrix_world as seen (after moves from scripts)
+                # the source's world scale is baked into the millimetre vertices once; the tooth object
+                # gets the source's world location and rotation and scale 1 / mm
                 enamel, dentin = tooth_from_mesh_object(src, mm_per_unit=mm)
+                placement = placement_from_mesh_object(src, mm_per_unit=mm)
                 name, kind = src.name, "custom"
             else:
                 geo = make_tooth(self.kind, resolution=self.resolution)
@@ -62,7 +66,7 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         if self.source == "MESH":
-            e_obj.matrix_world = src.matrix_world @ e_obj.matrix_world
+            e_obj.matrix_world = placement  # no parent: sets its location, rotation and scale
             if context.view_layer.objects.get(src.name) is not None:
                 src.hide_set(True)
         else:

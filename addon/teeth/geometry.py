@@ -12,13 +12,16 @@ inwards by ``GAP_MM`` along the vertex normals, so the two surfaces never coinci
 would be missed by Cycles' ray offsetting). The air gap changes a path's optical depth by at most
 sigma_t GAP_MM / cos per crossing (2e-4 mm: below 1e-3 for sigma_t < 5/mm at 60 degrees).
 
-Mesh coordinates are in millimetres (the core's units); objects get scale 1 / mm_per_unit.
+Mesh coordinates are in millimetres (the core's units); objects get scale 1 / mm_per_unit. A tooth made
+from a mesh object has that object's world scale baked into its millimetre vertices and the object's
+world location and rotation.
 """
 
 from __future__ import annotations
 
 import bpy
 import numpy as np
+from mathutils import Matrix
 
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
 from .materials import INNER_ATTRIBUTE
@@ -138,10 +141,35 @@ def build_tooth_pair(name: str, enamel_mesh, dentin_shape, c=(0.0, 0.0, 0.0), en
     return enamel, dentin
 
 
-def tooth_from_mesh_object(obj, enamel_occlusal_mm: float = 1.8, enamel_side_mm: float = 1.1, mm_per_unit=1000.0):
+def world_split(obj) -> tuple[Matrix, Matrix]:
+    """``obj.matrix_world`` split into a placement (world location and rotation, no scale) and the rest of
+    its linear part (scale, the parents' scale and any shear, in the object's rotated frame):
+    ``matrix_world = placement @ rest``. The rest is what a tooth baked from the mesh keeps in its vertices."""
+    mw = obj.matrix_world
+    loc, rot, _ = mw.decompose()
+    r3 = rot.to_matrix()
+    rest = r3.transposed() @ mw.to_3x3()
+    return Matrix.LocRotScale(loc, rot, None), rest.to_4x4()
+
+
+def placement_from_mesh_object(obj, mm_per_unit: float = 1000.0) -> Matrix:
+    """World matrix of a tooth made from ``obj`` by ``tooth_from_mesh_object``: the source's world location
+    and rotation, scale 1 / mm_per_unit (the tooth's mesh is in millimetres)."""
+    placement, _ = world_split(obj)
+    s = 1.0 / float(mm_per_unit)
+    return placement @ Matrix.Diagonal((s, s, s, 1.0))
+
+
+def tooth_from_mesh_object(obj, enamel_occlusal_mm: float = 1.8, enamel_side_mm: float = 1.1,
+                           mm_per_unit: float = 1000.0):
     """Core ``TriMesh`` + ``DentinBlendShape`` from an arbitrary closed mesh object (its local frame is taken
     as the canonical tooth space: z along the tooth axis, crown up). B0 is the enamel surface moved
-    inwards along the vertex normals by the enamel thickness (thicker towards the occlusal end)."""
+    inwards along the vertex normals by the enamel thickness (thicker towards the occlusal end).
+
+    The vertices are in millimetres at the size the object is seen: its world scale (parents included;
+    ``world_split``) is baked in once. Placed with ``placement_from_mesh_object`` the tooth's enamel surface
+    lies exactly on the source's surface. ``obj.matrix_world`` must be up to date (a depsgraph update after
+    moving it from Python)."""
     from ...core.teeth.dentin_blend_shapes import DentinBlendShape, canonical_modes
     from ...core.teeth.mesh import TriMesh
 
@@ -153,8 +181,8 @@ def tooth_from_mesh_object(obj, enamel_occlusal_mm: float = 1.8, enamel_side_mm:
     me.loop_triangles.foreach_get("loops", loops)
     co = np.empty(len(me.vertices) * 3, dtype=np.float32)
     me.vertices.foreach_get("co", co)
-    scale = np.asarray(obj.scale, dtype=np.float64) * mm_per_unit
-    v = co.reshape(-1, 3).astype(np.float64) * scale
+    _, rest = world_split(obj)
+    v = co.reshape(-1, 3).astype(np.float64) @ (np.array(rest.to_3x3()) * float(mm_per_unit)).T
     f = tris.reshape(-1, 3).astype(np.int64)
     if me.uv_layers:
         uv = np.empty(len(me.loops) * 2, dtype=np.float32)

@@ -1,0 +1,108 @@
+"""Teeth: an artist never loses work.
+
+* Add Tooth From Mesh keeps what you see: the tooth has the source's world size (its scale, its parents'
+  scale and the scene's unit scale counted once), location and rotation.
+* A .blend saved while a background fit runs reopens with the fit idle (job state is not stored in the file).
+* A fit applies to the teeth chosen in the panel's capture-tooth mapping; a fit that would apply to nothing
+  does not start, and Apply Fit Result that applies to nothing is an error.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="module")
+def capture_dir(tmp_path_factory):
+    """A tiny synthetic capture (1 tooth "tooth0", 1 camera, 3 lights, 16 x 12 px) written by the core."""
+    from material_structures.core.teeth.capture import default_rig
+    from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
+
+    folder = str(tmp_path_factory.mktemp("teeth-capture"))
+    scene = make_scene(n_teeth=1, resolution=12)
+    cams, lights = default_rig(target=scene_target(scene), width=16, height=12, n_lights=3, n_cameras=1,
+                               fov_x_deg=2.6)
+    render_capture(scene, cams, lights, spp=2, spp_background=1, max_depth=4).save(folder, scene.to_dict())
+    return folder
+
+
+def _world_vertices(obj, n: int | None = None) -> np.ndarray:
+    """World coordinates (Blender units) of the first ``n`` vertices of ``obj``'s mesh."""
+    me = obj.data
+    co = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3).astype(np.float64)[:n]
+    m = np.array(obj.matrix_world)
+    return co @ m[:3, :3].T + m[:3, 3]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# 7. Add Tooth From Mesh: the tooth is the size (and place, and orientation) of the mesh you see
+
+MESH_CASES = {
+    # id: (unit scale_length, mesh radius in Blender units, object scale, object rotation (rad),
+    #      parent (scale, rotation) or None, expected world dimensions in Blender units)
+    "8mm-sphere": (1.0, 0.004, (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), None, (0.008, 0.008, 0.008)),
+    "scale2-rotated": (1.0, 0.004, (2.0, 2.0, 2.0), (0.4, -0.7, 1.2), None, (0.016, 0.016, 0.016)),
+    "parented-nonuniform": (1.0, 0.004, (1.0, 1.0, 1.5), (0.0, 0.3, 0.0), (3.0, (0.2, 0.0, -0.5)),
+                            (0.024, 0.024, 0.036)),
+    "unit-scale-cm": (0.01, 0.4, (1.0, 1.0, 1.0), (0.0, 0.0, 0.9), None, (0.8, 0.8, 0.8)),
+}
+
+
+@pytest.mark.parametrize("case", list(MESH_CASES))
+def test_tooth_from_mesh_keeps_world_size_place_and_rotation(addon_module, case):
+    import bmesh
+
+    unit, radius, scale, rot, parent, dims = MESH_CASES[case]
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.unit_settings.scale_length = unit
+    me = bpy.data.meshes.new("Sphere")
+    bm = bmesh.new()
+    # 32 x 16: its bounding box is exactly 2 r on every axis (vertices at the poles, on the equator, at 90 deg)
+    bmesh.ops.create_uvsphere(bm, u_segments=32, v_segments=16, radius=radius)
+    bmesh.ops.triangulate(bm, faces=bm.faces[:])
+    bm.to_mesh(me)
+    bm.free()
+    src = bpy.data.objects.new("Sphere", me)
+    scene.collection.objects.link(src)
+    if parent is not None:
+        empty = bpy.data.objects.new("Jaw", None)
+        scene.collection.objects.link(empty)
+        empty.scale = (parent[0],) * 3
+        empty.rotation_euler = parent[1]
+        empty.location = (0.05, 0.0, -0.02)
+        src.parent = empty
+    src.location = (0.01 * radius / 0.004, -0.02 * radius / 0.004, 0.03 * radius / 0.004)
+    src.rotation_euler = rot
+    src.scale = scale
+    bpy.context.view_layer.update()
+    src_world = _world_vertices(src)
+    src_matrix = src.matrix_world.copy()
+    bpy.context.view_layer.objects.active = src
+    assert bpy.ops.material_structures.teeth_add_tooth(source="MESH") == {"FINISHED"}
+    enamel = bpy.context.active_object
+    dentin = enamel.ms_tooth.partner
+    bpy.context.view_layer.update()
+
+    mm_per_unit = 1000.0 * unit
+    assert enamel.ms_tooth.mm_per_unit == pytest.approx(mm_per_unit, rel=1e-9)
+    # what you see: the world dimensions of the mesh, within 1 %
+    np.testing.assert_allclose(tuple(enamel.dimensions), dims, rtol=0.01)
+    # ... vertex by vertex: the enamel's outer surface lies where the source's surface lay (float32 mm)
+    size = max(dims)
+    e_world = _world_vertices(enamel, len(src_world))
+    np.testing.assert_allclose(e_world, src_world, atol=1e-5 * size)
+    # the source's world location and rotation; scale 1 / mm_per_unit (millimetre mesh)
+    loc, quat, _ = src_matrix.decompose()
+    e_loc, e_quat, e_scale = enamel.matrix_world.decompose()
+    np.testing.assert_allclose(tuple(e_loc), tuple(loc), atol=1e-6 * size)
+    assert e_quat.rotation_difference(quat).angle == pytest.approx(0.0, abs=1e-4)
+    np.testing.assert_allclose(tuple(e_scale), (1.0 / mm_per_unit,) * 3, rtol=1e-5)
+    # the dentin core sits inside the enamel (the enamel is 1.1 - 1.8 mm thick)
+    d_world = _world_vertices(dentin)
+    lo, hi = src_world.min(axis=0), src_world.max(axis=0)
+    assert (d_world > lo).all() and (d_world < hi).all()
