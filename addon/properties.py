@@ -12,8 +12,11 @@ from .teeth import properties as teeth_properties
 class MS_SceneSettings(bpy.types.PropertyGroup):
     """Scene-wide Material Structures settings (one pointer per feature)."""
 
+    # Cycles' own viewport samples, shown in the tab (stored by Cycles, not here: one setting, not two).
     preview_samples: bpy.props.IntProperty(
-        name="Preview Samples", default=32, min=1, max=4096, description="Cycles samples for previews"
+        name="Viewport Samples", min=1, max=4096, description="Cycles samples of the rendered viewport",
+        get=lambda self: self.id_data.cycles.preview_samples,
+        set=lambda self, value: setattr(self.id_data.cycles, "preview_samples", value),
     )
     fabric_brush: bpy.props.PointerProperty(type=MS_FabricBrushSettings)
 

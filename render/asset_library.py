@@ -85,7 +85,14 @@ def build_asset_library(folder: str, preview_size: int = 128, samples: int = 16,
             image.pack()
     write_catalogs(folder, [MATERIALS[n].catalog for n in names])
     out = os.path.join(folder, LIBRARY_BLEND)
-    bpy.ops.wm.save_as_mainfile(filepath=out, compress=True, copy=True)
+    # Written under a temporary name, then renamed: no half-written library, and no ".blend1" backup
+    # (Blender keeps one when saving over a file; the extension zip would ship it).
+    tmp = os.path.join(folder, f".{LIBRARY_BLEND}.tmp-{os.getpid()}.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=tmp, compress=True, copy=True)
+    os.replace(tmp, out)
+    for stale in (out + "1", tmp + "1"):
+        if os.path.exists(stale):
+            os.remove(stale)
     return out
 
 

@@ -59,3 +59,17 @@ def test_register_operator_adds_the_library(built_library, monkeypatch):
     assert any(os.path.normpath(lib.path) == os.path.normpath(folder) for lib in libs)
     assert bpy.ops.material_structures.register_asset_library() == {"FINISHED"}  # idempotent
     assert sum(os.path.normpath(lib.path) == os.path.normpath(folder) for lib in libs) == 1
+
+
+def test_rebuilding_leaves_no_backup_and_the_zip_ships_none(built_library):
+    """``make library`` twice must not leave a ``.blend1`` backup for ``make build`` to ship."""
+    import tomllib
+
+    from material_structures.render.asset_library import build_asset_library
+
+    folder, path = built_library
+    assert build_asset_library(folder, preview_size=24, samples=1, progress=False) == path
+    assert sorted(f for f in os.listdir(folder) if ".blend" in f) == [os.path.basename(path)]
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    with open(os.path.join(root, "blender_manifest.toml"), "rb") as f:
+        assert "*.blend1" in tomllib.load(f)["build"]["paths_exclude_pattern"]

@@ -236,3 +236,13 @@ def test_corduroy_preset_has_wales_like_the_library(addon_module):
     assert flips >= 2 * CORDUROY_WALES - 1, flips  # leaning to either flank of every ridge
     library = _preset_maps("CORDUROY", seed=1)
     np.testing.assert_allclose(np.abs(maps.basis), np.abs(library.basis), atol=1e-6)
+
+
+def test_viewport_samples_in_the_tab_are_cycles_own(addon_module):
+    from material_structures import render as R
+
+    scene = R.reset_scene()
+    scene.material_structures.preview_samples = 7
+    assert scene.cycles.preview_samples == 7
+    scene.cycles.preview_samples = 19
+    assert scene.material_structures.preview_samples == 19
