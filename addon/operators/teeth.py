@@ -6,13 +6,12 @@ import os
 
 import bpy
 
+from ..teeth.fit_job import _JOB, job_running  # _JOB: the one background fit of this Blender session
 from ..teeth.materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
 from ..teeth.properties import owner
 
 TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar", "Premolar", ""),
                ("molar", "Molar", "")]
-
-_JOB = {"job": None}  # the one background fit of this Blender session
 
 
 def _mm_per_unit(scene) -> float:
@@ -195,14 +194,22 @@ class MS_OT_teeth_fit(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     _timer = None
+    _job = None  # the job this (modal) operator watches
+
+    @classmethod
+    def poll(cls, context):
+        if job_running():
+            cls.poll_message_set("A teeth fit is already running")
+            return False
+        return True
 
     def _start(self, context):
-        from ..teeth.fit_job import FitJob, usable_cores
+        from ..teeth.fit_job import FitJob, set_current_job, usable_cores
 
         fs = context.scene.ms_teeth_fit
         capture = bpy.path.abspath(fs.capture_dir)
         out = bpy.path.abspath(fs.out_dir) if fs.out_dir else os.path.join(capture, "fit")
-        if _JOB["job"] is not None and _JOB["job"].poll() == "RUNNING":
+        if job_running():
             self.report({"ERROR"}, "A teeth fit is already running")
             return None
         try:
@@ -213,20 +220,22 @@ class MS_OT_teeth_fit(bpy.types.Operator):
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return None
-        _JOB["job"] = job
-        fs.running, fs.progress, fs.status = True, 0.0, "starting"
+        set_current_job(job)
+        fs.last_result = ""
         return job
 
     def _finish(self, context, job, state):
         fs = context.scene.ms_teeth_fit
-        fs.running = False
-        fs.progress = job.progress
         if state == "FINISHED":
             done = apply_fit_file(context, job.result_path)
-            fs.status = f"done: applied to {', '.join(done) or 'no matching tooth'}; log {job.log_path}"
+            job.outcome = f"done: applied to {', '.join(done) or 'no matching tooth'}; log {job.log_path}"
+            job.settled = True
+            fs.last_result = job.outcome
             self.report({"INFO"}, f"Teeth fit finished; loss plot {job.loss_plot}")
             return {"FINISHED"}
-        fs.status = f"{state.lower()}: see {job.log_path}"
+        job.outcome = f"{state.lower()}: see {job.log_path}"
+        job.settled = True
+        fs.last_result = job.outcome
         self.report({"WARNING" if state == "CANCELLED" else "ERROR"}, f"Teeth fit {state.lower()}: {job.last_line}")
         return {"CANCELLED"}
 
@@ -240,6 +249,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
         job = self._start(context)
         if job is None:
             return {"CANCELLED"}
+        self._job = job
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.5, window=context.window)
         wm.modal_handler_add(self)
@@ -256,17 +266,14 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             context.workspace.status_text_set(None)
 
     def modal(self, context, event):
-        job = _JOB["job"]
+        job = getattr(self, "_job", None) or _JOB["job"]
         if job is None:
             self._cleanup(context)
             return {"CANCELLED"}
         if event.type == "ESC":
             job.cancel()
         if event.type in {"TIMER", "ESC"}:
-            state = job.poll()
-            fs = context.scene.ms_teeth_fit
-            fs.progress = job.progress
-            fs.status = job.status_text()
+            state = job.poll()  # the panel's running / progress / status read the job itself
             context.window_manager.progress_update(int(1000 * job.progress))
             if context.workspace is not None:
                 context.workspace.status_text_set(job.status_text())
@@ -286,7 +293,7 @@ class MS_OT_teeth_fit_cancel(bpy.types.Operator):
 
     def execute(self, context):
         job = _JOB["job"]
-        if job is None or job.poll() != "RUNNING":
+        if job is None or not job_running():  # nothing of a fit is stored in the file: nothing can be stuck
             self.report({"WARNING"}, "No teeth fit is running")
             return {"CANCELLED"}
         job.cancel()

@@ -5,6 +5,10 @@ messages on stdout) is read by a thread into ``OUT/fit_log.txt`` and parsed for 
 loss; ``cancel()`` terminates the process and the workers it forked (the core's checkpoint lets
 ``--resume`` continue). When it finishes the CLI has written ``scene_fit.json``, ``loss.json`` and
 ``loss.png`` into OUT.
+
+The one fit of this Blender session is ``current_job()``. Whether a fit runs, and its progress, are read
+from it (``Scene.ms_teeth_fit.running`` / ``progress`` / ``status`` have getters, nothing of a job is stored
+in the .blend): a file saved while a fit ran reopens with no fit running.
 """
 
 from __future__ import annotations
@@ -68,8 +72,27 @@ def usable_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+_JOB: dict[str, FitJob | None] = {"job": None}  # the one background fit of this Blender session
+
+
+def current_job() -> FitJob | None:
+    """The background fit started last in this Blender session (running or ended), or None."""
+    return _JOB["job"]
+
+
+def set_current_job(job: FitJob | None) -> None:
+    _JOB["job"] = job
+
+
+def job_running() -> bool:
+    """Whether this session's fit process is alive (never blocks)."""
+    job = _JOB["job"]
+    return job is not None and job.is_alive()
+
+
 class FitJob:
-    """One background fit. ``poll()`` -> state; ``cancel()``; ``result_path`` once finished."""
+    """One background fit. ``poll()`` -> state; ``cancel()``; ``result_path`` once finished. ``outcome``: what
+    became of the result (set by whoever applied it; ``settled`` then)."""
 
     def __init__(self, capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
                  lights_per_iteration: int | None = 18, extra: list[str] | None = None, workers: int = 1,
@@ -87,6 +110,8 @@ class FitJob:
         self._lock = threading.Lock()
         self._threads: list[threading.Thread] = []
         self.log_path = os.path.join(out_dir, "fit_log.txt")
+        self.outcome = ""
+        self.settled = False
 
     def start(self) -> FitJob:
         os.makedirs(self.out_dir, exist_ok=True)
@@ -138,6 +163,27 @@ class FitJob:
     @property
     def progress(self) -> float:
         return min(1.0, self.done_iterations / max(self.iterations, 1))
+
+    def is_alive(self) -> bool:
+        """The fit process has been started and has not exited (never blocks)."""
+        return self.proc is not None and self.proc.poll() is None
+
+    def state(self) -> str:
+        """``poll()``'s state without waiting for the output readers (for drawing the UI)."""
+        if self.proc is None or self.proc.poll() is None:
+            return "RUNNING"
+        if self.cancelled:
+            return "CANCELLED"
+        return "FINISHED" if self.proc.returncode == 0 and os.path.isfile(self.result_path) else "FAILED"
+
+    def ended_text(self) -> str:
+        """One line on an ended fit: its ``outcome`` once settled, else where its result / log is."""
+        if self.settled and self.outcome:
+            return self.outcome
+        state = self.state()
+        if state == "FINISHED":
+            return f"finished, not applied: Apply Fit Result on {self.result_path}"
+        return f"{state.lower()}: see {self.log_path}"
 
     def poll(self) -> str:
         """'RUNNING', 'FINISHED', 'CANCELLED' or 'FAILED'."""

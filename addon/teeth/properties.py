@@ -88,6 +88,30 @@ def _fit_preset_changed(self, _context) -> None:
     self.iterations = FIT_PRESETS[self.preset].get("iterations", THESIS_FIT_ITERATIONS)
 
 
+def _get_running(_self) -> bool:
+    from .fit_job import job_running
+
+    return job_running()
+
+
+def _get_progress(_self) -> float:
+    from .fit_job import current_job
+
+    job = current_job()
+    return 0.0 if job is None else float(job.progress)
+
+
+def _get_status(self) -> str:
+    from .fit_job import current_job
+
+    job = current_job()
+    if job is not None and job.is_alive():
+        return job.status_text()
+    if job is not None and not job.settled:  # ended with no one to apply it (e.g. a file was opened meanwhile)
+        return job.ended_text()
+    return self.last_result
+
+
 class MS_TeethFitSettings(bpy.types.PropertyGroup):
     """Scene-wide settings of the fitting operator (``Scene.ms_teeth_fit``)."""
 
@@ -111,10 +135,16 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                                           "10 s per iteration on 2 cores")],
         default="thesis", update=_fit_preset_changed,
         description="fit settings; choosing them also sets Iterations to theirs")
-    running: bpy.props.BoolProperty(name="Running", default=False, options={"SKIP_SAVE"})
-    progress: bpy.props.FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
-                                      options={"SKIP_SAVE"})
-    status: bpy.props.StringProperty(name="Status", default="", options={"SKIP_SAVE"})
+    # Job state: read from this Blender session's background fit, never stored in the .blend (a file saved
+    # while a fit ran reopens idle). ``last_result`` is what became of the last fit, kept with the file.
+    running: bpy.props.BoolProperty(name="Running", get=_get_running,
+                                    description="a teeth fit of this Blender session is running")
+    progress: bpy.props.FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR", get=_get_progress,
+                                      description="iterations done of the running (or last) fit of this session")
+    status: bpy.props.StringProperty(name="Status", get=_get_status,
+                                     description="the running fit's iteration and loss, else the last fit's result")
+    last_result: bpy.props.StringProperty(name="Last Fit", default="",
+                                          description="what became of the last fit started from this scene")
 
 
 CLASSES: list[type] = [MS_ToothSettings, MS_TeethFitSettings]

@@ -9,9 +9,14 @@
 
 from __future__ import annotations
 
+import os
+from types import SimpleNamespace
+
 import bpy
 import numpy as np
 import pytest
+
+from .fresh import run_fresh
 
 
 @pytest.fixture(scope="module")
@@ -106,3 +111,107 @@ def test_tooth_from_mesh_keeps_world_size_place_and_rotation(addon_module, case)
     d_world = _world_vertices(dentin)
     lo, hi = src_world.min(axis=0), src_world.max(axis=0)
     assert (d_world > lo).all() and (d_world < hi).all()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# 8. A .blend saved while a fit runs reopens idle
+
+def _import(capture_dir):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    path = os.path.join(capture_dir, "scene.json")
+    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+    return bpy.data.objects["tooth0 Enamel"]
+
+
+class _WindowManager:
+    """Stand-in window manager: the modal Fit operator's invoke() headless (no window)."""
+
+    def event_timer_add(self, step, window=None):
+        return object()
+
+    def event_timer_remove(self, timer):
+        pass
+
+    def modal_handler_add(self, op):
+        return True
+
+    def progress_begin(self, lo, hi):
+        pass
+
+    def progress_update(self, v):
+        pass
+
+    def progress_end(self):
+        pass
+
+
+_REOPEN_SNIPPET = """
+from types import SimpleNamespace
+
+class Layout:  # records the operators the Teeth panel draws
+    def __init__(self):
+        self.ops = []
+    def operator(self, idname, **kw):
+        self.ops.append(idname)
+        return SimpleNamespace()
+    def __getattr__(self, name):
+        return lambda *a, **kw: self
+
+fs = bpy.context.scene.ms_teeth_fit
+r = {"running": fs.running, "progress": fs.progress, "status": fs.status, "iterations": fs.iterations,
+     "capture_dir": fs.capture_dir, "fit_poll": bpy.ops.material_structures.teeth_fit.poll()}
+try:
+    r["cancel"] = sorted(bpy.ops.material_structures.teeth_fit_cancel())
+except RuntimeError as exc:
+    r["cancel"] = str(exc)
+r["running_after_cancel"] = fs.running
+layout = Layout()
+bpy.types.VIEW3D_PT_material_structures_teeth.draw(SimpleNamespace(layout=layout), bpy.context)
+r["panel"] = layout.ops
+RESULT = r
+"""
+
+
+def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_path):
+    import importlib
+
+    ops = importlib.import_module(f"{addon_module}.addon.operators.teeth")  # the registered operators' module
+    _import(capture_dir)
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = capture_dir
+    fs.out_dir = str(tmp_path / "fit")
+    fs.iterations = 10000
+    fs.lights_per_iteration = 1
+    fs.init = "scene"
+    # what a click on "Fit Teeth to Capture" does (invoke: background fit + modal timer), headless
+    wm = _WindowManager()
+    context = SimpleNamespace(scene=bpy.context.scene, window_manager=wm, window=None, workspace=None,
+                              screen=None, view_layer=bpy.context.view_layer)
+    op = SimpleNamespace(report=lambda *a: None, _timer=None, _job=None)
+    op._start = lambda ctx: ops.MS_OT_teeth_fit._start(op, ctx)
+    op._cleanup = lambda ctx: ops.MS_OT_teeth_fit._cleanup(op, ctx)
+    op._finish = lambda ctx, job, state: ops.MS_OT_teeth_fit._finish(op, ctx, job, state)
+    path = str(tmp_path / "mid-fit.blend")
+    try:
+        assert ops.MS_OT_teeth_fit.invoke(op, context, None) == {"RUNNING_MODAL"}
+        running_while_running = fs.running  # this session's live job
+        fit_poll_while_running = bpy.ops.material_structures.teeth_fit.poll()
+        assert bpy.ops.wm.save_as_mainfile(filepath=path, copy=True) == {"FINISHED"}
+    finally:
+        assert bpy.ops.material_structures.teeth_fit_cancel() == {"FINISHED"}
+    # the modal operator's next timer tick ends it
+    assert ops.MS_OT_teeth_fit.modal(op, context, SimpleNamespace(type="TIMER")) == {"CANCELLED"}
+    assert not fs.running and bpy.ops.material_structures.teeth_fit.poll()
+
+    r = run_fresh(_REOPEN_SNIPPET, blend=path)
+    assert r["running"] is False, r
+    assert r["progress"] == 0.0 and "iteration" not in r["status"], r
+    assert r["fit_poll"] is True, r
+    assert r["cancel"] == ["CANCELLED"], r  # a warning: nothing to cancel, and nothing stuck
+    assert r["running_after_cancel"] is False, r
+    assert "material_structures.teeth_fit" in r["panel"], r  # the Fit button is back
+    assert "material_structures.teeth_fit_cancel" not in r["panel"], r
+    # the user's settings are still in the file
+    assert r["iterations"] == 10000 and r["capture_dir"] == capture_dir, r
+    # while it ran, this session showed it running and offered no second fit
+    assert running_while_running and not fit_poll_while_running
