@@ -56,7 +56,7 @@ def on_load_post(*_args) -> None:
     """Shaders are embedded in the file; bring files from older versions (or an older extension) up to date."""
     from ..render.osl import refresh_embedded_scripts
 
-    refresh_embedded_scripts(bpy.context.scene)
+    refresh_embedded_scripts()  # compiles under Cycles + OSL lent to the scene, its own engine restored
 
 
 HANDLERS = [

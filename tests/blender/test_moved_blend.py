@@ -13,7 +13,9 @@ from fresh import run_fresh
 RENDER = """
 from material_structures.render import render_to_array
 scene = bpy.context.scene
-RESULT = {"pixels": render_to_array(scene).tolist(),
+engine = (scene.render.engine, scene.cycles.shading_system)  # as saved: loading must not change it
+scene.render.engine, scene.cycles.shading_system = "CYCLES", True
+RESULT = {"engine": engine, "pixels": render_to_array(scene).tolist(),
           "external": [n.name for m in bpy.data.materials if m.node_tree for n in m.node_tree.nodes
                        if n.type == "SCRIPT" and n.mode == "EXTERNAL"]
                       + [n.name for g in bpy.data.node_groups for n in g.nodes
@@ -107,6 +109,8 @@ def test_file_from_before_embedding_is_converted_on_load(addon_module, tmp_path)
     obj = R.add_textured_plane(scene, 2.0)
     obj.data.materials.append(mat)
     R.add_orthographic_camera(scene, 2.0)
+    scene.render.engine = "BLENDER_EEVEE_NEXT" if bpy.app.version < (5, 0, 0) else "BLENDER_EEVEE"
+    scene.cycles.shading_system = False
     saved = tmp_path / "a" / "old.blend"
     saved.parent.mkdir()
     bpy.ops.wm.save_as_mainfile(filepath=str(saved), relative_remap=True)
@@ -115,4 +119,5 @@ def test_file_from_before_embedding_is_converted_on_load(addon_module, tmp_path)
     shutil.copy(saved, moved)
     got = run_fresh(RENDER, blend=str(moved), repo_dir=str(tmp_path / "other-repo"))
     assert got["external"] == []
+    assert got["engine"][1] is False and got["engine"][0] != "CYCLES"  # the user's engine, untouched by loading
     np.testing.assert_allclose(np.asarray(got["pixels"])[..., :3].mean(axis=(0, 1)), [0.2, 0.4, 0.6], atol=1e-4)
