@@ -149,15 +149,44 @@ def _group_op(kind: str):
 GROUP_OPERATORS = [_group_op(k) for k in GROUP_NAMES]
 
 
-def apply_fit_file(context, path: str) -> list[str]:
+def apply_fit_file(context, path: str) -> tuple[list[str], list[str]]:
+    """Apply a fitted scene file to the teeth mapped under Fit to capture (by name where a capture tooth is not
+    in the mapping). Returns (``"capture tooth -> object"`` for each tooth applied, the file's tooth names)."""
     from ...core.teeth.scene import load_scene
-    from ..teeth.scene_build import apply_fit
+    from ..teeth.scene_build import apply_fit, fit_targets
 
-    return apply_fit(load_scene(path), context.scene, source=path)
+    ts = load_scene(path)
+    names = [t.name for t in ts.teeth]
+    targets = fit_targets(names, context.scene)
+    done = apply_fit(ts, context.scene, source=path, targets=targets)
+    return [f"{n} -> {targets[n].name}" for n in done], names
+
+
+class MS_OT_teeth_read_capture_teeth(bpy.types.Operator):
+    """Read the capture's teeth (its scene.json) to choose the tooth of this scene each one's fit is applied to
+    (teeth of the same name are chosen for you)"""
+
+    bl_idname = "material_structures.teeth_read_capture_teeth"
+    bl_label = "Read Capture Teeth"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        from ..teeth.scene_build import capture_tooth_names, fill_tooth_map
+
+        capture = bpy.path.abspath(context.scene.ms_teeth_fit.capture_dir)
+        try:
+            names = capture_tooth_names(capture)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.report({"ERROR"}, f"cannot read the capture's teeth: {exc}")
+            return {"CANCELLED"}
+        mapped = fill_tooth_map(context.scene, names)
+        self.report({"INFO"}, f"{len(names)} capture teeth, {mapped} mapped to teeth of this scene")
+        return {"FINISHED"}
 
 
 class MS_OT_teeth_apply_fit_file(bpy.types.Operator):
-    """Write a fitted scene (scene_fit.json) into the teeth materials and dentin shape keys (matched by name)"""
+    """Write a fitted scene (scene_fit.json) into the teeth materials and dentin shape keys of the teeth chosen
+    under Fit to capture (a tooth not listed there: the tooth of the same name)"""
 
     bl_idname = "material_structures.teeth_apply_fit_file"
     bl_label = "Apply Fit Result"
@@ -174,20 +203,23 @@ class MS_OT_teeth_apply_fit_file(bpy.types.Operator):
         if not os.path.isfile(self.filepath):
             self.report({"ERROR"}, f"file not found: {self.filepath}")
             return {"CANCELLED"}
+        from ..teeth.scene_build import no_mapping_message
+
         try:
-            done = apply_fit_file(context, self.filepath)
+            done, names = apply_fit_file(context, self.filepath)
         except (ValueError, KeyError, OSError) as exc:
             self.report({"ERROR"}, f"cannot apply {self.filepath}: {exc}")
             return {"CANCELLED"}
-        if not done:
-            self.report({"WARNING"}, "No tooth in this scene matches the fitted teeth' names")
+        if not done:  # nothing was changed
+            self.report({"ERROR"}, no_mapping_message(names))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Applied the fit to {', '.join(done)}")
+        self.report({"INFO"}, f"Applied the fit: {', '.join(done)}")
         return {"FINISHED"}
 
 
 class MS_OT_teeth_fit(bpy.types.Operator):
-    """Fit the teeth model to a capture folder in a background process, then apply the result"""
+    """Fit the teeth model to a capture folder in a background process, then apply the result to the teeth
+    chosen for the capture's teeth"""
 
     bl_idname = "material_structures.teeth_fit"
     bl_label = "Fit Teeth to Capture"
@@ -205,12 +237,26 @@ class MS_OT_teeth_fit(bpy.types.Operator):
 
     def _start(self, context):
         from ..teeth.fit_job import FitJob, set_current_job, usable_cores
+        from ..teeth.scene_build import capture_tooth_names, fill_tooth_map, fit_targets, no_mapping_message
 
         fs = context.scene.ms_teeth_fit
         capture = bpy.path.abspath(fs.capture_dir)
         out = bpy.path.abspath(fs.out_dir) if fs.out_dir else os.path.join(capture, "fit")
         if job_running():
             self.report({"ERROR"}, "A teeth fit is already running")
+            return None
+        if not os.path.isfile(os.path.join(capture, "capture.json")):
+            self.report({"ERROR"}, f"no capture.json in {capture!r}")
+            return None
+        # the fit applies to the teeth mapped to the capture's: refuse now rather than after an hour's fit
+        try:
+            names = capture_tooth_names(capture)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.report({"ERROR"}, f"cannot read the capture's teeth: {exc}")
+            return None
+        fill_tooth_map(context.scene, names)
+        if not fit_targets(names, context.scene):
+            self.report({"ERROR"}, no_mapping_message(names))
             return None
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)
@@ -227,10 +273,21 @@ class MS_OT_teeth_fit(bpy.types.Operator):
     def _finish(self, context, job, state):
         fs = context.scene.ms_teeth_fit
         if state == "FINISHED":
-            done = apply_fit_file(context, job.result_path)
-            job.outcome = f"done: applied to {', '.join(done) or 'no matching tooth'}; log {job.log_path}"
+            from ..teeth.scene_build import no_mapping_message
+
+            try:
+                done, names = apply_fit_file(context, job.result_path)
+            except (ValueError, KeyError, OSError) as exc:
+                done, names, error = [], [], f"cannot apply {job.result_path}: {exc}"
+            else:
+                error = no_mapping_message(names)
             job.settled = True
-            fs.last_result = job.outcome
+            if not done:  # e.g. the mapped tooth was deleted while the fit ran: say so, keep the result
+                job.outcome = fs.last_result = f"finished, applied to no tooth: {job.result_path}"
+                self.report({"ERROR"}, f"Teeth fit finished but applied to nothing: {error}; "
+                                       f"then Apply Fit Result on {job.result_path}")
+                return {"CANCELLED"}
+            job.outcome = fs.last_result = f"done: applied {', '.join(done)}; log {job.log_path}"
             self.report({"INFO"}, f"Teeth fit finished; loss plot {job.loss_plot}")
             return {"FINISHED"}
         job.outcome = f"{state.lower()}: see {job.log_path}"
@@ -329,5 +386,6 @@ class MS_OT_teeth_import_scene(bpy.types.Operator):
 
 
 CLASSES: list[type] = [MS_OT_teeth_add_tooth, MS_OT_teeth_set_dentin, MS_OT_teeth_apply_fitted,
-                       *GROUP_OPERATORS, MS_OT_teeth_apply_fit_file, MS_OT_teeth_fit, MS_OT_teeth_fit_cancel,
+                       *GROUP_OPERATORS, MS_OT_teeth_read_capture_teeth, MS_OT_teeth_apply_fit_file,
+                       MS_OT_teeth_fit, MS_OT_teeth_fit_cancel,
                        MS_OT_teeth_import_scene]

@@ -1,4 +1,5 @@
-"""Sidebar panel "Teeth": add teeth, edit the dentin shape (live shape keys), fit to a capture."""
+"""Sidebar panel "Teeth": add teeth, edit the dentin shape (live shape keys), fit to a capture (choosing which
+tooth of the scene each capture tooth's fit is applied to)."""
 
 from __future__ import annotations
 
@@ -41,6 +42,15 @@ class VIEW3D_PT_material_structures_teeth(bpy.types.Panel):
         box = layout.box()
         box.label(text="Fit to capture", icon="MOD_LENGTH")
         box.prop(fs, "capture_dir")
+        if len(fs.tooth_map):  # capture tooth -> the tooth of this scene its fit is applied to
+            col = box.column(align=True)
+            for m in fs.tooth_map:
+                split = col.split(factor=0.4, align=True)
+                split.label(text=m.capture_tooth, icon="FORWARD")
+                split.prop(m, "enamel", text="")
+            if all(m.enamel is None for m in fs.tooth_map):
+                col.label(text="No capture tooth is mapped to a tooth of this scene", icon="ERROR")
+        box.operator("material_structures.teeth_read_capture_teeth", icon="FILE_REFRESH")
         box.prop(fs, "out_dir")
         box.prop(fs, "preset")
         row = box.row(align=True)

@@ -112,11 +112,39 @@ def _get_status(self) -> str:
     return self.last_result
 
 
+def _is_enamel(_self, obj) -> bool:
+    return getattr(obj, "ms_tooth", None) is not None and obj.ms_tooth.role == "ENAMEL"
+
+
+class MS_TeethFitToothMap(bpy.types.PropertyGroup):
+    """One capture tooth and the tooth of the scene its fit is applied to."""
+
+    capture_tooth: bpy.props.StringProperty(name="Capture Tooth",
+                                            description="the tooth's name in the capture's scene.json")
+    enamel: bpy.props.PointerProperty(name="Tooth", type=bpy.types.Object, poll=_is_enamel,
+                                      description="the tooth of this scene (its enamel) that the fit of this "
+                                                  "capture tooth is applied to")
+
+
+def _capture_dir_changed(self, _context) -> None:
+    """Setting the capture folder reads its teeth into the mapping (left as it was when there are none)."""
+    from .scene_build import capture_tooth_names, fill_tooth_map
+
+    try:
+        names = capture_tooth_names(bpy.path.abspath(self.capture_dir))
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    fill_tooth_map(self.id_data, names)
+
+
 class MS_TeethFitSettings(bpy.types.PropertyGroup):
     """Scene-wide settings of the fitting operator (``Scene.ms_teeth_fit``)."""
 
-    capture_dir: bpy.props.StringProperty(name="Capture", subtype="DIR_PATH",
+    capture_dir: bpy.props.StringProperty(name="Capture", subtype="DIR_PATH", update=_capture_dir_changed,
                                           description="capture folder (capture.json, images/, masks/, scene.json)")
+    tooth_map: bpy.props.CollectionProperty(type=MS_TeethFitToothMap, name="Capture Teeth",
+                                            description="which tooth of this scene each capture tooth's fit "
+                                                        "is applied to")
     out_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH",
                                       description="fit folder: log, loss plot, checkpoint, scene_fit.json")
     iterations: bpy.props.IntProperty(name="Iterations", default=THESIS_FIT_ITERATIONS, min=1, max=100000)
@@ -147,7 +175,7 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                                           description="what became of the last fit started from this scene")
 
 
-CLASSES: list[type] = [MS_ToothSettings, MS_TeethFitSettings]
+CLASSES: list[type] = [MS_ToothSettings, MS_TeethFitToothMap, MS_TeethFitSettings]
 
 
 def register_pointers() -> None:

@@ -110,11 +110,72 @@ def tooth_objects(scene=None) -> dict:
     return {o.ms_tooth.tooth_name: o for o in scene.objects if o.ms_tooth.role == "ENAMEL"}
 
 
-def apply_fit(ts, scene=None, source: str = "", set_current: bool = True) -> list[str]:
-    """Write a fitted core ``TeethScene`` into the matching teeth (by tooth name): materials, a_t, the
-    fitted dentin coefficients (and, with ``set_current``, the shape-key values). Returns the names applied."""
+# Capture tooth -> tooth of the scene. A fit's teeth carry the capture's names (scene.json), which a tooth made
+# with Add Tooth ("Incisor") or renamed does not share: the fit settings keep an explicit mapping
+# (``Scene.ms_teeth_fit.tooth_map``), read from the capture and pre-filled where the names match.
+
+def capture_tooth_names(capture_dir: str) -> list[str]:
+    """The tooth names of a capture folder's ``scene.json`` (in its order)."""
+    import json
+    import os
+
+    path = os.path.join(capture_dir, "scene.json")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"no scene.json in {capture_dir!r}")
+    with open(path, encoding="utf-8") as f:
+        return [str(t["name"]) for t in json.load(f)["teeth"]]
+
+
+def is_scene_tooth(obj, scene) -> bool:
+    """``obj`` is an enamel shell (a tooth's settings owner) linked into ``scene``."""
+    return (obj is not None and getattr(obj, "ms_tooth", None) is not None and obj.ms_tooth.role == "ENAMEL"
+            and scene.objects.get(obj.name) == obj)
+
+
+def fill_tooth_map(scene, names: list[str]) -> int:
+    """Make ``scene.ms_teeth_fit.tooth_map`` list the capture teeth ``names``: a tooth the user chose stays
+    (while it is a tooth of the scene), else the tooth of the same name is pre-filled. Returns how many
+    capture teeth are mapped."""
+    tm = scene.ms_teeth_fit.tooth_map
+    chosen = {m.capture_tooth: m.enamel for m in tm if is_scene_tooth(m.enamel, scene)}
+    by_name = tooth_objects(scene)
+    tm.clear()
+    for name in names:
+        m = tm.add()
+        m.capture_tooth = name
+        m.enamel = chosen[name] if chosen.get(name) is not None else by_name.get(name)
+    return sum(m.enamel is not None for m in tm)
+
+
+def fit_targets(names, scene=None) -> dict:
+    """``{capture tooth name: enamel object}`` a fit of the teeth ``names`` applies to: the mapping of the
+    scene's fit settings; a name not in the mapping goes to the tooth of that name (scripts, imported
+    scenes). A capture tooth mapped to nothing (or to an object no longer a tooth of the scene) gets nothing."""
     scene = scene or bpy.context.scene
-    objs = tooth_objects(scene)
+    mapped = {m.capture_tooth: m.enamel for m in scene.ms_teeth_fit.tooth_map}
+    by_name = tooth_objects(scene)
+    out = {}
+    for name in names:
+        obj = mapped[name] if name in mapped else by_name.get(name)
+        if is_scene_tooth(obj, scene) and all(obj != o for o in out.values()):
+            out[name] = obj
+    return out
+
+
+def no_mapping_message(names) -> str:
+    return (f"No capture tooth is mapped to a tooth of this scene (capture teeth: {', '.join(names) or 'none'}): "
+            "choose them under Fit to capture in the Teeth panel")
+
+
+def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, targets: dict | None = None) -> list[str]:
+    """Write a fitted core ``TeethScene`` into the teeth it maps to (``targets``, default ``fit_targets``: the
+    panel's capture-tooth mapping, else by tooth name): materials, a_t, the fitted dentin coefficients (and,
+    with ``set_current``, the shape-key values), gums and cavity. Returns the capture tooth names applied;
+    when none maps to a tooth, nothing is changed and the list is empty."""
+    scene = scene or bpy.context.scene
+    objs = fit_targets([t.name for t in ts.teeth], scene) if targets is None else targets
+    if not objs:
+        return []
     done = []
     for t in ts.teeth:
         enamel = objs.get(t.name)

@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import os
+import time
 from types import SimpleNamespace
 
 import bpy
@@ -215,3 +216,94 @@ def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_pat
     assert r["iterations"] == 10000 and r["capture_dir"] == capture_dir, r
     # while it ran, this session showed it running and offered no second fit
     assert running_while_running and not fit_poll_while_running
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# 9. A fit applies to the teeth the user mapped, never silently to nothing
+
+def _add_incisor():
+    bpy.ops.wm.read_homefile(use_empty=True)
+    assert bpy.ops.material_structures.teeth_add_tooth(kind="incisor", resolution=12) == {"FINISHED"}
+    enamel = bpy.data.objects["Incisor Enamel"]
+    assert enamel.ms_tooth.tooth_name == "Incisor"
+    return enamel
+
+
+def test_fit_refuses_to_start_when_no_capture_tooth_is_mapped(addon_module, capture_dir, tmp_path):
+    enamel = _add_incisor()  # tooth name "Incisor"; the capture's tooth is "tooth0"
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = capture_dir
+    fs.out_dir = str(tmp_path / "fit")
+    fs.iterations = 1
+    fs.lights_per_iteration = 1
+    t0 = time.perf_counter()
+    with pytest.raises(RuntimeError, match="No capture tooth is mapped"):
+        bpy.ops.material_structures.teeth_fit()
+    assert time.perf_counter() - t0 < 5.0  # refused at once
+    assert not os.path.exists(tmp_path / "fit" / "fit_log.txt")  # no fit was started
+    assert not fs.running and not enamel.ms_tooth.has_fit
+    # the mapping was read from the capture's scene.json: its tooth, not mapped (no name matches)
+    assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [("tooth0", None)]
+
+
+def test_fit_applies_to_the_mapped_tooth(addon_module, capture_dir, tmp_path):
+    from material_structures.core.teeth.scene import load_scene
+
+    enamel = _add_incisor()
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = capture_dir
+    fs.out_dir = str(tmp_path / "fit")
+    fs.iterations = 2
+    fs.lights_per_iteration = 2
+    fs.init = "perturbed"
+    assert bpy.ops.material_structures.teeth_read_capture_teeth() == {"FINISHED"}
+    assert [m.capture_tooth for m in fs.tooth_map] == ["tooth0"]
+    fs.tooth_map[0].enamel = enamel  # the user's choice in the panel
+    assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
+    fit = load_scene(str(tmp_path / "fit" / "scene_fit.json"))
+    t = fit.teeth[0]
+    st = enamel.ms_tooth
+    assert st.has_fit
+    np.testing.assert_allclose(tuple(st.fitted), t.c, atol=1e-6)
+    np.testing.assert_allclose(st.coefficients(), np.clip(t.c, -0.8, 0.8), atol=1e-6)
+    node = enamel.active_material.node_tree.nodes["Enamel"]
+    np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
+    assert "Incisor" in fs.status
+
+
+def test_apply_fit_result_uses_the_mapping_and_refuses_nothing(addon_module, capture_dir):
+    from material_structures.core.teeth.scene import load_scene
+
+    result = os.path.join(capture_dir, "scene.json")  # a teeth scene file like scene_fit.json
+    t = load_scene(result).teeth[0]
+    enamel = _add_incisor()
+    node = enamel.active_material.node_tree.nodes["Enamel"]
+    node.inputs["Sigma_t"].default_value = before = (5.0, 6.0, 7.0)  # not the file's values
+    assert not np.allclose(before, t.enamel.sigma_t, rtol=1e-3)
+    # nothing in this scene is called "tooth0" and nothing is mapped: an error, nothing changed
+    with pytest.raises(RuntimeError, match="No capture tooth is mapped"):
+        bpy.ops.material_structures.teeth_apply_fit_file(filepath=result)
+    assert not enamel.ms_tooth.has_fit
+    np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), before, rtol=0)
+    # setting the capture folder reads its teeth; the user maps tooth0 -> the incisor
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = capture_dir
+    assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [("tooth0", None)]
+    fs.tooth_map[0].enamel = enamel
+    assert bpy.ops.material_structures.teeth_apply_fit_file(filepath=result) == {"FINISHED"}
+    assert enamel.ms_tooth.has_fit
+    np.testing.assert_allclose(tuple(enamel.ms_tooth.fitted), t.c, atol=1e-6)
+    np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
+
+
+def test_mapping_is_prefilled_where_names_match(addon_module, capture_dir):
+    enamel = _import(capture_dir)  # tooth name "tooth0", as in the capture
+    assert bpy.ops.material_structures.teeth_add_tooth(kind="molar", resolution=8) == {"FINISHED"}
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = capture_dir
+    assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [("tooth0", enamel)]
+    # a choice the user made survives reading the capture again
+    molar = bpy.data.objects["Molar Enamel"]
+    fs.tooth_map[0].enamel = molar
+    assert bpy.ops.material_structures.teeth_read_capture_teeth() == {"FINISHED"}
+    assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [("tooth0", molar)]
