@@ -161,7 +161,7 @@ def placement_from_mesh_object(obj, mm_per_unit: float = 1000.0) -> Matrix:
 
 
 def tooth_from_mesh_object(obj, enamel_occlusal_mm: float = 1.8, enamel_side_mm: float = 1.1,
-                           mm_per_unit: float = 1000.0):
+                           mm_per_unit: float = 1000.0) -> tuple:
     """Core ``TriMesh`` + ``DentinBlendShape`` from an arbitrary closed mesh object (its local frame is taken
     as the canonical tooth space: z along the tooth axis, crown up). B0 is the enamel surface moved
     inwards along the vertex normals by the enamel thickness (thicker towards the occlusal end).

@@ -147,7 +147,7 @@ def fill_tooth_map(scene, names: list[str]) -> int:
     return sum(m.enamel is not None for m in tm)
 
 
-def fit_targets(names, scene=None) -> dict:
+def fit_targets(names: list[str], scene=None) -> dict:
     """``{capture tooth name: enamel object}`` a fit of the teeth ``names`` applies to: the mapping of the
     scene's fit settings; a name not in the mapping goes to the tooth of that name (scripts, imported
     scenes). A capture tooth mapped to nothing (or to an object no longer a tooth of the scene) gets nothing."""
@@ -162,7 +162,7 @@ def fit_targets(names, scene=None) -> dict:
     return out
 
 
-def no_mapping_message(names) -> str:
+def no_mapping_message(names: list[str]) -> str:
     return (f"No capture tooth is mapped to a tooth of this scene (capture teeth: {', '.join(names) or 'none'}): "
             "choose them under Fit to capture in the Teeth panel")
 
