@@ -6,9 +6,10 @@ from __future__ import annotations
 import bpy
 import numpy as np
 import pytest
-from fresh import run_fresh
 
 from material_structures.core.fabric.parameter_maps import make_maps, save_params
+
+from .fresh import run_fresh
 
 UVS = [(0.2, 0.3), (0.35, 0.4), (0.5, 0.45), (0.7, 0.4)]
 READ_MAPS = """

@@ -8,7 +8,8 @@ import shutil
 
 import bpy
 import numpy as np
-from fresh import run_fresh
+
+from .fresh import run_fresh
 
 RENDER = """
 from material_structures.render import render_to_array
