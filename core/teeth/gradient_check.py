@@ -11,10 +11,11 @@ import numpy as np
 from .capture import Camera, PointLight
 from .param_vector import ParamLayout, scene_to_vector, vector_to_scene
 from .path_tracer import RenderSettings, render
+from .scene import TeethScene
 from .synthetic import make_scene, scene_target
 
 
-def fd_test_scene():
+def fd_test_scene() -> tuple[TeethScene, list[Camera], list[PointLight]]:
     """One tooth (2 x 2 a_t texture), gums and cavity, a 14 x 12 camera and three lights."""
     sc = make_scene(n_teeth=1, resolution=14)
     t = sc.teeth[0]
@@ -28,12 +29,20 @@ def fd_test_scene():
     return sc, [cam], lights
 
 
-def fd_check(spp: int = 3, max_depth: int = 5, seed: int = 7, rel_step: float = 1e-5):
-    """Returns (layout, analytic gradient, central-difference gradient) of sum(adjoint * C)."""
+def fd_check(spp: int = 3, max_depth: int | None = 5, seed: int = 7, rel_step: float = 1e-5,
+             rr_depth: int | None = None) -> tuple[ParamLayout, np.ndarray, np.ndarray]:
+    """Returns (layout, analytic gradient, central-difference gradient) of sum(adjoint * C).
+
+    ``max_depth=None`` checks the all-bounce estimator with Russian roulette (from vertex ``rr_depth``,
+    default ``RenderSettings``'s): its survival probabilities are evaluated at theta_0 (part of
+    p(path; theta_0)), so the renders at theta_0 +- h make the same roulette decisions and the central
+    difference is that of the same estimator."""
     sc, cams, lights = fd_test_scene()
     layout = ParamLayout(sc)
     x0 = scene_to_vector(sc, layout)
     st = RenderSettings(spp=spp, max_depth=max_depth, seed=seed)
+    if rr_depth is not None:
+        st.rr_depth = rr_depth
     adj = np.random.default_rng(3).random((1, len(lights), cams[0].height, cams[0].width, 3))
     g = render(sc, cams, lights, st, adjoint=adj).grad
     fd = np.zeros_like(g)

@@ -9,6 +9,11 @@ the Lambertian oral-cavity proxy. Every scattering / cavity vertex connects to e
 (next-event estimation through the non-bending boundaries, attenuated by all media crossed and by
 a_t (1 - F) at each boundary). The contribution is f(path; theta) / p(path; theta_0).
 
+Path length. ``RenderSettings.max_depth`` = n stops every path after n vertices (biased low: the
+light that needs more bounces is missing, a lot in teeth media with albedo 0.7-0.97); ``None`` renders
+all bounces, ending paths by Russian roulette (unbiased; the roulette decisions are part of
+p(path; theta_0), see ``RenderSettings``) with a safety cap of ``MAX_PATH_VERTICES``.
+
 Derivatives. With the path and its discrete structure fixed, d/dtheta [f / p] = (f / p) d log f,
 and d log f is the sum of per-interaction terms (eq. 5.8): 1 / a_t (eq. 5.10), phase-function terms
 (eq. 5.11-5.14), blended albedo / phase / sigma_t terms via l(q) (eq. 5.15-5.21), (N - 1) / sigma_t -
@@ -22,6 +27,7 @@ sums), connection terms by the connection's own contribution.
 
 The sampling and evaluation scenes are the same for ordinary rendering; the finite-difference tests
 evaluate the same estimator at theta +- h with the sampling fixed at theta_0 (common random numbers).
+With roulette, the per-path levels of the suffix sums grow with the deepest path of a batch.
 """
 
 from __future__ import annotations
@@ -49,18 +55,59 @@ from .sigmoid_blend import blend_weight, blend_weight_dq
 
 MAX_CROSSINGS = 12
 JACOBIAN_MAX_BYTES = 8 * 2**30
+# Safety cap on path vertices with Russian roulette (``RenderSettings.max_depth = None``). Not a bias in
+# practice: after the roulette start the survival probability of a path is about the product of its
+# albedos (see ``RenderSettings``), so a path reaches 1000 vertices with probability ~ 0.97^1000 ~ 6e-14
+# at the teeth's highest albedo; ``RenderResult.stats["capped_paths"]`` counts those that did.
+MAX_PATH_VERTICES = 1000
 
 
 @dataclass
 class RenderSettings:
+    """Sampling settings of ``render``.
+
+    ``max_depth``: an int stops every path after that many vertices (scattering + surface events), a
+    biased but deterministic-length estimator (the fit's default, 6). ``None`` renders all bounces with
+    Russian roulette from vertex ``rr_depth`` on (capped at ``MAX_PATH_VERTICES``):
+
+    Roulette. After each of its vertices b >= ``rr_depth`` (counted from 1) a path survives with probability
+        q = min(1, max_c beta_c),   beta_c = f_c(x_0..x_b; theta_0) / mean_k p_k(x_0..x_b; theta_0),
+    the path throughput at the *sampling* parameters in the hero-channel balance form of the estimator
+    (it includes the 1 / q of earlier roulettes, and is independent of the hero channel). The roulette
+    is one more sampling decision: a survivor's pdf gets the factor q in every channel, p_k -> q p_k, so
+    its contribution f / p is divided by q (unbiased: E[1{u < q} / q] = 1), a killed path contributes
+    nothing from then on. Why the throughput (and not the per-channel albedo product): once the
+    throughput has dropped below 1, every later roulette keeps it near 1, so the survival probability
+    per vertex is about the vertex's own albedo x a_t (1 - F) x rho factor, i.e. analog absorption, and
+    the weights of the surviving paths stay bounded (max_c beta_c <= 1 right after a roulette that
+    could kill) instead of growing as 1 / q. The per-channel albedo product would leave out the
+    spectral balance-heuristic ratio f_c / mean_k p_k (up to 3) and the a_t (1 - F) and rho factors,
+    so its survivors' weights would not be held near 1: weights that spread more are more variance
+    for the same number of traced vertices. q is not capped below 1 (Mitsuba caps at 0.95): paths whose
+    throughput is still >= 1 are not worth killing, and termination is guaranteed by absorption, by
+    escape, and by the ``MAX_PATH_VERTICES`` cap.
+
+    Derivatives with roulette. q is a function of the path prefix and theta_0 only (sampling-scene
+    albedos, a_t, rho, sigma_t and geometry; never the evaluation scene), so it is part of
+    p(path; theta_0): the per-path derivative d/dtheta [f / p] = (f / p) d log f (eq. 5.7-5.8) keeps
+    exactly the same per-interaction terms (eq. 5.10-5.32), with f / p now including 1 / q. With
+    common random numbers (``sampling_scene``) the roulette decisions and the q at theta_0 +- h are
+    the same, so finite differences check the same estimator. (Computing q from the evaluation
+    throughput instead would add the missing term -d log q / dtheta and flip decisions under h.)
+    """
+
     spp: int = 4
-    max_depth: int = 6  # path vertices (scattering + surface events)
+    max_depth: int | None = 6  # path vertices (scattering + surface events); None: all, with roulette
     seed: int = 0
     chunk: int = 4096  # camera paths per wavefront batch
     jitter: bool = True
     # processes that trace the chunks (each chunk has its own random stream, so the result does not
     # depend on this beyond floating-point summation order); > 1 forks (POSIX only)
     workers: int = 1
+    # with max_depth None: roulette may end a path once it has this many vertices (Mitsuba's rr_depth).
+    # Vertices here include every boundary event; 10 was the most efficient of 5 / 10 / 20 (variance x
+    # time of the tooth pixels) on the index-matched Mitsuba test scene, see docs/teeth-tracer.md
+    rr_depth: int = 10
 
 
 @dataclass
@@ -368,6 +415,9 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     running score d log f, every connection adds its own terms), rows in the order of ``pixels``
     (camera 0's pixels first). Contracting it with the adjoint gives ``grad`` of the same paths.
     ``sampling_scene``: theta_0 for the path sampling (default ``scene``), see module docstring.
+    ``settings.max_depth = None``: all bounces with Russian roulette; ``grad`` and ``jacobian`` are then
+    the exact derivatives of that estimator (roulette probabilities at theta_0, see ``RenderSettings``),
+    and ``stats["capped_paths"]`` counts the paths stopped by ``MAX_PATH_VERTICES``.
     """
     settings = settings or RenderSettings()
     cs = compiled or CompiledScene(scene, sampling_scene)
@@ -403,33 +453,38 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     t0 = time.perf_counter()
     starts = list(range(0, len(pix_of), settings.chunk))
 
-    def trace(chunk_ids, img, grad, jac) -> tuple[int, int, int]:
-        """Trace these chunks into img / grad / jac; (path vertices, shadow rays, ray casts) they added."""
-        n_vertices, shadow0, casts0 = 0, tr.n_shadow, tr.n_casts
+    def trace(chunk_ids, img, grad, jac) -> tuple[int, int, int, int]:
+        """Trace these chunks into img / grad / jac; (path vertices, shadow rays, ray casts, paths stopped
+        by ``MAX_PATH_VERTICES``) they added."""
+        n_vertices, n_capped, shadow0, casts0 = 0, 0, tr.n_shadow, tr.n_casts
         for ci in chunk_ids:
             sl = slice(starts[ci], starts[ci] + settings.chunk)
             rng = np.random.Generator(np.random.PCG64([settings.seed, ci]))
-            n_vertices += _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad,
-                                       hw, jac, row_of[sl])
-        return n_vertices, tr.n_shadow - shadow0, tr.n_casts - casts0
+            nv, nc = _trace_chunk(tr, cameras, cam_of[sl], pix_of[sl], rng, lp, li, settings, img, adj, grad,
+                                  hw, jac, row_of[sl])
+            n_vertices += nv
+            n_capped += nc
+        return n_vertices, tr.n_shadow - shadow0, tr.n_casts - casts0, n_capped
 
     if settings.workers > 1 and len(starts) > 1:
-        n_vertices, n_shadow, n_casts = _trace_forked(trace, len(starts), settings.workers, img, grad, jac)
+        n_vertices, n_shadow, n_casts, n_capped = _trace_forked(trace, len(starts), settings.workers, img, grad, jac)
     else:
-        n_vertices, n_shadow, n_casts = trace(range(len(starts)), img, grad, jac)
+        n_vertices, n_shadow, n_casts, n_capped = trace(range(len(starts)), img, grad, jac)
     stats = {"seconds": time.perf_counter() - t0, "path_vertices": int(n_vertices),
              "shadow_rays": int(n_shadow), "ray_casts": int(n_casts), "camera_paths": int(len(pix_of))}
+    if settings.max_depth is None:
+        stats["capped_paths"] = int(n_capped)
     images = img.reshape(len(cameras), n_l, h, w, 3)
     return RenderResult(images, grad, stats, jac)
 
 
-def _trace_forked(trace, n_chunks: int, workers: int, img, grad, jac) -> tuple[int, int, int]:
+def _trace_forked(trace, n_chunks: int, workers: int, img, grad, jac) -> tuple[int, int, int, int]:
     """Run ``trace`` over the chunks in ``workers`` forked processes (chunk i on worker i mod workers)
     and add their images, gradients and Jacobians into ``img``, ``grad``, ``jac`` in worker order."""
     workers = min(workers, n_chunks)
     parts = forked_map(_trace_chunk_set, (trace, (img, grad, jac)),
                        [list(range(k, n_chunks, workers)) for k in range(workers)], workers)
-    totals = np.zeros(3, dtype=np.int64)
+    totals = np.zeros(4, dtype=np.int64)
     for p_img, p_grad, p_jac, counts in parts:
         img += p_img
         if grad is not None:
@@ -437,7 +492,7 @@ def _trace_forked(trace, n_chunks: int, workers: int, img, grad, jac) -> tuple[i
         if jac is not None:
             jac += p_jac
         totals += counts
-    return int(totals[0]), int(totals[1]), int(totals[2])
+    return tuple(int(t) for t in totals)
 
 
 def _trace_chunk_set(job, chunk_ids: list[int]):
@@ -448,7 +503,8 @@ def _trace_chunk_set(job, chunk_ids: list[int]):
 
 
 def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings, img, adj, grad, hw,
-                 jac=None, rows_j=None) -> int:
+                 jac=None, rows_j=None) -> tuple[int, int]:
+    """Trace one wavefront batch; (path vertices, paths still alive at the roulette safety cap)."""
     cs = tr.cs
     n = len(pix)
     want = tr.want_grad
@@ -465,8 +521,12 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
     med = np.zeros(n, dtype=np.int64)
     logf = np.zeros((n, 3))
     logp = np.zeros((n, 3))
-    levels = st.max_depth + 2
-    A = np.zeros((n, levels, 3)) if grad is not None else None
+    roulette = st.max_depth is None
+    depth_cap = MAX_PATH_VERTICES if roulette else st.max_depth
+    # log f at the sampling parameters theta_0 (roulette only): the throughput that sets q
+    logfs = np.zeros((n, 3)) if roulette else None
+    # adjoint-weighted contributions per path and vertex level; grown as paths get deeper (roulette)
+    A = np.zeros((n, depth_cap + 2 if not roulette else 16, 3)) if grad is not None else None
     prefix = []  # (level, rows, cols, vals) for the reverse-mode gradient
     # forward mode: running per-path score (n, P, 3) and per-path image derivatives (n, L, 3, P)
     S = None if jac is None else np.zeros((n, tr.n_j, 3))
@@ -482,9 +542,11 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
     n_vertices = 0
     inv_spp = 1.0 / st.spp
 
-    for b in range(st.max_depth):
+    for b in range(depth_cap):
         if len(pid) == 0:
             break
+        if A is not None and A.shape[1] < b + 2:
+            A = np.concatenate([A, np.zeros_like(A)], axis=1)
         m_ = len(pid)
         u = rng.random((m_, 6))
         tri_x, t_x, cnt, end_tri, end_t, _ = tr.through(o, d, None, shadow=False)
@@ -517,6 +579,8 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
         lens_e = np.where(jj <= kstar[:, None], upper - tb_e[:, :-1], 0.0)
         lens_e = np.where(in_medium[:, None], lens_e, 0.0)
         logf -= np.einsum("nk,nkc->nc", lens_e, cs.sigma_e[mseq])
+        if roulette:
+            logfs -= np.where(in_medium[:, None], tau_at_s, 0.0)
         if want:
             rec = tr.sigma_records(lens_e, mseq, pid)
             if rec is not None:
@@ -557,6 +621,10 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
             aE, aD = cs.alb["Ee"][mv], cs.alb["De"][mv]
             a_mix = aE * lw_e[:, None] + aD * (1 - lw_e[:, None])
             logf[vs] += np.log(s_mix) + np.log(a_mix)
+            if roulette:
+                ls = lw_s[:, None]
+                logfs[vs] += (np.log(cs.sigma_s[mE] * ls + cs.sigma_s[mD] * (1 - ls))
+                              + np.log(cs.alb["Es"][mv] * ls + cs.alb["Ds"][mv] * (1 - ls)))
             if want:
                 rows = pid[vs]
                 cols = np.concatenate([cs.col_sigma[mE][:, None] + np.arange(3),
@@ -588,6 +656,8 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
             f_s, _, _ = tr.phase_eval(mu[:, None], mix_s)
             logf[vs] += np.log(f_e[:, 0])[:, None]
             logp[vs] += np.log(f_s[:, 0])[:, None]
+            if roulette:
+                logfs[vs] += np.log(f_s[:, 0])[:, None]
             if want:
                 cols, vals = tr.phase_scores(mu[:, None], mv, lw_e, dl, dqdc, pe_e, pd_e, mix_e)
                 push(b + 1, pid[vs], cols[:, :], np.repeat(vals[:, 0, :, None], 3, axis=2))
@@ -615,6 +685,8 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                     new_med[tv_] = np.where(entering, cs.inside[tt], cs.outside[tt])
                     a, cols, w4 = tr.a_t_at(tt, o[tv_], d[tv_], end_t[tv_], "e")
                     logf[tv_] += np.log(a)
+                    if roulette:
+                        logfs[tv_] += np.log(tr.a_t_at(tt, o[tv_], d[tv_], end_t[tv_], "s")[0])
                     if want:
                         push(b, pid[tv_], cols, tr.a_t_vals(a, w4))
                 new_med[rv] = med[rv]
@@ -625,6 +697,8 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                 nrm = cs.normal_s[end_tri[ov]]
                 nrm = nrm * -np.sign(np.einsum("nx,nx->n", nrm, d[ov]))[:, None]
                 logf[ov] += np.log(cs.rho_e)[None, :]
+                if roulette:
+                    logfs[ov] += np.log(cs.rho_s)[None, :]
                 if want:
                     push(b, pid[ov], np.broadcast_to(cs.col_rho + np.arange(3), (len(ov), 3)),
                          _diag(np.broadcast_to(1.0 / cs.rho_e, (len(ov), 3))))
@@ -639,11 +713,21 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
             # anything else (should not happen): terminate
             bad = sv[(kind != KIND_DIELECTRIC) & (kind != KIND_OPAQUE)]
             alive[bad] = False
+        # Russian roulette (see ``RenderSettings``): survival q from the theta_0 throughput, p *= q
+        if roulette and b + 1 >= st.rr_depth:
+            ur = rng.random(m_)
+            ra = np.flatnonzero(alive)
+            live, log_q = _roulette(ur[ra], logfs[ra], logp[ra])
+            alive[ra[~live]] = False
+            logp[ra[live]] += log_q[:, None]
         # compact
         keep = np.flatnonzero(alive)
         o, d, med = x[keep], new_d[keep], new_med[keep]
         logf, logp, hero, pid = logf[keep], logp[keep], hero[keep], pid[keep]
+        if roulette:
+            logfs = logfs[keep]
         cam, pix = cam[keep], pix[keep]
+    n_capped = len(pid) if roulette else 0
 
     if grad is not None and prefix:
         R = np.cumsum(A[:, ::-1, :], axis=1)[:, ::-1, :]  # suffix sums over vertex levels
@@ -651,12 +735,24 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
             _accumulate(grad, rows, np.asarray(cols), vals, R[:, level, :])
     if jac is not None:
         np.add.at(jac, rows_j, JP)  # rows repeat when spp > 1
-    return n_vertices
+    return n_vertices, n_capped
 
 
 def _logmeanexp(a: np.ndarray) -> np.ndarray:
     m = a.max(axis=1, keepdims=True)
     return m + np.log(np.mean(np.exp(a - m), axis=1, keepdims=True))
+
+
+def _roulette(u: np.ndarray, logfs: np.ndarray, logp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Russian roulette for paths with uniform numbers ``u``, log f at theta_0 ``logfs`` and per-channel
+    log pdfs ``logp`` (n, 3): (survives (n,), log q of the survivors). Survival probability
+    q = min(1, max_c beta_c), beta_c = f_c / mean_k p_k (see ``RenderSettings``); a zero-throughput path
+    (q = 0) never survives. The caller multiplies the survivors' pdfs by q (their weight by 1 / q)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        beta = np.exp(np.max(logfs, axis=1) - _logmeanexp(logp)[:, 0])
+    q = np.minimum(np.nan_to_num(beta, nan=0.0, posinf=1.0), 1.0)
+    live = u < q
+    return live, np.log(q[live])
 
 
 def _nee(tr: _Tracer, idx, xv, dv, mv, wv, normal, lp, li, cam, pix, pid, b, img, adj, grad, A, hw, inv_spp,

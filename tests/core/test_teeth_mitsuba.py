@@ -4,7 +4,8 @@ The two renderers agree exactly in model when the boundaries are index-matched (
 Mitsuba ``null`` BSDF interfaces) and the enamel/dentin blend is sharp (spread -> 0): enamel and
 dentin media with two-lobe HG phase functions (Mitsuba ``blendphase``), gums, a Lambertian oral-cavity
 proxy (``twosided diffuse``) and point lights. Compared per channel: the whole-image mean (2 %) and
-the mean over the tooth pixels (within the Monte Carlo error of both renderers + 1 %).
+the mean over the tooth pixels (within the Monte Carlo error of both renderers + 1 %), for a fixed
+depth of 60 and for the all-bounce Russian-roulette estimator.
 """
 
 from __future__ import annotations
@@ -84,19 +85,51 @@ def _mitsuba_render(sc, cam: Camera, light: PointLight, spp: int, tmp, seed: int
     return img[:, :, :3]
 
 
-def test_full_tooth_matches_mitsuba(tmp_path):
+@pytest.fixture(scope="module")
+def mitsuba_refs(tmp_path_factory):
+    """The scene, its tooth mask and per light three Mitsuba ``volpath`` renders with all bounces
+    (``max_depth: -1``) at 256 spp, seeds 0-2."""
     sc, cam, lights = _scene()
     mask = tooth_masks(sc, [cam])[0]
+    tmp = tmp_path_factory.mktemp("mitsuba")
+    refs = [[_mitsuba_render(sc, cam, light, 256, tmp, seed=s) for s in range(3)] for light in lights]
+    return sc, cam, lights, mask, refs
+
+
+def _tooth_mean(imgs: list[np.ndarray], mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per channel: the mean over the tooth pixels of the seeds' mean image, and its standard error
+    from the per-pixel variance over the seeds (pixels are independent estimates: this pools
+    n_pixels x (n_seeds - 1) degrees of freedom instead of the n_seeds - 1 of the seeds' means)."""
+    v = np.array([m[mask] for m in imgs])  # (seeds, pixels, 3)
+    return v.mean(axis=(0, 1)), np.sqrt(v.var(axis=0, ddof=1).sum(axis=0) / len(v)) / v.shape[1]
+
+
+def _compare(mine: list[np.ndarray], ref: list[np.ndarray], mask: np.ndarray, what) -> None:
+    # whole image (lit oral-cavity walls, gums, tooth) per channel
+    np.testing.assert_allclose(np.mean(mine, axis=0).mean((0, 1)), np.mean(ref, axis=0).mean((0, 1)), rtol=0.02)
+    # the tooth pixels: agreement within the Monte Carlo error of both renderers + 1 %
+    a, sa = _tooth_mean(mine, mask)
+    b, sb = _tooth_mean(ref, mask)
+    se = np.hypot(sa, sb)
+    assert np.all(np.abs(a - b) < 4 * se + 0.01 * b), (what, a, b, se)
+
+
+def test_full_tooth_matches_mitsuba(mitsuba_refs):
+    """Fixed depth 60 (practically all bounces for these albedos) against Mitsuba with all bounces."""
+    sc, cam, lights, mask, refs = mitsuba_refs
     assert mask.sum() > 40
     for k, light in enumerate(lights):
         mine = [render(sc, [cam], [light], RenderSettings(spp=32, max_depth=60, seed=10 * k + s)).images[0, 0]
                 for s in range(3)]
-        ref = [_mitsuba_render(sc, cam, light, 256, tmp_path, seed=s) for s in range(3)]
-        # whole image (lit oral-cavity walls, gums, tooth) per channel
-        np.testing.assert_allclose(np.mean(mine, axis=0).mean((0, 1)), np.mean(ref, axis=0).mean((0, 1)), rtol=0.02)
-        # the tooth pixels: agreement within the Monte Carlo error of both renderers
-        a = np.array([m[mask].mean(axis=0) for m in mine])
-        b = np.array([m[mask].mean(axis=0) for m in ref])
-        se = np.hypot(a.std(axis=0, ddof=1), b.std(axis=0, ddof=1)) / np.sqrt(3)
-        diff = np.abs(a.mean(axis=0) - b.mean(axis=0))
-        assert np.all(diff < 4 * se + 0.01 * b.mean(axis=0)), (k, a.mean(axis=0), b.mean(axis=0), se)
+        _compare(mine, refs[k], mask, ("depth 60", k))
+
+
+def test_roulette_all_bounces_matches_mitsuba(mitsuba_refs):
+    """Russian roulette (``max_depth=None``, all bounces) against Mitsuba ``volpath`` ``max_depth: -1``.
+    (The same comparison at max_depth 6 fails by 6-17 % per channel, see docs/teeth-tracer.md.)"""
+    sc, cam, lights, mask, refs = mitsuba_refs
+    for k, light in enumerate(lights):
+        res = [render(sc, [cam], [light], RenderSettings(spp=32, max_depth=None, seed=100 + 10 * k + s))
+               for s in range(3)]
+        assert all(r.stats["capped_paths"] == 0 for r in res)
+        _compare([r.images[0, 0] for r in res], refs[k], mask, ("roulette", k))
