@@ -105,8 +105,9 @@ class RenderSettings:
     # depend on this beyond floating-point summation order); > 1 forks (POSIX only)
     workers: int = 1
     # with max_depth None: roulette may end a path once it has this many vertices (Mitsuba's rr_depth).
-    # Vertices here include every boundary event; 10 was the most efficient of 5 / 10 / 20 (variance x
-    # time of the tooth pixels) on the index-matched Mitsuba test scene, see docs/teeth-tracer.md
+    # Vertices here include every boundary event; 10 was as efficient as or better than 5 / 20 (variance
+    # x time of the tooth pixels, within ~20 %) on the index-matched Mitsuba test scene, see
+    # docs/teeth-tracer.md
     rr_depth: int = 10
 
 
