@@ -4,6 +4,13 @@ All generators build polylines in micrometres on the patch [0, Px] x [0, Py], cu
 segments no longer than ``segment_um`` (curved scratches become polylines), clip them to the patch
 and index them with :func:`make_scratch_set`. Widths and depths default to the thesis' ranges,
 uniform in 0.8-6 um, drawn once per scratch (constant along it).
+
+Each takes an optional ``progress`` callback, called with strictly increasing fractions of the work
+done, the last one 1.0 (stages: polylines 0-20 %, segments 20-35 %, grid index 35-100 %; the grid
+index is most of the time). An exception raised by the callback stops the generation (a cancel).
+Measured on this project's 2-core machine (20 mm patch, defaults): 10 000 wear scratches about 6 s,
+50 000 about 30 s; 200 000 exceed the float32 tables' 2^24 index entries on a 20 mm patch and are
+refused early in the grid stage.
 """
 
 from __future__ import annotations
@@ -13,7 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .scratch_set import ScratchSet, make_scratch_set
+from .scratch_set import Progress, ProgressFn, ScratchSet, make_scratch_set
 
 THESIS_RANGE_UM = (0.8, 6.0)
 
@@ -38,15 +45,19 @@ def _clip_to_patch(seg: np.ndarray, ps: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def polylines_to_segments(
-    polylines: Sequence[ArrayLike], patch_size_um: ArrayLike, segment_um: float
+    polylines: Sequence[ArrayLike], patch_size_um: ArrayLike, segment_um: float,
+    progress: ProgressFn | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Resample each polyline (K, 2) so no piece exceeds ``segment_um``; clip to the patch.
 
-    Returns (segments (M, 4), scratch index (M,)).
+    Returns (segments (M, 4), scratch index (M,)). ``progress``: fraction of the polylines done.
     """
     ps = np.asarray(patch_size_um, dtype=np.float64)
     segs, ids = [], []
+    every = max(1, len(polylines) // 100)
     for i, pl in enumerate(polylines):
+        if progress is not None and i % every == 0:
+            progress(i / len(polylines))
         p = np.asarray(pl, dtype=np.float64).reshape(-1, 2)
         if p.shape[0] < 2:
             raise ValueError(f"curve {i} needs at least two points, got {p.shape[0]}")
@@ -58,25 +69,38 @@ def polylines_to_segments(
             continue
         d = np.linalg.norm(np.diff(p, axis=0), axis=1)
         n = np.maximum(1, np.ceil(d / segment_um).astype(int))
-        pts = [p[:1]]
-        for j in range(len(d)):
-            t = np.arange(1, n[j] + 1)[:, None] / n[j]
-            pts.append(p[j] + t * (p[j + 1] - p[j]))
-        q = np.concatenate(pts)
+        # piece j of edge j0 -> j0 + 1 ends at p[j0] + k / n[j0] (p[j0 + 1] - p[j0]), k = 1..n[j0]
+        j0 = np.repeat(np.arange(len(d)), n)
+        k = np.arange(1, j0.size + 1) - np.repeat(np.cumsum(n) - n, n)
+        t = (k / n[j0])[:, None]
+        q = np.concatenate([p[:1], p[j0] + t * (p[j0 + 1] - p[j0])])
         segs.append(np.concatenate([q[:-1], q[1:]], axis=1))
         ids.append(np.full(len(q) - 1, i))
+    if progress is not None:
+        progress(1.0)
     if not segs:
         return np.zeros((0, 4)), np.zeros(0, np.int64)
     seg, keep = _clip_to_patch(np.concatenate(segs), ps)
     return seg, np.concatenate(ids)[keep]
 
 
-def _finish(polylines, patch, rng, width_range, depth_range, segment_um, **kw) -> ScratchSet:
-    seg, ids = polylines_to_segments(polylines, patch, segment_um)
+def _finish(polylines, patch, rng, width_range, depth_range, segment_um, progress: Progress, **kw) -> ScratchSet:
+    seg, ids = polylines_to_segments(polylines, patch, segment_um, progress=progress.sub(0.2, 0.35))
     n = len(polylines)
     w = rng.uniform(*width_range, n)
     d = rng.uniform(*depth_range, n)
-    return make_scratch_set(seg, w[ids], d[ids], patch, scratch_id=ids, **kw)
+    return make_scratch_set(seg, w[ids], d[ids], patch, scratch_id=ids, progress=progress.sub(0.35, 1.0), **kw)
+
+
+def _stepper(n: int, progress: Progress):
+    """Report the polyline stage (0-20 %) about every 1 % of ``n`` scratches."""
+    every = max(1, n // 100)
+
+    def step(i: int) -> None:
+        if i % every == 0:
+            progress(0.2 * i / max(n, 1))
+
+    return step
 
 
 def uniform_wear(
@@ -89,13 +113,17 @@ def uniform_wear(
     depth_um: tuple[float, float] = THESIS_RANGE_UM,
     segment_um: float = 250.0,
     seed: int = 0,
+    progress: ProgressFn | None = None,
     **index_kw,
 ) -> ScratchSet:
     """Random wear: scratches at uniform positions and orientations, gently curved (random arc)."""
     rng = np.random.default_rng(seed)
     ps = np.asarray(patch_size_um, dtype=np.float64)
+    prog = Progress(progress)
+    step = _stepper(int(n_scratches), prog)
     lines = []
-    for _ in range(int(n_scratches)):
+    for i in range(int(n_scratches)):
+        step(i)
         start = rng.uniform(0, 1, 2) * ps
         ang = rng.uniform(0, 2 * np.pi)
         length = rng.uniform(*length_um)
@@ -105,7 +133,7 @@ def uniform_wear(
         dxy = np.stack([np.cos(th), np.sin(th)], 1)
         pts = start + np.concatenate([[[0, 0]], np.cumsum(dxy[1:] * np.diff(s)[:, None], axis=0)])
         lines.append(pts)
-    return _finish(lines, ps, rng, width_um, depth_um, segment_um, **index_kw)
+    return _finish(lines, ps, rng, width_um, depth_um, segment_um, prog, **index_kw)
 
 
 def circular_polish(
@@ -119,6 +147,7 @@ def circular_polish(
     depth_um: tuple[float, float] = THESIS_RANGE_UM,
     segment_um: float = 250.0,
     seed: int = 0,
+    progress: ProgressFn | None = None,
     **index_kw,
 ) -> ScratchSet:
     """Circular polishing marks: arcs of circles around one centre (default: the patch centre).
@@ -130,15 +159,18 @@ def circular_polish(
     if radius_um is None:
         radius_um = (0.05 * ps.min(), 0.7 * ps.min())
     c = ps / 2 if centre_um is None else np.asarray(centre_um, dtype=np.float64)
+    prog = Progress(progress)
+    step = _stepper(int(n_scratches), prog)
     lines = []
-    for _ in range(int(n_scratches)):
+    for i in range(int(n_scratches)):
+        step(i)
         r = rng.uniform(*radius_um)
         a0 = rng.uniform(0, 2 * np.pi)
         span = rng.uniform(*arc_rad)
         n = max(2, int(r * span / segment_um) + 2)
         a = a0 + np.linspace(0, span, n)
         lines.append(c + r * np.stack([np.cos(a), np.sin(a)], 1))
-    return _finish(lines, ps, rng, width_um, depth_um, segment_um, **index_kw)
+    return _finish(lines, ps, rng, width_um, depth_um, segment_um, prog, **index_kw)
 
 
 def hairline_brush(
@@ -152,14 +184,18 @@ def hairline_brush(
     depth_um: tuple[float, float] = THESIS_RANGE_UM,
     segment_um: float = 500.0,
     seed: int = 0,
+    progress: ProgressFn | None = None,
     **index_kw,
 ) -> ScratchSet:
     """Hairline brushing: long, nearly parallel lines crossing the whole patch along ``angle_rad``."""
     rng = np.random.default_rng(seed)
     ps = np.asarray(patch_size_um, dtype=np.float64)
     diag = float(np.hypot(*ps))
+    prog = Progress(progress)
+    step = _stepper(int(n_scratches), prog)
     lines = []
-    for _ in range(int(n_scratches)):
+    for i in range(int(n_scratches)):
+        step(i)
         a = angle_rad + rng.normal(0, jitter_rad)
         t = np.array([np.cos(a), np.sin(a)])
         nrm = np.array([-t[1], t[0]])
@@ -167,7 +203,7 @@ def hairline_brush(
         s = np.linspace(-0.6 * diag, 0.6 * diag, max(2, int(1.2 * diag / segment_um) + 1))
         wav = waviness_um * np.sin(2 * np.pi * s / rng.uniform(3000, 12000) + rng.uniform(0, 2 * np.pi))
         lines.append(ps / 2 + s[:, None] * t + (off + wav)[:, None] * nrm)
-    return _finish(lines, ps, rng, width_um, depth_um, segment_um, **index_kw)
+    return _finish(lines, ps, rng, width_um, depth_um, segment_um, prog, **index_kw)
 
 
 def from_curves(
@@ -179,6 +215,7 @@ def from_curves(
     uv: bool = False,
     segment_um: float = 250.0,
     seed: int = 0,
+    progress: ProgressFn | None = None,
     **index_kw,
 ) -> ScratchSet:
     """Scratches from user-drawn curves: a list of (K, 2) point arrays (um, or UV in [0, 1] with uv=True).
@@ -201,5 +238,6 @@ def from_curves(
         raise ValueError(f"{name} must be a (lo, hi) tuple, a scalar or one value per curve ({n})")
 
     w, d = per_curve(width_um, "width_um"), per_curve(depth_um, "depth_um")
-    seg, ids = polylines_to_segments(lines, ps, segment_um)
-    return make_scratch_set(seg, w[ids], d[ids], ps, scratch_id=ids, **index_kw)
+    prog = Progress(progress)
+    seg, ids = polylines_to_segments(lines, ps, segment_um, progress=prog.sub(0.0, 0.2))
+    return make_scratch_set(seg, w[ids], d[ids], ps, scratch_id=ids, progress=prog.sub(0.2, 1.0), **index_kw)

@@ -49,16 +49,29 @@ _NPZ_KEYS = (
 def save_scratch_set_npz(path: str | os.PathLike, s: ScratchSet) -> None:
     """Write the set as one ``.npz`` (layout in the module docstring)."""
     validate_scratch_set(s)
-    np.savez_compressed(
-        path, format=FORMAT, version=VERSION, **{k: np.asarray(getattr(s, k)) for k in _NPZ_KEYS}
-    )
+    path = os.fspath(path)
+    tmp = f"{path}.tmp-{os.getpid()}"
+    try:
+        with open(tmp, "wb") as f:  # a file object: numpy appends no second ".npz" (e.g. to "set.NPZ")
+            np.savez_compressed(
+                f, format=FORMAT, version=VERSION, **{k: np.asarray(getattr(s, k)) for k in _NPZ_KEYS}
+            )
+        os.replace(tmp, path)  # never a half-written file under the real name
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 def _load_npz(path: str) -> ScratchSet:
+    with open(path, "rb") as f:
+        magic = f.read(4)
+    if magic != b"PK\x03\x04":  # every .npz is a zip archive; np.load would try other formats
+        raise ValueError(f"{path}: not a readable .npz file (not a zip archive)")
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as exc:
-        raise ValueError(f"{path}: not a readable .npz file ({exc})") from exc
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"{path}: not a readable .npz file ({first})") from exc
     with z:
         if "format" not in z.files or str(z["format"]) != FORMAT:
             raise ValueError(f"{path}: not a scratch-set file (missing format tag {FORMAT!r})")
@@ -173,18 +186,42 @@ def _load_exr_folder(folder: str) -> ScratchSet:
 
 
 def load_scratch_set(path: str | os.PathLike) -> ScratchSet:
-    """Load a ``.npz`` file or an EXR-table folder; raises FileNotFoundError/ValueError with the reason."""
+    """Load a ``.npz`` file or an EXR-table folder; raises FileNotFoundError/ValueError with the reason
+    (one line; any file that is not ``.npz`` is refused, a table inside a folder included: pass the folder)."""
     path = os.fspath(path)
     if os.path.isdir(path):
         return _load_exr_folder(path)
     if not os.path.exists(path):
         raise FileNotFoundError(f"scratch set not found: {path}")
+    if not path.lower().endswith(".npz"):
+        inside = os.path.basename(path) in EXR_FILES
+        hint = " (a table of an EXR-table folder: import the folder)" if inside else ""
+        raise ValueError(f"{path}: not a scratch set: expected a .npz file or an EXR-table folder{hint}")
     return _load_npz(path)
 
 
 def save_scratch_set(path: str | os.PathLike, s: ScratchSet) -> None:
-    """``.npz`` path -> one file; any other path -> EXR-table folder."""
-    if os.fspath(path).endswith(".npz"):
+    """``.npz`` path -> one file; a path without an extension (or an existing folder) -> EXR-table folder.
+
+    Any other extension (``.exr``, ``.png``, ...) is refused with a ValueError before anything is
+    written: it would silently become a folder."""
+    path = os.fspath(path)
+    kind = save_kind(path)
+    if kind == "npz":
         save_scratch_set_npz(path, s)
-    else:
+    elif kind == "folder":
         save_scratch_set_exr(path, s)
+    else:
+        raise ValueError(f"{path}: cannot write a scratch set to a '{kind}' file: use a .npz file, or a folder "
+                         "path without an extension for EXR tables")
+
+
+def save_kind(path: str | os.PathLike) -> str:
+    """What :func:`save_scratch_set` makes of ``path``: ``"npz"``, ``"folder"`` or the refused extension."""
+    path = os.fspath(path)
+    if os.path.isdir(path) or path.endswith(("/", os.sep)):
+        return "folder"
+    ext = os.path.splitext(path)[1]
+    if ext.lower() == ".npz":
+        return "npz"
+    return "folder" if ext == "" else ext

@@ -16,6 +16,7 @@ cell's slice.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +26,40 @@ PROFILE_RECTANGULAR = 0
 KNOWN_PROFILES = (PROFILE_RECTANGULAR,)
 MAX_TABLE_INDEX = 2**24  # integers stored in float32 tables are exact below this
 REACH_SIGMAS = 3.5  # scratches farther than the footprint + 3.5 sigma contribute nothing
+
+ProgressFn = Callable[[float], None]  # called with the fraction done, 0..1
+
+
+class Progress:
+    """Forwards a long computation's progress to ``fn`` as strictly increasing fractions in [0, 1].
+
+    ``sub(lo, hi)`` maps a stage's own 0..1 onto [lo, hi] of the whole. Steps below ``min_step`` are
+    dropped (a bar needs no more than ~1000 updates); 1.0 is always passed on. An exception raised by
+    ``fn`` (e.g. a user's cancel) propagates and stops the computation.
+    """
+
+    def __init__(self, fn: ProgressFn | None = None, lo: float = 0.0, hi: float = 1.0, *,
+                 min_step: float = 1e-3, _root: Progress | None = None) -> None:
+        self.fn, self.lo, self.hi, self.min_step = fn, float(lo), float(hi), float(min_step)
+        self._root = _root if _root is not None else self
+        self.last = -1.0
+
+    def __call__(self, fraction: float) -> None:
+        root = self._root
+        if root.fn is None:
+            return
+        f = min(1.0, max(0.0, self.lo + (self.hi - self.lo) * float(fraction)))
+        if f > root.last and (f - root.last >= root.min_step or f == 1.0):
+            root.last = f
+            root.fn(f)
+
+    def sub(self, lo: float, hi: float) -> Progress:
+        span = self.hi - self.lo
+        return Progress(None, self.lo + span * lo, self.lo + span * hi, _root=self._root)
+
+    @property
+    def active(self) -> bool:
+        return self._root.fn is not None
 
 
 @dataclass
@@ -105,12 +140,21 @@ def validate_scratch_set(s: ScratchSet) -> None:
 
 
 def build_grid_index(
-    segments: ArrayLike, patch_size_um: ArrayLike, cell_size_um: float, query_radius_um: float
+    segments: ArrayLike,
+    patch_size_um: ArrayLike,
+    cell_size_um: float,
+    query_radius_um: float,
+    *,
+    progress: ProgressFn | None = None,
+    chunk_candidates: int = 250_000,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """CSR grid index: (grid_offset (ny, nx), grid_count (ny, nx), cell_segments (K,)).
 
     A segment is listed in a cell when it comes within ``query_radius_um`` of the cell's square
-    (exact segment-square distance).
+    (exact segment-square distance). Segments are tested in chunks of about ``chunk_candidates``
+    (segment, cell) pairs (bounded memory; the result does not depend on the chunking), reporting the
+    fraction of pairs tested to ``progress``. An index that would exceed the float32 tables' limit
+    (``MAX_TABLE_INDEX`` entries) is refused as soon as it does, not after the whole grid is built.
     """
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     ps = np.asarray(patch_size_um, dtype=np.float64)
@@ -125,17 +169,44 @@ def build_grid_index(
     ix1 = np.clip(np.floor(hi[:, 0] / c).astype(np.int64), 0, nx - 1)
     iy1 = np.clip(np.floor(hi[:, 1] / c).astype(np.int64), 0, ny - 1)
     wx = ix1 - ix0 + 1
-    n = wx * (iy1 - iy0 + 1)
-    rep = np.repeat(np.arange(seg.shape[0]), n)
-    local = np.arange(rep.size) - np.repeat(np.cumsum(n) - n, n)
-    ix = ix0[rep] + local % wx[rep]
-    iy = iy0[rep] + local // wx[rep]
-    keep = segment_rect_distance(seg[rep], ix * c, iy * c, c) <= r
-    rep, cell = rep[keep], (iy * nx + ix)[keep]
+    n = wx * (iy1 - iy0 + 1)  # candidate cells per segment
+    ends = np.cumsum(n)
+    total = int(ends[-1]) if ends.size else 0
+    # chunk boundaries (segment indices): about chunk_candidates pairs each, at least one segment
+    bounds = [0]
+    while bounds[-1] < seg.shape[0]:
+        start = bounds[-1]
+        base = int(ends[start - 1]) if start else 0
+        stop = int(np.searchsorted(ends, base + max(1, int(chunk_candidates)), side="right"))
+        bounds.append(max(stop, start + 1))
+    reps, cells = [], []
+    kept = 0
+    for a, b in zip(bounds[:-1], bounds[1:], strict=False):
+        nn = n[a:b]
+        rep = a + np.repeat(np.arange(b - a), nn)
+        local = np.arange(rep.size) - np.repeat(np.cumsum(nn) - nn, nn)
+        ix = ix0[rep] + local % wx[rep]
+        iy = iy0[rep] + local // wx[rep]
+        keep = segment_rect_distance(seg[rep], ix * c, iy * c, c) <= r
+        reps.append(rep[keep])
+        cells.append((iy * nx + ix)[keep])
+        kept += int(keep.sum())
+        if kept >= MAX_TABLE_INDEX:
+            raise ValueError(
+                f"too many grid entries for exact float32 tables (more than {MAX_TABLE_INDEX} after "
+                f"{b} of {seg.shape[0]} segments): use fewer scratches, a larger patch or a smaller "
+                "footprint/coherence length"
+            )
+        if progress is not None:
+            progress(float(ends[b - 1]) / total)
+    rep = np.concatenate(reps) if reps else np.zeros(0, np.int64)
+    cell = np.concatenate(cells) if cells else np.zeros(0, np.int64)
     order = np.argsort(cell, kind="stable")
     cell_segments = rep[order]
     count = np.bincount(cell, minlength=nx * ny)
     offset = np.cumsum(count) - count
+    if progress is not None:
+        progress(1.0)
     return offset.reshape(ny, nx), count.reshape(ny, nx), cell_segments
 
 
@@ -187,11 +258,13 @@ def make_scratch_set(
     sigma_um: float = 60.0,
     max_footprint_um: float = 500.0,
     cell_size_um: float | None = None,
+    progress: ProgressFn | None = None,
 ) -> ScratchSet:
     """Assemble and index a scratch set.
 
     The query radius is ``max_footprint_um + 3.5 sigma``: footprints with a semi-major axis up to
     ``max_footprint_um`` are evaluated exactly. The cell size defaults to half the query radius.
+    ``progress`` is called with the fraction of the grid index built (see :func:`build_grid_index`).
     """
     seg = np.asarray(segments, dtype=np.float64)
     if seg.ndim != 2 or seg.shape[1] != 4:
@@ -200,7 +273,7 @@ def make_scratch_set(
     q = float(max_footprint_um) + REACH_SIGMAS * float(sigma_um)
     c = float(cell_size_um) if cell_size_um is not None else 0.5 * q
     ps = np.asarray(patch_size_um, dtype=np.float64).reshape(2)
-    off, cnt, cs = build_grid_index(seg, ps, c, q)
+    off, cnt, cs = build_grid_index(seg, ps, c, q, progress=progress)
     s = ScratchSet(
         segments=seg,
         width_um=np.broadcast_to(np.asarray(width_um, dtype=np.float64), (m,)).copy(),
