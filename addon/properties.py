@@ -6,6 +6,7 @@ import bpy
 
 from .fabric.properties import CLASSES as FABRIC_CLASSES
 from .fabric.properties import MS_FabricBrushSettings
+from .scratch import world as scratch_world
 from .teeth import properties as teeth_properties
 
 
@@ -19,6 +20,14 @@ class MS_SceneSettings(bpy.types.PropertyGroup):
         set=lambda self, value: setattr(self.id_data.cycles, "preview_samples", value),
     )
     fabric_brush: bpy.props.PointerProperty(type=MS_FabricBrushSettings)
+    # Scratched metal: the K brightest regions of the world as lamps of the scratch term (addon/scratch/world.py).
+    # Stored in the scene's ID property "ms_scratch_world_lamps", where files and scripts from before set it.
+    scratch_world_lamps: bpy.props.IntProperty(
+        name="World Lights", min=0, max=scratch_world.MAX_WORLD_LAMPS, default=0,
+        description="Brightest regions of the world's environment image given to the scratch term as distant "
+        "sphere lamps, in free lamp slots (0: the scratches see no world light; an approximation)",
+        get=scratch_world.get_world_lamps, set=scratch_world.set_world_lamps, update=scratch_world.update_world_lamps,
+    )
 
 
 # Feature property groups first: MS_SceneSettings points at them.

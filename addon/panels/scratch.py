@@ -43,8 +43,7 @@ class MATERIAL_PT_material_structures_scratch(bpy.types.Panel):
                 col.label(text=f"{label}: linked")
             else:
                 col.prop(sock, "default_value", text=label)
-        if "ms_scratch_world_lamps" in context.scene:
-            layout.prop(context.scene, '["ms_scratch_world_lamps"]', text="World Lights")
+        layout.prop(context.scene.material_structures, "scratch_world_lamps", text="World Lights")
         row = layout.row()
         row.operator("material_structures.scratch_generate", icon="MOD_NOISE")
         row.operator("material_structures.scratch_draw", icon="GREASEPENCIL")

@@ -1,7 +1,9 @@
 """World (HDRI) light for the scratch term: the brightest regions of the environment as sphere lamps.
 
 The base metal closure sees the world as usual; only the scratch term needs it through lamp inputs.
-Approximation (opt-in: ``scene["ms_scratch_world_lamps"] = K``, free lamp slots permitting):
+Approximation (opt-in: the scene setting World Lights, ``scene.material_structures.scratch_world_lamps
+= K``, free lamp slots permitting; it is stored in the scene's ID property ``ms_scratch_world_lamps``,
+where files and scripts from before it was a setting put it, so those keep working):
 
 1. the environment image (the world's Environment Texture, equirectangular) is reduced to a
    64 x 32 luminance map of the upper hemisphere;
@@ -23,6 +25,8 @@ import math
 
 import numpy as np
 
+WORLD_LAMPS_PROP = "ms_scratch_world_lamps"  # scene ID property holding World Lights (K)
+MAX_WORLD_LAMPS = 4  # the shader's lamp slots
 MAP_W, MAP_H = 64, 32
 MIN_SEPARATION_DEG = 25.0
 THRESHOLD = 0.05
@@ -120,11 +124,37 @@ def world_lamps(scene, slots: int) -> list:
     return [lamp for lamp, _ in world_lamps_with_radii(scene, slots)]
 
 
+def world_lamp_count(scene) -> int:
+    """World Lights of ``scene`` (0 = off), clamped to the shader's lamp slots."""
+    if scene is None:
+        return 0
+    try:
+        k = int(scene.get(WORLD_LAMPS_PROP, 0))
+    except (TypeError, ValueError):
+        return 0
+    return max(0, min(MAX_WORLD_LAMPS, k))
+
+
+def get_world_lamps(settings) -> int:
+    """Getter of ``MS_SceneSettings.scratch_world_lamps`` (``settings.id_data`` is the scene)."""
+    return world_lamp_count(settings.id_data)
+
+
+def set_world_lamps(settings, value: int) -> None:
+    settings.id_data[WORLD_LAMPS_PROP] = max(0, min(MAX_WORLD_LAMPS, int(value)))
+
+
+def update_world_lamps(settings, context) -> None:
+    """A changed World Lights reaches the shaders at once (render_pre syncs again anyway)."""
+    from .material import sync_scratch_lamps
+
+    sync_scratch_lamps(settings.id_data)
+
+
 def world_lamps_with_radii(scene, slots: int) -> list:
     from ..lamp_sync import ShaderLamp
 
-    k = int(scene.get("ms_scratch_world_lamps", 0)) if scene is not None else 0
-    k = min(k, slots)
+    k = min(world_lamp_count(scene), slots)
     if k <= 0:
         return []
     env = world_environment(scene)
