@@ -1,12 +1,19 @@
-"""Scratched-metal operators: generate, draw (modal + EXEC stroke replay), import/export, sync lamps."""
+"""Scratched-metal operators: generate (modal with progress + EXEC), draw (modal + EXEC stroke replay),
+import/export, sync lamps.
+
+Every material owns its scratch set (``addon/scratch/material.py``): Generate and Import update the
+active object's scratched material's own set, or give the object a new material with a new set.
+"""
 
 from __future__ import annotations
 
 import os
+import threading
+from collections.abc import Callable
 
 import bpy
 
-from ...core.scratch.scratch_io import load_scratch_set, save_scratch_set
+from ...core.scratch.scratch_io import EXR_FILES, load_scratch_set, save_kind, save_scratch_set
 from ..fabric.mesh_uv import MeshUVLookup
 from ..fabric.properties import MS_StrokePoint
 from ..scratch.editing import (
@@ -18,28 +25,79 @@ from ..scratch.editing import (
     merge_sets,
     object_scratch_material,
 )
-from ..scratch.material import create_scratched_metal, ensure_scratch_group, sync_scratch_lamps
+from ..scratch.material import (
+    create_scratched_metal,
+    material_scratch_group,
+    sync_scratch_lamps,
+    unique_set_name,
+    update_scratch_group,
+)
 from .fabric import assign_material, require_uv_mesh
 
 PATTERN_ITEMS = [(k, k.title(), v) for k, v in PATTERNS.items()]
+MODAL_MIN_COUNT = 2000  # fewer scratches take about a second or less: generated at once, no Esc needed
+JOB_THREAD_NAME = "Material Structures scratch generation"
 
 
-def apply_set(context, obj, scratch_set, set_name: str):
-    """Put ``scratch_set`` on ``obj``: update its scratched-metal material, or give it a new one."""
+def apply_set(context, obj, scratch_set, set_name: str) -> bpy.types.Material:
+    """Put ``scratch_set`` on ``obj``: update its scratched-metal material's own set, or give it a new
+    material with a new set (``set_name``, made unique: no other material's set changes)."""
     mat = object_scratch_material(obj)
-    if mat is not None:
-        current = material_set(mat)
-        name = current[0] if current else set_name
-        ensure_scratch_group(scratch_set, name, context.scene)
+    group = material_scratch_group(mat) if mat is not None and mat.library is None else None
+    if group is not None:
+        update_scratch_group(group, scratch_set, context.scene)
     else:
-        mat = create_scratched_metal(f"Scratched Metal {set_name}", scratch_set, set_name, scene=context.scene)
+        name = unique_set_name(set_name)
+        mat = create_scratched_metal(f"Scratched Metal {name}", scratch_set, name, scene=context.scene)
         assign_material(obj, mat)
     sync_scratch_lamps(context.scene)
     return mat
 
 
+class GenerationCancelled(Exception):
+    """Raised by a job's progress callback after the user cancelled: unwinds the generator."""
+
+
+class GenerateJob:
+    """A scratch generation on a worker thread (core numpy code only, never bpy). ``fraction`` follows
+    the generator's progress callback; :meth:`cancel` stops it at its next report (at most ~1 % of the
+    work away)."""
+
+    def __init__(self, generate: Callable[[Callable[[float], None]], object]) -> None:
+        self.fraction = 0.0
+        self.result = None
+        self.error: Exception | None = None
+        self._cancel = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(generate,), name=JOB_THREAD_NAME, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _progress(self, fraction: float) -> None:
+        if self._cancel.is_set():
+            raise GenerationCancelled
+        self.fraction = fraction
+
+    def _run(self, generate) -> None:
+        try:
+            self.result = generate(self._progress)
+        except GenerationCancelled:
+            pass
+        except Exception as exc:  # reported by the operator on the main thread
+            self.error = exc
+
+    @property
+    def done(self) -> bool:
+        return not self._thread.is_alive()
+
+    def cancel(self) -> None:
+        self._cancel.set()
+        self._thread.join()
+
+
 class MS_OT_scratch_generate(bpy.types.Operator):
-    """Generate a scratch set (wear, polishing circles or hairline) on the active object's scratched metal"""
+    """Generate a scratch set (wear, polishing circles or hairline) on the active object's scratched metal.
+    Thousands of scratches take seconds: the progress shows in the status bar, Esc cancels"""
 
     bl_idname = "material_structures.scratch_generate"
     bl_label = "Generate Scratches"
@@ -59,20 +117,25 @@ class MS_OT_scratch_generate(bpy.types.Operator):
     seed: bpy.props.IntProperty(name="Seed", default=0, min=0)
     replace: bpy.props.BoolProperty(name="Replace", description="Replace the current set (else add to it)",
                                     default=True)
-    set_name: bpy.props.StringProperty(name="Set Name", default="Scratches")
+    set_name: bpy.props.StringProperty(name="Set Name", description="Name of a new material's set (made unique; "
+                                       "an existing scratched material keeps its own set)", default="Scratches")
 
-    def execute(self, context):
-        obj = context.active_object
-        if not require_uv_mesh(self, obj):
-            return {"CANCELLED"}
+    def _check(self, context) -> bool:
+        if not require_uv_mesh(self, context.active_object):
+            return False
         for label, (lo, hi) in (("length", self.length_um), ("width", self.width_um), ("depth", self.depth_um)):
             if lo > hi:
                 self.report({"ERROR"}, f"{label} range is empty ({lo} > {hi})")
-                return {"CANCELLED"}
+                return False
+        return True
+
+    def _generate(self, progress=None):
         sigma = FINE_WEAR_SIGMA_UM if self.fine_wear else 60.0
+        return generate_set(self.pattern, self.count, self.patch_mm, tuple(self.length_um), tuple(self.width_um),
+                            tuple(self.depth_um), self.seed, sigma, self.angle_deg, progress=progress)
+
+    def _apply(self, context, obj, new) -> set[str]:
         try:
-            new = generate_set(self.pattern, self.count, self.patch_mm, tuple(self.length_um), tuple(self.width_um),
-                               tuple(self.depth_um), self.seed, sigma, self.angle_deg)
             current = None if self.replace else material_set(object_scratch_material(obj))
             s = merge_sets(current[1] if current else None, new)
         except ValueError as exc:
@@ -81,6 +144,80 @@ class MS_OT_scratch_generate(bpy.types.Operator):
         mat = apply_set(context, obj, s, self.set_name)
         self.report({"INFO"}, f"{s.n_scratches} scratches ({s.n_segments} segments) on '{mat.name}'")
         return {"FINISHED"}
+
+    def execute(self, context):
+        """Generate at once (scripts, Adjust Last Operation): progress in the window manager's bar."""
+        if not self._check(context):
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, 1000)
+        try:
+            new = self._generate(lambda f: wm.progress_update(int(1000 * f)))
+        except ValueError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+        return self._apply(context, context.active_object, new)
+
+    # -- interactive: the generation runs beside Blender; TIMER events show its progress, Esc cancels ----
+    def invoke(self, context, event):
+        if self.count < MODAL_MIN_COUNT or context.window is None:
+            return self.execute(context)
+        if not self._start_job(context):
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _start_job(self, context) -> bool:
+        if not self._check(context):
+            return False
+        self._obj_name = context.active_object.name
+        self._timer = None
+        self._job = GenerateJob(self._generate)
+        self._job.start()
+        context.window_manager.progress_begin(0, 1000)
+        self._show(context, 0.0)
+        return True
+
+    def _show(self, context, fraction: float) -> None:
+        context.window_manager.progress_update(int(1000 * fraction))
+        if context.workspace is not None:
+            context.workspace.status_text_set(
+                f"Generating {self.count} scratches: {100 * fraction:.0f} %  (Esc cancels)")
+
+    def _end(self, context) -> None:
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel()
+            self._end(context)
+            self.report({"WARNING"}, "Scratch generation cancelled: nothing changed")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        self._show(context, job.fraction)
+        if not job.done:
+            return {"RUNNING_MODAL"}
+        self._end(context)
+        if job.error is not None:
+            self.report({"ERROR"}, str(job.error))
+            return {"CANCELLED"}
+        obj = bpy.data.objects.get(self._obj_name)
+        if obj is None or job.result is None:
+            self.report({"ERROR"}, f"'{self._obj_name}' is gone: the scratches were not applied")
+            return {"CANCELLED"}
+        return self._apply(context, obj, job.result)
 
 
 class MS_OT_scratch_draw(bpy.types.Operator):
@@ -121,17 +258,26 @@ class MS_OT_scratch_draw(bpy.types.Operator):
         if self.stroke_space == "UV":
             return [tuple(p.uv) for p in self.stroke]
         lookup = MeshUVLookup(obj, context.evaluated_depsgraph_get())
-        out = [uv for uv in (lookup.nearest(p.location) for p in self.stroke) if uv is not None]
+        # recorded points lie on the surface: one farther than 1 % of the object's size missed it
+        lo = [min(v[i] for v in lookup.verts) for i in range(3)]
+        hi = [max(v[i] for v in lookup.verts) for i in range(3)]
+        tol = max(1e-6, 0.01 * sum((b - a) ** 2 for a, b in zip(lo, hi, strict=True)) ** 0.5)
+        out = [uv for uv in (lookup.nearest(p.location, tol) for p in self.stroke) if uv is not None]
         if len(out) < 2:
-            raise ValueError("the stroke does not touch the mesh")
+            raise ValueError(f"the stroke does not touch the mesh of '{obj.name}': no scratch drawn")
         return out
 
     def _add_curves(self, context, obj, curves):
         mat = object_scratch_material(obj)
-        name, current = material_set(mat)
+        found = material_set(mat)
+        if found is None:
+            raise ValueError(f"'{obj.name}' has no scratched-metal material")
+        current = found[1]
         new = curves_set(curves, current.patch_size_um, tuple(self.width_um), tuple(self.depth_um),
                          current.sigma_um, self.seed, current.query_radius_um - 3.5 * current.sigma_um)
-        ensure_scratch_group(merge_sets(current, new), name, context.scene)
+        if new.n_segments == 0:
+            raise ValueError("the stroke adds no scratch (it lies outside the UV square [0, 1] or has no length)")
+        update_scratch_group(material_scratch_group(mat), merge_sets(current, new), context.scene)
 
     # -- interactive ----------------------------------------------------------------------------
     def invoke(self, context, event):
@@ -190,8 +336,23 @@ class MS_OT_scratch_draw(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def is_exr_table_folder(folder: str) -> bool:
+    return os.path.isdir(folder) and any(os.path.isfile(os.path.join(folder, f)) for f in EXR_FILES)
+
+
+def import_source(path: str) -> str:
+    """What Import reads for a picked ``path``: a folder as it is; a file inside an EXR-table folder (one
+    of its tables, or a name typed into the file browser there) -> that folder; anything else as it is
+    (core ``load_scratch_set`` refuses a file that is not ``.npz`` with one clear line)."""
+    if os.path.isdir(path) or path.lower().endswith(".npz"):
+        return path
+    folder = os.path.dirname(path)
+    return folder if is_exr_table_folder(folder) else path
+
+
 class MS_OT_scratch_import(bpy.types.Operator):
-    """Import a scratch set (.npz file or EXR-table folder) onto the active object"""
+    """Import a scratch set onto the active object: a .npz file, or an EXR-table folder (pick the folder or
+    any table inside it)"""
 
     bl_idname = "material_structures.scratch_import"
     bl_label = "Import Scratch Set"
@@ -208,9 +369,7 @@ class MS_OT_scratch_import(bpy.types.Operator):
         obj = context.active_object
         if not require_uv_mesh(self, obj):
             return {"CANCELLED"}
-        path = bpy.path.abspath(self.filepath)
-        if os.path.isfile(path) is False and os.path.isdir(os.path.dirname(path)) and not path.endswith(".npz"):
-            path = os.path.dirname(path)  # a file picked inside an EXR-table folder
+        path = import_source(bpy.path.abspath(self.filepath))
         try:
             s = load_scratch_set(path)
         except (OSError, ValueError) as exc:
@@ -223,7 +382,8 @@ class MS_OT_scratch_import(bpy.types.Operator):
 
 
 class MS_OT_scratch_export(bpy.types.Operator):
-    """Export the active object's scratch set (.npz file, or an EXR-table folder for any other path)"""
+    """Export the active object's scratch set: a path ending .npz writes one file, a path without an
+    extension a folder of EXR tables; any other extension is refused"""
 
     bl_idname = "material_structures.scratch_export"
     bl_label = "Export Scratch Set"
@@ -247,6 +407,11 @@ class MS_OT_scratch_export(bpy.types.Operator):
             self.report({"ERROR"}, "The active object has no scratch set")
             return {"CANCELLED"}
         path = bpy.path.abspath(self.filepath)
+        kind = save_kind(path)
+        if kind not in ("npz", "folder"):
+            self.report({"ERROR"}, f"Cannot export to a '{kind}' file extension: use .npz for one file, or a "
+                        "folder path without an extension for EXR tables")
+            return {"CANCELLED"}
         try:
             save_scratch_set(path, found[1])
         except (OSError, ValueError) as exc:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.scratch import scratch_generators as gen
-from ...core.scratch.scratch_set import ScratchSet, make_scratch_set
+from ...core.scratch.scratch_set import ProgressFn, ScratchSet, make_scratch_set
 from .material import MARKER, group_node
-from .tables import PROP, load_stored_set
+from .tables import PROP, load_group_set
 
 PATTERNS = {
     "WEAR": "Random wear: uniformly placed, gently curved scratches",
@@ -28,11 +28,13 @@ def generate_set(
     sigma_um: float = 60.0,
     angle_deg: float = 0.0,
     max_footprint_um: float = 500.0,
+    progress: ProgressFn | None = None,
 ) -> ScratchSet:
-    """A scratch set on a square patch of ``patch_mm`` mm (core generators; ranges are uniform)."""
+    """A scratch set on a square patch of ``patch_mm`` mm (core generators; ranges are uniform).
+    ``progress``: called with the fraction done (increasing, last 1.0); an exception it raises cancels."""
     ps = (patch_mm * 1000.0, patch_mm * 1000.0)
     kw = {"width_um": tuple(width_um), "depth_um": tuple(depth_um), "seed": int(seed), "sigma_um": float(sigma_um),
-          "max_footprint_um": float(max_footprint_um)}
+          "max_footprint_um": float(max_footprint_um), "progress": progress}
     if pattern == "WEAR":
         return gen.uniform_wear(int(count), ps, length_um=tuple(length_um), **kw)
     if pattern == "POLISH":
@@ -77,8 +79,7 @@ def material_set(mat):
     node = group_node(mat)
     if node is None or node.node_tree.get(PROP) is None:
         return None
-    meta = node.node_tree[PROP]
-    return str(meta["name"]), load_stored_set(meta)
+    return str(node.node_tree[PROP]["name"]), load_group_set(node.node_tree)
 
 
 def object_scratch_material(obj):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from .material import ensure_tables_extracted, scratch_groups, sync_scratch_lamps
+from .material import adopt_named_images, ensure_tables_extracted, scratch_groups, sync_scratch_lamps
 
 
 @persistent
@@ -31,6 +31,7 @@ def on_render_pre(scene, *_args) -> None:
 @persistent
 def on_load_post(*_args) -> None:
     if scratch_groups():
+        adopt_named_images()  # files from before: sets found by name -> by pointer
         ensure_tables_extracted()
 
 

@@ -1,6 +1,10 @@
 """The "Scratched Metal" node groups and materials (thesis ch. 4 in Cycles).
 
-One node group per scratch set, ``Scratched Metal (<set>)``: inside, an OSL script node
+One node group per scratch set, ``Scratched Metal (<set>)``, and one set per material: a new
+material gets a set name no other set uses (made unique like Blender names: ``Scratches.001``), and
+updating a material's set writes only that set's own images (``tables.IMAGES_PROP``). A material
+that shares its group with another one (a copy of a material) gets its own copy of the group on its
+first update; objects share a set only by wearing the same material. Inside the group, an OSL script node
 (``cycles_osl/ms_scratch_metal.osl``) gives the base metal closure weighted by (1 - rho_P) and the
 scratch term through emission; a Texture Coordinate node feeds the UV map (its ray differentials
 give the pixel footprint) and a Tangent node the scratch plane's x axis. The set's tables reach the
@@ -20,7 +24,16 @@ import bpy
 from ...render.osl import load_osl_script
 from ...render.session import osl_flip_t
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
-from .tables import PROP, extract_tables, load_stored_set, store_scratch_set
+from .tables import (
+    IMAGES_PROP,
+    PROP,
+    TABLES,
+    extract_tables,
+    group_images,
+    image_name,
+    load_group_set,
+    store_scratch_set,
+)
 
 SHADER = "ms_scratch_metal"
 SCRIPT_NODE = "Scratch Shader"
@@ -50,39 +63,130 @@ def group_name(set_name: str) -> str:
     return f"{GROUP_PREFIX} ({set_name})"
 
 
-def ensure_scratch_group(scratch_set, set_name: str, scene=None) -> bpy.types.ShaderNodeTree:
-    """The node group of scratch set ``set_name`` (created or updated; the set is packed in the file)."""
-    scene = scene or bpy.context.scene
-    meta = store_scratch_set(scratch_set, set_name)
-    group = bpy.data.node_groups.get(group_name(set_name))
-    if group is None or not group.get(MARKER):
-        group = bpy.data.node_groups.new(group_name(set_name), "ShaderNodeTree")
-        group[MARKER] = 1
-        for name, socket_type, default, lo, hi in GROUP_INPUTS:
-            sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
-            sock.default_value = default
-            if lo is not None:
-                sock.min_value, sock.max_value = lo, hi
-        group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
-        nodes, links = group.nodes, group.links
-        gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
-        script = _load_script(group, scene)
-        texco = nodes.new("ShaderNodeTexCoord")
-        tangent = nodes.new("ShaderNodeTangent")
-        tangent.direction_type = "UV_MAP"
-        add = nodes.new("ShaderNodeAddShader")
-        for name, *_ in GROUP_INPUTS:
-            links.new(gin.outputs[name], script.inputs[name])
-        links.new(texco.outputs["UV"], script.inputs["UV"])
-        links.new(tangent.outputs["Tangent"], script.inputs["Tangent"])
-        links.new(script.outputs["BSDF"], add.inputs[0])
-        links.new(script.outputs["Scratch"], add.inputs[1])
-        links.new(add.outputs[0], gout.inputs["Shader"])
-        gin.location, script.location, texco.location = (-500, 0), (-150, 0), (-500, -300)
-        tangent.location, add.location, gout.location = (-500, -500), (150, 0), (350, 0)
+MAX_SET_NAME = 39  # bytes: "MS Scratch <name>.NNN segments" stays within Blender 4.5's 63-byte ID names
+
+
+def _set_name_taken(name: str, exclude=None) -> bool:
+    if bpy.data.node_groups.get(group_name(name)) not in (None, exclude):
+        return True
+    if any(bpy.data.images.get(image_name(name, t)) is not None for t in TABLES):
+        return True
+    return any(str(g[PROP]["name"]) == name for g in scratch_groups() if g != exclude)
+
+
+def unique_set_name(base: str, exclude=None) -> str:
+    """``base``, or ``base.001``, ``base.002``, ... : the first name no scratch set, group or table image
+    uses (``exclude``: a group whose own name does not count)."""
+    base = (base or "Scratches").strip() or "Scratches"
+    raw = base.encode()[:MAX_SET_NAME]
+    base = raw.decode(errors="ignore")
+    if not _set_name_taken(base, exclude):
+        return base
+    stem, dot, num = base.rpartition(".")
+    if not (dot and num.isdigit() and stem):
+        stem = base
+    k = 1
+    while _set_name_taken(f"{stem}.{k:03d}", exclude):
+        k += 1
+    return f"{stem}.{k:03d}"
+
+
+def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
+    group = bpy.data.node_groups.new(group_name(name), "ShaderNodeTree")
+    group[MARKER] = 1
+    for sock_name, socket_type, default, lo, hi in GROUP_INPUTS:
+        sock = group.interface.new_socket(sock_name, in_out="INPUT", socket_type=socket_type)
+        sock.default_value = default
+        if lo is not None:
+            sock.min_value, sock.max_value = lo, hi
+    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    nodes, links = group.nodes, group.links
+    gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    script = _load_script(group, scene)
+    texco = nodes.new("ShaderNodeTexCoord")
+    tangent = nodes.new("ShaderNodeTangent")
+    tangent.direction_type = "UV_MAP"
+    add = nodes.new("ShaderNodeAddShader")
+    for sock_name, *_ in GROUP_INPUTS:
+        links.new(gin.outputs[sock_name], script.inputs[sock_name])
+    links.new(texco.outputs["UV"], script.inputs["UV"])
+    links.new(tangent.outputs["Tangent"], script.inputs["Tangent"])
+    links.new(script.outputs["BSDF"], add.inputs[0])
+    links.new(script.outputs["Scratch"], add.inputs[1])
+    links.new(add.outputs[0], gout.inputs["Shader"])
+    gin.location, script.location, texco.location = (-500, 0), (-150, 0), (-500, -300)
+    tangent.location, add.location, gout.location = (-500, -500), (150, 0), (350, 0)
+    return group
+
+
+def _store(group, scratch_set, name: str, images: dict | None) -> None:
+    meta, own = store_scratch_set(scratch_set, name, images)
     group[PROP] = meta
+    group[IMAGES_PROP] = own
     group.interface.items_tree["Coherence"].default_value = meta["sigma_um"]
     sync_group_tables(group, scratch_set)
+
+
+def new_scratch_group(scratch_set, set_name: str, scene=None) -> bpy.types.ShaderNodeTree:
+    """A new node group holding ``scratch_set`` under a set name no other set uses (``set_name`` made
+    unique), with its own packed table images."""
+    scene = scene or bpy.context.scene
+    name = unique_set_name(set_name)
+    group = _build_group(name, scene)
+    _store(group, scratch_set, name, None)
+    return group
+
+
+def _sharing(group) -> tuple[bool, bool]:
+    """(set name shared, table images shared) with another scratch group."""
+    mine = {img.as_pointer() for img in group_images(group).values() if img is not None}
+    name = str(group[PROP]["name"])
+    same_name = same_images = False
+    for other in scratch_groups():
+        if other == group:
+            continue
+        same_name |= str(other[PROP]["name"]) == name
+        same_images |= any(img is not None and img.as_pointer() in mine for img in group_images(other).values())
+    return same_name, same_images
+
+
+def update_scratch_group(group, scratch_set, scene=None) -> bpy.types.ShaderNodeTree:
+    """Write ``scratch_set`` into ``group``'s own set (its own images, rewritten in place). A group that
+    shares its set name with another group (an appended material, a copied group) first gets a name of
+    its own (its images renamed with it); one that shares images gets new images: no other group changes."""
+    scene = scene or bpy.context.scene
+    name = str(group[PROP]["name"])
+    images = group_images(group)
+    same_name, same_images = _sharing(group)
+    if same_images:
+        images = None
+    if same_name or same_images:
+        name = unique_set_name(name, exclude=group)
+        for table, img in (images or {}).items():
+            if img is not None and img.library is None:
+                img.name = image_name(name, table)
+    if group.name != group_name(name) and bpy.data.node_groups.get(group_name(name)) is None:
+        group.name = group_name(name)
+    _store(group, scratch_set, name, images)
+    return group
+
+
+def material_scratch_group(mat) -> bpy.types.ShaderNodeTree | None:
+    """The node group of ``mat``'s scratch set, made ``mat``'s own first: when other materials use the
+    same group (Blender's material copies share node groups), ``mat`` gets a copy of it (its images
+    become its own on the next :func:`update_scratch_group`)."""
+    node = group_node(mat)
+    if node is None:
+        return None
+    group = node.node_tree
+    for other in bpy.data.materials:
+        if other == mat:
+            continue
+        o = group_node(other)
+        if o is not None and o.node_tree == group:
+            copy = group.copy()
+            node.node_tree = copy
+            return copy
     return group
 
 
@@ -93,7 +197,7 @@ def script_node(group):
 def sync_group_tables(group, scratch_set=None) -> str:
     """Extract the group's set to the EXR cache if needed and point the shader at it."""
     meta = group[PROP]
-    s = scratch_set if scratch_set is not None else load_stored_set(meta)
+    s = scratch_set if scratch_set is not None else load_group_set(group)
     folder = extract_tables(s)
     node = script_node(group)
     vals = {
@@ -128,7 +232,25 @@ def ensure_tables_extracted() -> int:
     for g in scratch_groups():
         node = script_node(g)
         if not os.path.isfile(os.path.join(node.inputs["TableDir"].default_value, "cell_params.exr")):
-            sync_group_tables(g)
+            try:
+                sync_group_tables(g)
+            except ValueError as exc:  # a set whose images are gone: say so, extract the others
+                print(f"Material Structures: {g.name}: {exc}")
+                continue
+            n += 1
+    return n
+
+
+def adopt_named_images() -> int:
+    """Files from before: give each scratch group pointers to the images it found by its set's name, so
+    that renaming or appending keeps them together. Returns how many groups were converted."""
+    n = 0
+    for g in scratch_groups():
+        if g.get(IMAGES_PROP) is not None or g.library is not None:
+            continue
+        images = group_images(g)
+        if all(img is not None for img in images.values()):
+            g[IMAGES_PROP] = images
             n += 1
     return n
 
@@ -144,9 +266,10 @@ def create_scratched_metal(
     tiling: float = 1.0,
     scene=None,
 ) -> bpy.types.Material:
-    """A material on the scratch set's group, with an EEVEE/viewport fallback (Principled metal)."""
+    """A new material with its own scratch set (``set_name`` or ``name``, made unique; see
+    :func:`new_scratch_group`), with an EEVEE/viewport fallback (Principled metal)."""
     scene = scene or bpy.context.scene
-    group = ensure_scratch_group(scratch_set, set_name or name, scene)
+    group = new_scratch_group(scratch_set, set_name or name, scene)
     mat = bpy.data.materials.new(name)
     if mat.node_tree is None:  # 4.5
         mat.use_nodes = True

@@ -9,10 +9,13 @@ OSL ``texture()`` needs a file path, and packed images have none. So a scratch s
     "MS Scratch <name> grid"       R, G offset, count (nx x ny)
     "MS Scratch <name> cells"      R    segment index
 
-plus the scalars (patch size, sigma, cell size, query radius, M, K) in an ID property of the
-material. Before rendering (render_pre, load_post, and whenever a material is built) the tables are
-extracted with ``core.scratch.scratch_io.save_scratch_set_exr`` (plus two derived cell-major tables,
-:func:`write_cell_major_tables`) into a content-addressed cache
+plus the scalars (patch size, sigma, cell size, query radius, M, K) in an ID property (``PROP``)
+of the set's node group, and the four images themselves in a second one (``IMAGES_PROP``: ID
+pointers, which follow renames and come along when the material is appended). The images belong to
+that one group: a set is never found by its name, except in files from before ``IMAGES_PROP`` (the
+images named after ``meta["name"]``). Before rendering (render_pre, load_post, and whenever a
+material is built) the tables are extracted with ``core.scratch.scratch_io.save_scratch_set_exr``
+(plus two derived cell-major tables, :func:`write_cell_major_tables`) into a content-addressed cache
 folder ``<tempdir>/material_structures_scratch/<sha1>/``: identical content -> identical path, so
 OpenImageIO's texture cache can never serve stale tables, and a reopened file re-extracts what it
 needs. The shader reads the folder from its ``TableDir`` input.
@@ -32,7 +35,8 @@ from ..fabric.maps import array_to_image, image_to_array
 
 IMAGE_PREFIX = "MS Scratch"
 TABLES = {"segments": 4, "params": 4, "grid": 2, "cells": 1}
-PROP = "ms_scratch_set"  # ID property (dict) on materials holding a scratch set
+PROP = "ms_scratch_set"  # ID property (dict) on a set's node group: the set's scalars and name
+IMAGES_PROP = "ms_scratch_images"  # ID property on the group: {table: Image} (files from before: absent)
 
 
 def _wrap(table: np.ndarray, fill: float) -> np.ndarray:
@@ -73,23 +77,65 @@ def image_name(name: str, table: str) -> str:
     return f"{IMAGE_PREFIX} {name} {table}"
 
 
-def store_scratch_set(s: ScratchSet, name: str) -> dict:
-    """Pack ``s`` as images named after ``name`` (replacing older ones); returns the metadata dict."""
+def _rewrite_image(image, arr: np.ndarray) -> None:
+    """Overwrite a same-sized float image's pixels with ``arr`` (H, W, C), row 0 = top, and repack it."""
+    h, w, c = arr.shape
+    rgba = np.zeros((h, w, 4), dtype=np.float32)
+    rgba[..., 3] = 1.0
+    rgba[..., :c] = arr
+    image.pixels.foreach_set(rgba[::-1].ravel())
+    image.update()
+    image.pack()
+
+
+def store_scratch_set(s: ScratchSet, name: str, images: dict | None = None) -> tuple[dict, dict]:
+    """Pack ``s`` into ``images`` ({table: Image}, the set's own images: rewritten in place where the
+    size allows, else replaced) or, for a new set, into new images named after ``name`` (Blender makes
+    a taken name unique). Returns (metadata dict, {table: Image})."""
+    import bpy
+
     validate_scratch_set(s)
+    out = {}
     for table, arr in set_to_arrays(s).items():
-        img = array_to_image(arr, image_name(name, table), pack=True)
+        img = (images or {}).get(table)
+        h, w = arr.shape[:2]
+        if img is not None and tuple(img.size) == (w, h) and img.is_float:
+            _rewrite_image(img, arr)
+        else:
+            if img is not None:
+                bpy.data.images.remove(img)  # this set's own old table, another size
+            img = array_to_image(arr, image_name(name, table), pack=True, replace=False)
         img.use_fake_user = True  # kept in the file even when no node uses it
-    return set_meta(s, name)
+        out[table] = img
+    return set_meta(s, name), out
 
 
-def load_stored_set(meta) -> ScratchSet:
-    """Rebuild the scratch set from the packed images named in ``meta`` (dict or ID property)."""
+def group_images(group) -> dict:
+    """{table: Image or None} of a set's node group: its own images (``IMAGES_PROP``) or, in files from
+    before, the images named after the set."""
+    import bpy
+
+    own = group.get(IMAGES_PROP)
+    if own is not None:  # never by name then: a name may belong to another set by now
+        return {t: img if isinstance(img := own.get(t), bpy.types.Image) else None for t in TABLES}
+    name = str(group[PROP]["name"])
+    return {t: bpy.data.images.get(image_name(name, t)) for t in TABLES}
+
+
+def load_group_set(group) -> ScratchSet:
+    """The scratch set stored by a set's node group."""
+    return load_stored_set(group[PROP], group_images(group))
+
+
+def load_stored_set(meta, images: dict | None = None) -> ScratchSet:
+    """Rebuild the scratch set from its packed images: ``images`` ({table: Image}) or, when None, the
+    images named after ``meta["name"]`` (``meta``: dict or ID property)."""
     import bpy
 
     name = str(meta["name"])
     arrays = {}
     for table, ch in TABLES.items():
-        img = bpy.data.images.get(image_name(name, table))
+        img = images.get(table) if images is not None else bpy.data.images.get(image_name(name, table))
         if img is None:
             raise ValueError(f"scratch set {name!r}: image {image_name(name, table)!r} is missing from the file")
         arrays[table] = image_to_array(img, ch).astype(np.float64)

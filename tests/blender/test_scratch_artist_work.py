@@ -1,0 +1,432 @@
+"""An artist's scratched-metal work survives (issue: an artist never loses work in Blender): each material
+owns its scratch set (a second object's Generate or Import no longer replaces the first one's, before
+or after save and reopen, old files included), World Lights is a real setting, Import/Export refuse
+what they cannot read or write, long generations show progress and can be cancelled, a draw stroke
+that adds nothing is an error."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+import time
+
+import bpy
+import numpy as np
+import pytest
+
+from .fresh import run_fresh
+
+SET_DIGESTS = """
+import hashlib
+import numpy as np
+from material_structures.addon.scratch.editing import material_set, object_scratch_material
+RESULT = {}
+for obj in bpy.data.objects:
+    found = material_set(object_scratch_material(obj))
+    if found is not None:
+        seg = np.asarray(found[1].segments, np.float32)
+        RESULT[obj.name] = [found[0], int(seg.shape[0]), hashlib.sha1(seg.tobytes()).hexdigest(),
+                            object_scratch_material(obj).name]
+"""
+
+
+def _digest(s) -> tuple[int, str]:
+    seg = np.asarray(s.segments, np.float32)  # the packed tables are float32
+    return int(seg.shape[0]), hashlib.sha1(seg.tobytes()).hexdigest()
+
+
+def _set_of(obj):
+    from material_structures.addon.scratch.editing import material_set, object_scratch_material
+
+    found = material_set(object_scratch_material(obj))
+    return None if found is None else found[1]
+
+
+def _plane(scene, name, x=0.0):
+    from material_structures import render as R
+
+    obj = R.add_textured_plane(scene, 1.0, name=name)
+    obj.location.x = x
+    _activate(obj)
+    return obj
+
+
+def _activate(obj):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+
+
+def _expected_wear(seed, count=500, patch_mm=20.0):
+    """What Generate's defaults make for ``seed``, straight from the generator (no Blender data)."""
+    from material_structures.addon.scratch.editing import generate_set
+
+    return _digest(generate_set("WEAR", count, patch_mm, seed=seed))
+
+
+@pytest.fixture
+def scene(addon_module):
+    from material_structures import render as R
+
+    return R.reset_scene()
+
+
+# -- item 3: a scratch set is owned by its material ---------------------------------------------------
+def test_two_objects_keep_their_own_sets_after_save_and_reopen(scene, tmp_path):
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.scratch_generate(seed=1) == {"FINISHED"}
+    b = _plane(scene, "B", x=2.0)
+    assert bpy.ops.material_structures.scratch_generate(seed=2) == {"FINISHED"}
+    want = {"A": _expected_wear(1), "B": _expected_wear(2)}
+    assert want["A"] != want["B"]
+    assert _digest(_set_of(a)) == want["A"], "generating on B replaced A's scratches"
+    assert _digest(_set_of(b)) == want["B"]
+    assert a.active_material != b.active_material
+    path = str(tmp_path / "two.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    got = run_fresh(SET_DIGESTS, blend=path)
+    for name in ("A", "B"):
+        assert tuple(got[name][1:3]) == want[name], f"{name} after reopening: {got[name]}"
+    assert got["A"][0] == "Scratches" and got["B"][0] == "Scratches.001"  # uniquified like Blender names
+
+
+def test_updating_a_material_changes_only_that_material(scene):
+    a = _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(seed=1)
+    b = _plane(scene, "B", x=2.0)
+    bpy.ops.material_structures.scratch_generate(seed=2)
+    # Regenerating A's material leaves B's alone.
+    _activate(a)
+    assert bpy.ops.material_structures.scratch_generate(seed=3) == {"FINISHED"}
+    assert _digest(_set_of(a)) == _expected_wear(3)
+    assert _digest(_set_of(b)) == _expected_wear(2)
+    # C wears A's material: the user shares it on purpose, so C's Generate updates A too.
+    c = _plane(scene, "C", x=4.0)
+    c.data.materials.append(a.active_material)
+    assert bpy.ops.material_structures.scratch_generate(seed=4) == {"FINISHED"}
+    assert _digest(_set_of(a)) == _digest(_set_of(c)) == _expected_wear(4)
+    # D wears a copy of B's material (Blender copies share the node group): D's Generate must not touch B.
+    d = _plane(scene, "D", x=6.0)
+    d.data.materials.append(b.active_material.copy())
+    assert bpy.ops.material_structures.scratch_generate(seed=5) == {"FINISHED"}
+    assert _digest(_set_of(d)) == _expected_wear(5)
+    assert _digest(_set_of(b)) == _expected_wear(2), "the material copy's Generate changed the original"
+    # Drawing on D changes D only.
+    stroke = [{"name": "", "location": (0, 0, 0), "uv": (0.1 + 0.1 * i, 0.5), "pressure": 1.0} for i in range(5)]
+    assert bpy.ops.material_structures.scratch_draw(stroke=stroke) == {"FINISHED"}
+    assert _set_of(d).n_segments > _expected_wear(5)[0]
+    assert _digest(_set_of(b)) == _expected_wear(2)
+
+
+def test_appended_material_brings_and_keeps_its_own_set(scene, tmp_path):
+    """A material appended from another file (the asset library, a colleague's file) whose set has the
+    same name as one here: it renders its own set, and updating either leaves the other alone."""
+    from material_structures import render as R
+
+    _plane(scene, "W")
+    assert bpy.ops.material_structures.scratch_generate(seed=7) == {"FINISHED"}
+    bpy.data.objects["W"].active_material.use_fake_user = True
+    lib = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=lib)
+
+    scene = R.reset_scene()
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.scratch_generate(seed=1) == {"FINISHED"}
+    with bpy.data.libraries.load(lib, link=False) as (_src, dst):
+        dst.materials = ["Scratched Metal Scratches"]
+    b = _plane(scene, "B", x=2.0)
+    b.data.materials.append(dst.materials[0])
+    assert _digest(_set_of(b)) == _expected_wear(7), "the appended material shows another set"
+    assert _digest(_set_of(a)) == _expected_wear(1)
+    assert bpy.ops.material_structures.scratch_generate(seed=2) == {"FINISHED"}  # on B
+    _activate(a)
+    assert bpy.ops.material_structures.scratch_generate(seed=3) == {"FINISHED"}
+    assert _digest(_set_of(a)) == _expected_wear(3)
+    assert _digest(_set_of(b)) == _expected_wear(2)
+
+
+def test_import_gives_each_material_its_own_set(scene, tmp_path):
+    from material_structures.addon.scratch.editing import generate_set
+    from material_structures.core.scratch.scratch_io import save_scratch_set
+
+    src = generate_set("WEAR", 120, 20.0, seed=11)
+    save_scratch_set(str(tmp_path / "worn.npz"), src)
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.scratch_import(filepath=str(tmp_path / "worn.npz")) == {"FINISHED"}
+    b = _plane(scene, "B", x=2.0)
+    assert bpy.ops.material_structures.scratch_import(filepath=str(tmp_path / "worn.npz")) == {"FINISHED"}
+    assert a.active_material != b.active_material
+    assert bpy.ops.material_structures.scratch_generate(seed=2) == {"FINISHED"}  # on B
+    assert _digest(_set_of(a)) == _digest(src), "B's Generate changed A's imported set"
+    assert _digest(_set_of(b)) == _expected_wear(2)
+
+
+OLD_FILE_RENDER = """
+import hashlib
+import numpy as np
+from material_structures.render import render_to_array
+from material_structures.addon.scratch.editing import material_set, object_scratch_material
+
+def digests():
+    out = {}
+    for obj in bpy.data.objects:
+        found = material_set(object_scratch_material(obj))
+        if found is not None:
+            seg = np.asarray(found[1].segments, np.float32)
+            out[obj.name] = [int(seg.shape[0]), hashlib.sha1(seg.tobytes()).hexdigest()]
+    return out
+
+scene = bpy.context.scene
+RESULT = {"loaded": digests(), "render": render_to_array(scene)[..., :3].tolist()}
+if __GENERATE__:
+    from material_structures import render as R
+    b = R.add_textured_plane(scene, 1.0, name="B")
+    b.location.x = 10.0  # outside the camera's view
+    bpy.context.view_layer.objects.active = b
+    RESULT["op"] = list(bpy.ops.material_structures.scratch_generate(seed=2, set_name="plate"))
+    RESULT["after"] = digests()
+    RESULT["render_after"] = render_to_array(scene)[..., :3].tolist()
+    bpy.ops.wm.save_as_mainfile(filepath=__SAVE__)
+"""
+
+
+def _old_file_snippet(generate: bool, save: str) -> str:
+    return OLD_FILE_RENDER.replace("__GENERATE__", repr(generate)).replace("__SAVE__", repr(save))
+
+
+def test_file_with_the_old_naming_loads_renders_and_keeps_its_set(scene, tmp_path):
+    """A file from before: one group per set *name*, tables found by image name only. It reopens and
+    renders as before, and a new set of the same name on another object leaves it alone."""
+    from material_structures import render as R
+    from material_structures.addon.fabric.verify import _direction, _look_from
+    from material_structures.addon.scratch.material import create_scratched_metal, group_node, sync_scratch_lamps
+    from material_structures.addon.scratch.verify import add_lamp, test_scratch_set
+
+    R.configure_cycles(scene, resolution=(8, 8), samples=1, seed=0)
+    R.dark_world(scene)
+    s = test_scratch_set()
+    mat = create_scratched_metal("Plate", s, "plate", scene=scene)
+    group = group_node(mat).node_tree
+    group_node(mat).inputs["Debug"].default_value = 1  # the scratch term alone: pixels depend on the set
+    assert group.name == "Scratched Metal (plate)"
+    for key in [k for k in group.keys() if k not in ("ms_scratch_set", "material_structures_scratch")]:
+        del group[key]  # as written before: the marker and the metadata; images found by their names
+    assert sorted(i.name for i in bpy.data.images if i.name.startswith("MS Scratch plate ")) == [
+        f"MS Scratch plate {t}" for t in ("cells", "grid", "params", "segments")]
+    R.add_textured_plane(scene, 1.0, mat, name="A")
+    _look_from(R.add_orthographic_camera(scene, ortho_scale=0.9), _direction(25.0, 200.0))
+    add_lamp(scene, "POINT", (0.5, 0.3, 1.2), 200.0, radius=0.08)
+    sync_scratch_lamps(scene)
+    ref = R.render_to_array(scene)[..., :3]
+    assert float(ref.max()) > 0.0  # scratch glints visible
+    want_a = list(_digest(_set_of(bpy.data.objects["A"])))
+    old = str(tmp_path / "old.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=old)
+
+    new = str(tmp_path / "new.blend")
+    got = run_fresh(_old_file_snippet(True, new), blend=old)
+    assert got["loaded"]["A"] == want_a
+    np.testing.assert_allclose(np.asarray(got["render"]), ref, rtol=0, atol=1e-6)
+    assert got["op"] == ["FINISHED"]
+    assert got["after"]["A"] == want_a, "a new set named like the old file's replaced it"
+    assert got["after"]["B"] == list(_expected_wear(2))
+    np.testing.assert_allclose(np.asarray(got["render_after"]), ref, rtol=0, atol=1e-6)
+    again = run_fresh(_old_file_snippet(False, ""), blend=new)
+    assert again["loaded"] == {"A": want_a, "B": list(_expected_wear(2))}
+    np.testing.assert_allclose(np.asarray(again["render"]), ref, rtol=0, atol=1e-6)
+
+
+# -- 10b: World Lights ------------------------------------------------------------------------------
+class _Recorder:
+    """Stand-in for a panel's layout: records every prop() drawn."""
+
+    def __init__(self):
+        self.props = []
+
+    def prop(self, data, name, **kw):
+        self.props.append((data, name, kw.get("text")))
+
+    def __getattr__(self, _name):
+        return lambda *a, **k: self
+
+
+def _env_world(scene):
+    from .test_scratch_world import _env
+
+    env = _env()
+    img = bpy.data.images.new("Env", env.shape[1], env.shape[0], float_buffer=True)
+    rgba = np.concatenate([env, np.ones(env.shape[:2] + (1,))], -1)[::-1].astype(np.float32)
+    img.pixels.foreach_set(rgba.ravel())
+    img.pack()  # saved with the file
+    tree = scene.world.node_tree
+    tex = tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = img
+    bg = next(n for n in tree.nodes if n.type == "BACKGROUND")
+    tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 1.0
+
+
+def test_world_lights_is_a_setting_drawn_always_and_read_by_the_shader(scene):
+    from types import SimpleNamespace
+
+    from material_structures.addon.panels.scratch import MATERIAL_PT_material_structures_scratch as Panel
+    from material_structures.addon.scratch.material import scratch_script_nodes, sync_scratch_lamps
+
+    if scene.world is None:
+        scene.world = bpy.data.worlds.new("World")
+        if scene.world.node_tree is None:  # 4.5
+            scene.world.use_nodes = True
+    obj = _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(count=20, seed=1)
+    assert "ms_scratch_world_lamps" not in scene.keys()
+    layout = _Recorder()
+    Panel.draw(SimpleNamespace(layout=layout), SimpleNamespace(material=obj.active_material, scene=scene))
+    drawn = [(name, text) for data, name, text in layout.props if data == scene.material_structures]
+    assert ("scratch_world_lamps", "World Lights") in drawn, layout.props
+
+    rna = scene.material_structures.bl_rna.properties["scratch_world_lamps"]
+    assert rna.name == "World Lights" and rna.hard_min == 0 and rna.hard_max == 4
+    _env_world(scene)
+    node = next(scratch_script_nodes())
+    sync_scratch_lamps(scene)
+    assert node.inputs["Lamp1Type"].default_value == 0  # 0 = off, the default
+    scene.material_structures.scratch_world_lamps = 2
+    sync_scratch_lamps(scene)
+    assert node.inputs["Lamp1Type"].default_value == 1  # the sun region as a sphere lamp
+    assert node.inputs["Lamp1Radius"].default_value > 0
+
+
+WORLD_LIGHTS = """
+from material_structures.addon.scratch.material import scratch_script_nodes, sync_scratch_lamps
+scene = bpy.context.scene
+sync_scratch_lamps(scene)
+RESULT = [scene.material_structures.scratch_world_lamps, next(scratch_script_nodes()).inputs["Lamp1Type"].default_value]
+"""
+
+
+def test_world_lights_set_the_old_way_keep_working_after_reopen(scene, tmp_path):
+    if scene.world is None:
+        scene.world = bpy.data.worlds.new("World")
+        if scene.world.node_tree is None:  # 4.5
+            scene.world.use_nodes = True
+    _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(count=20, seed=1)
+    _env_world(scene)
+    scene["ms_scratch_world_lamps"] = 1  # how files and scripts set it before
+    path = str(tmp_path / "old_world.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    assert run_fresh(WORLD_LIGHTS, blend=path) == [1, 1]
+
+
+# -- 10d, 10e: Import / Export paths ------------------------------------------------------------------
+def test_import_of_a_file_inside_an_exr_table_folder_imports_the_folder(scene, tmp_path):
+    from material_structures.addon.scratch.editing import generate_set
+    from material_structures.core.scratch.scratch_io import save_scratch_set
+
+    src = generate_set("WEAR", 40, 20.0, seed=6)
+    save_scratch_set(str(tmp_path / "tables"), src)
+    a = _plane(scene, "A")
+    picked = tmp_path / "tables" / "segment_params.exr"
+    assert bpy.ops.material_structures.scratch_import(filepath=str(picked)) == {"FINISHED"}
+    assert _digest(_set_of(a)) == _digest(src)
+    (tmp_path / "notes.txt").write_text("not a scratch set")
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.material_structures.scratch_import(filepath=str(tmp_path / "notes.txt"))
+    msg = str(info.value)
+    assert "pickle" not in msg.lower() and ".npz" in msg and "EXR" in msg, msg
+    assert _digest(_set_of(a)) == _digest(src)
+
+
+def test_export_to_a_path_with_another_extension_is_refused(scene, tmp_path):
+    _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(count=20, seed=1)
+    for name in ("set.exr", "set.png"):
+        with pytest.raises(RuntimeError, match="extension"):
+            bpy.ops.material_structures.scratch_export(filepath=str(tmp_path / name))
+        assert not os.path.exists(tmp_path / name), f"{name} was written anyway"
+    assert bpy.ops.material_structures.scratch_export(filepath=str(tmp_path / "set.npz")) == {"FINISHED"}
+    assert bpy.ops.material_structures.scratch_export(filepath=str(tmp_path / "tables")) == {"FINISHED"}
+    assert os.path.isfile(tmp_path / "set.npz") and os.path.isfile(tmp_path / "tables" / "meta.exr")
+
+
+# -- 10h: progress and cancel -------------------------------------------------------------------------
+class _Ev:
+    def __init__(self, type_, value="NOTHING"):
+        self.type, self.value = type_, value
+
+
+def _modal_stub(count, seed):
+    """The Generate operator's modal methods on a stand-in (INVOKE needs a window; background has none)."""
+    from material_structures.addon.operators.scratch import MS_OT_scratch_generate as Op
+
+    class Stub:
+        pattern, patch_mm, angle_deg, fine_wear, replace, set_name = "WEAR", 20.0, 0.0, False, True, "Scratches"
+        length_um, width_um, depth_um = (300.0, 4000.0), (0.8, 6.0), (0.8, 6.0)
+        reports: list = []
+
+        def report(self, kind, text):
+            self.reports.append((set(kind), text))
+
+    op = Stub()
+    op.count, op.seed = count, seed
+    for name in dir(Op):
+        if name.startswith("_") and not name.startswith("__") and callable(getattr(Op, name)):
+            setattr(op, name, getattr(Op, name).__get__(op))
+    op.modal = Op.modal.__get__(op)
+    return op
+
+
+def test_generate_10k_headless_modal_progress_and_cancel(scene):
+    from material_structures.addon.operators import scratch as ops
+
+    a = _plane(scene, "A")
+    t = time.perf_counter()
+    assert bpy.ops.material_structures.scratch_generate(count=10_000, seed=3) == {"FINISHED"}  # EXEC, no window
+    exec_s = time.perf_counter() - t
+    s = _set_of(a)
+    assert s.n_scratches >= 9_900
+    before = _digest(s)
+
+    # The modal path: the generation runs beside Blender, TIMER events show the progress, ESC cancels.
+    op = _modal_stub(10_000, 4)
+    ctx = bpy.context
+    assert op._start_job(ctx) is True
+    assert op.modal(ctx, _Ev("ESC", "PRESS")) == {"CANCELLED"}
+    assert not any(th.name == ops.JOB_THREAD_NAME for th in threading.enumerate()), "the job still runs"
+    assert _digest(_set_of(a)) == before, "a cancelled generation changed the set"
+
+    op = _modal_stub(10_000, 5)
+    assert op._start_job(ctx) is True
+    shown, deadline = [], time.perf_counter() + max(120.0, 6 * exec_s)
+    while True:
+        res = op.modal(ctx, _Ev("TIMER"))
+        shown.append(op._job.fraction)
+        if res != {"RUNNING_MODAL"} or time.perf_counter() > deadline:
+            break
+        assert op.modal(ctx, _Ev("MOUSEMOVE")) == {"PASS_THROUGH"}  # the viewport stays usable
+        time.sleep(0.05)
+    assert res == {"FINISHED"}, op.reports
+    assert len(shown) > 5 and shown[-1] == 1.0
+    assert all(b >= a for a, b in zip(shown, shown[1:], strict=False))
+    assert len(set(shown)) > 3, shown  # the bar moved
+    after = _set_of(a)
+    assert after.n_scratches >= 9_900 and _digest(after) != before  # seed 5's set replaced seed 3's
+
+
+# -- draw stroke that adds nothing ----------------------------------------------------------------------
+def test_draw_stroke_that_misses_or_adds_nothing_is_cancelled(scene):
+    a = _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(count=20, seed=1)
+    before, n_before = _digest(_set_of(a)), _set_of(a).n_scratches
+    far = [{"name": "", "location": (5.0 + 0.1 * i, 5.0, 3.0), "uv": (0, 0), "pressure": 1.0} for i in range(5)]
+    with pytest.raises(RuntimeError, match="does not touch"):
+        bpy.ops.material_structures.scratch_draw(stroke=far, stroke_space="WORLD")
+    outside = [{"name": "", "location": (0, 0, 0), "uv": (1.5 + 0.1 * i, 1.7), "pressure": 1.0} for i in range(5)]
+    with pytest.raises(RuntimeError, match="adds no scratch"):
+        bpy.ops.material_structures.scratch_draw(stroke=outside)
+    assert _digest(_set_of(a)) == before
+    on = [{"name": "", "location": (-0.4 + 0.2 * i, 0.1, 0.0), "uv": (0, 0), "pressure": 1.0} for i in range(5)]
+    assert bpy.ops.material_structures.scratch_draw(stroke=on, stroke_space="WORLD") == {"FINISHED"}
+    assert _set_of(a).n_scratches == n_before + 1
