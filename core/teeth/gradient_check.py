@@ -30,13 +30,14 @@ def fd_test_scene() -> tuple[TeethScene, list[Camera], list[PointLight]]:
 
 
 def fd_check(spp: int = 3, max_depth: int | None = 5, seed: int = 7, rel_step: float = 1e-5,
-             rr_depth: int | None = None) -> tuple[ParamLayout, np.ndarray, np.ndarray]:
+             rr_depth: int | None = None, reference: bool = False) -> tuple[ParamLayout, np.ndarray, np.ndarray]:
     """Returns (layout, analytic gradient, central-difference gradient) of sum(adjoint * C).
 
     ``max_depth=None`` checks the all-bounce estimator with Russian roulette (from vertex ``rr_depth``,
     default ``RenderSettings``'s): its survival probabilities are evaluated at theta_0 (part of
     p(path; theta_0)), so the renders at theta_0 +- h make the same roulette decisions and the central
-    difference is that of the same estimator."""
+    difference is that of the same estimator. ``reference``: check ``render``'s numpy reference tracer
+    instead of the compiled one."""
     sc, cams, lights = fd_test_scene()
     layout = ParamLayout(sc)
     x0 = scene_to_vector(sc, layout)
@@ -44,7 +45,7 @@ def fd_check(spp: int = 3, max_depth: int | None = 5, seed: int = 7, rel_step: f
     if rr_depth is not None:
         st.rr_depth = rr_depth
     adj = np.random.default_rng(3).random((1, len(lights), cams[0].height, cams[0].width, 3))
-    g = render(sc, cams, lights, st, adjoint=adj).grad
+    g = render(sc, cams, lights, st, adjoint=adj, reference=reference).grad
     fd = np.zeros_like(g)
     for p in range(layout.size):
         h = rel_step * max(abs(x0[p]), 0.05)
@@ -52,7 +53,8 @@ def fd_check(spp: int = 3, max_depth: int | None = 5, seed: int = 7, rel_step: f
         for sgn in (1, -1):
             x = x0.copy()
             x[p] += sgn * h
-            img = render(vector_to_scene(sc, x, layout), cams, lights, st, sampling_scene=sc).images
+            img = render(vector_to_scene(sc, x, layout), cams, lights, st, sampling_scene=sc,
+                         reference=reference).images
             vals.append(np.sum(adj * img))
         fd[p] = (vals[0] - vals[1]) / (2 * h)
     return layout, g, fd

@@ -406,7 +406,7 @@ class _Tracer:
 def render(scene, cameras: list[Camera], lights: list[PointLight], settings: RenderSettings | None = None, *,
            pixels: list[np.ndarray] | None = None, light_ids: np.ndarray | None = None, sampling_scene=None,
            adjoint: np.ndarray | None = None, compiled: CompiledScene | None = None,
-           jacobian_cols: np.ndarray | None = None) -> RenderResult:
+           jacobian_cols: np.ndarray | None = None, reference: bool = False) -> RenderResult:
     """Render ``scene`` for every camera and (selected) light; optionally the gradient of sum(adjoint * C).
 
     ``pixels``: per camera, flat pixel indices (row * W + col) to trace (default: all).
@@ -419,6 +419,9 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
     ``settings.max_depth = None``: all bounces with Russian roulette; ``grad`` and ``jacobian`` are then
     the exact derivatives of that estimator (roulette probabilities at theta_0, see ``RenderSettings``),
     and ``stats["capped_paths"]`` counts the paths stopped by ``MAX_PATH_VERTICES``.
+    The paths are traced by the compiled tracer (``path_tracer_compiled``, all cores) when numba is
+    installed; ``reference=True`` (or no numba) traces them with this module's numpy implementation,
+    ``settings.workers`` processes. Both are the same estimator with different random numbers.
     """
     settings = settings or RenderSettings()
     cs = compiled or CompiledScene(scene, sampling_scene)
@@ -432,6 +435,8 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
         pixels = [np.arange(hw) for _ in cameras]
     cam_of = np.concatenate([np.full(len(p), c) for c, p in enumerate(pixels)]).astype(np.int64)
     pix_of = np.concatenate([np.asarray(p, dtype=np.int64) for p in pixels])
+    if not reference and _compiled_tracer() is not None:
+        return _render_compiled(cs, cameras, lp, li, settings, cam_of, pix_of, adjoint, jacobian_cols, hw)
     row_of = np.repeat(np.arange(len(pix_of)), settings.spp)
     cam_of = np.repeat(cam_of, settings.spp)
     pix_of = np.repeat(pix_of, settings.spp)
@@ -477,6 +482,49 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
         stats["capped_paths"] = int(n_capped)
     images = img.reshape(len(cameras), n_l, h, w, 3)
     return RenderResult(images, grad, stats, jac)
+
+
+def _compiled_tracer():
+    """The compiled tracer module, or None where numba is not installed."""
+    try:
+        from . import path_tracer_compiled
+    except ImportError:  # pragma: no cover - depends on the environment
+        return None
+    return path_tracer_compiled
+
+
+def _render_compiled(cs: CompiledScene, cameras, lp, li, settings: RenderSettings, cam_of, pix_of, adjoint,
+                     jacobian_cols, hw: int) -> RenderResult:
+    """``render`` through ``path_tracer_compiled`` (rows = traced pixels, all their samples in one thread)."""
+    ptc = _compiled_tracer()
+    n_cam, n_l, n_rows = len(cameras), len(lp), len(pix_of)
+    jmap, n_j = None, 0
+    if jacobian_cols is not None:
+        n_j = len(jacobian_cols)
+        need = 8 * n_l * 3 * n_j * n_rows
+        if need > JACOBIAN_MAX_BYTES:
+            raise ValueError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
+                             f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
+        jmap = np.full(cs.layout.size + 1, -1, dtype=np.int64)
+        jmap[np.asarray(jacobian_cols, dtype=np.int64)] = np.arange(n_j)
+    adj = None
+    if adjoint is not None:
+        adj = np.asarray(adjoint, dtype=np.float64).reshape(n_cam, n_l, hw, 3)
+    packed = getattr(cs, "_packed", None)
+    if packed is None:
+        packed = cs._packed = ptc.pack_scene(cs)
+    t0 = time.perf_counter()
+    rows, grad, jac, counts, threads = ptc.trace(cs, packed, cameras, cam_of, pix_of, settings.spp, settings.seed,
+                                                 settings.max_depth, settings.rr_depth, settings.jitter, lp, li, adj,
+                                                 jmap, n_j)
+    img = np.zeros((n_cam, n_l, hw, 3))
+    np.add.at(img, (cam_of, slice(None), pix_of), rows)
+    stats = {"seconds": time.perf_counter() - t0, "path_vertices": int(counts[0]), "shadow_rays": int(counts[1]),
+             "ray_casts": int(counts[2]), "camera_paths": int(n_rows * settings.spp), "threads": int(threads)}
+    if settings.max_depth is None:
+        stats["capped_paths"] = int(counts[3])
+    h = hw // cameras[0].width
+    return RenderResult(img.reshape(n_cam, n_l, h, cameras[0].width, 3), grad, stats, jac)
 
 
 def _trace_forked(trace, n_chunks: int, workers: int, img, grad, jac) -> tuple[int, int, int, int]:

@@ -1,0 +1,822 @@
+"""Compiled (numba) form of the volumetric path tracer of ``path_tracer``: the same estimator per path.
+
+``path_tracer`` documents the estimator (eq. 5.1-5.32): hero-channel free flight with the balance
+heuristic, thin non-bending boundaries (eq. 5.1-5.2), enamel/dentin blend by l(q) (eq. 5.15-5.21),
+next-event estimation to every point light, Russian roulette at theta_0, and the per-path derivative
+d/dtheta [f / p] = (f / p) d log f with the per-interaction terms of eq. 5.10-5.32. This module traces
+that estimator one path at a time in compiled code (paths in parallel threads); ``path_tracer``'s
+numpy wavefront implementation stays as the readable reference the tests compare against.
+
+Differences that change no expectation: random numbers come from a counter-based generator per path
+(splitmix64 seeded by (seed, path index)), so the result does not depend on the thread count but is
+not the numpy tracer's sample for sample; ray queries use a float64 BVH (``bvh``) instead of embree;
+the dentin distance q is the exact nearest triangle (the reference searches 8 nearest centroids).
+
+Gradient (reverse mode) by path replay: a first pass traces a path and records the adjoint-weighted
+contribution A_b of each vertex level b; a second pass replays the same random numbers and adds every
+d log f term pushed at level L with the weight R_L = sum_{b >= L} A_b (the suffix sums of the
+reference), and every connection term with its own connection's weight. Forward mode (the image
+Jacobian) carries the running score d log f per path as the reference does.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import get_num_threads, njit, prange
+
+from .bvh import (
+    STACK_SIZE,
+    TriangleBVH,
+    closest_point_triangle,
+    closest_triangle,
+    first_hit,
+    hits_until_stop,
+    ray_triangle,
+)
+from .compiled_scene import KIND_DIELECTRIC, KIND_INDEX_MATCHED, KIND_OPAQUE, MED_AIR, MED_DENTIN, CompiledScene
+from .ray_queries import RAY_EPS
+
+MAX_CROSSINGS = 12
+MAX_PATH_VERTICES = 1000
+# l(q) = (1 + tanh(q / 2 s)) / 2 is 1 in float64 from q / s = 38.2 on (tanh rounds to 1 beyond 19.1):
+# the dentin distance is searched only this many spreads far
+BLEND_REACH = 40.0
+HIT_BUFFER = 32  # hits gathered per traversal (more: one cast per crossing)
+INV_4PI = 1.0 / (4.0 * np.pi)
+N_BLOCKS = 64  # row blocks traced in parallel; fixed so that sums do not depend on the thread count
+
+
+def pack_scene(cs: CompiledScene) -> tuple:
+    """The arrays of ``cs`` the kernels read: (geometry, media, textures)."""
+    nt = len(cs.dentin)
+    tri_delta = np.zeros((len(cs.tris_s), 3, 3, 3))
+    dentin_trees = []
+    for i in range(nt):
+        ids = np.flatnonzero(cs.dentin_tooth == i)
+        dp = cs.dentin[i]
+        tri_delta[ids] = np.transpose(dp.deltas[:, dp.faces[cs.dentin_face[ids]], :], (1, 0, 2, 3))
+        dentin_trees.append(TriangleBVH(cs.tris_s, ids))
+    dnodes, droots = TriangleBVH.merge(dentin_trees)
+    geo = (np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
+           cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
+           cs.dentin_tooth, tri_delta) + TriangleBVH(cs.tris_s).arrays() + dnodes + (
+               droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED)
+    has_cavity = bool(cs.has_cavity)
+    med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
+           cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"], cs.ph["De"],
+           cs.col_alb["E"], cs.col_alb["D"], cs.col_ph["E"], cs.col_ph["D"], cs.c_col,
+           cs.rho_s if has_cavity else np.ones(3), cs.rho_e if has_cavity else np.ones(3),
+           int(cs.col_rho) if has_cavity else -1, float(cs.spread))
+    offs, hs, ws, flat_s, flat_e = [], [], [], [], []
+    n = 0
+    for ts, te in zip(cs.tex_s, cs.tex_e, strict=True):
+        ts, te = np.asarray(ts, dtype=np.float64), np.asarray(te, dtype=np.float64)
+        offs.append(n)
+        hs.append(te.shape[0])
+        ws.append(te.shape[1])
+        flat_s.append(ts.reshape(-1, 3))
+        flat_e.append(te.reshape(-1, 3))
+        n += te.shape[0] * te.shape[1]
+    tex = (np.concatenate(flat_s) if flat_s else np.ones((1, 3)), np.concatenate(flat_e) if flat_e else np.ones((1, 3)),
+           np.array(offs, dtype=np.int64), np.array(hs, dtype=np.int64), np.array(ws, dtype=np.int64),
+           np.array(cs.tex_col, dtype=np.int64))
+    return geo, med, tex
+
+
+# ------------------------------------------------------------------------------------------ random numbers
+@njit(cache=True)
+def _mix64(z):
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True)
+def _rand(rs) -> float:
+    """Next uniform in [0, 1) of the splitmix64 stream in rs[0]."""
+    rs[0] += np.uint64(0x9E3779B97F4A7C15)
+    return float(_mix64(rs[0]) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True)
+def _seed(rs, seed, path) -> None:
+    rs[0] = _mix64(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + _mix64(np.uint64(path) + np.uint64(1)))
+
+
+# ------------------------------------------------------------------------------------------ small math
+@njit(cache=True)
+def _fresnel(cos_i, eta) -> float:
+    """Unpolarised Fresnel reflectance of the thin boundary (eq. 5.1), |cos_i| used."""
+    c = min(abs(cos_i), 1.0)
+    sin_t2 = (1.0 - c * c) / (eta * eta)
+    cos_t = np.sqrt(max(1.0 - sin_t2, 0.0))
+    rs = (c - eta * cos_t) / (c + eta * cos_t)
+    rp = (eta * c - cos_t) / (eta * c + cos_t)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+@njit(cache=True)
+def _hg(mu, g) -> float:
+    den = 1.0 + g * g - 2.0 * g * mu
+    return INV_4PI * (1.0 - g * g) / (den * np.sqrt(den))
+
+
+@njit(cache=True)
+def _hg_dlog(mu, g) -> float:
+    return -(2.0 * g / (1.0 - g * g) + 3.0 * (g - mu) / (1.0 + g * g - 2.0 * g * mu))
+
+
+@njit(cache=True)
+def _sample_hg_mu(g, u) -> float:
+    if abs(g) < 1e-4:
+        return 1.0 - 2.0 * u
+    s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
+    return min(max((1.0 + g * g - s * s) / (2.0 * g), -1.0), 1.0)
+
+
+@njit(cache=True)
+def _direction_from_mu(d, mu, phi, out) -> None:
+    """Unit direction at cosine mu to d and azimuth phi (frame of Duff et al. 2017) into out."""
+    sign = 1.0 if d[2] >= 0.0 else -1.0
+    a = -1.0 / (sign + d[2])
+    b = d[0] * d[1] * a
+    t0, t1, t2 = 1.0 + sign * d[0] * d[0] * a, sign * b, -sign * d[0]
+    s0, s1, s2 = b, sign + d[1] * d[1] * a, -d[1]
+    st = np.sqrt(max(1.0 - mu * mu, 0.0))
+    cp, sp = np.cos(phi), np.sin(phi)
+    x = d[0] * mu + (t0 * cp + s0 * sp) * st
+    y = d[1] * mu + (t1 * cp + s1 * sp) * st
+    z = d[2] * mu + (t2 * cp + s2 * sp) * st
+    n = np.sqrt(x * x + y * y + z * z)
+    out[0], out[1], out[2] = x / n, y / n, z / n
+
+
+@njit(cache=True)
+def _logmeanexp3(a) -> float:
+    m = max(a[0], max(a[1], a[2]))
+    return m + np.log((np.exp(a[0] - m) + np.exp(a[1] - m) + np.exp(a[2] - m)) / 3.0)
+
+
+@njit(cache=True)
+def _blend(q, spread) -> float:
+    """l(q) of eq. 5.15."""
+    return 0.5 * (1.0 + np.tanh(0.5 * q / spread))
+
+
+# ------------------------------------------------------------------------------------------ score sinks
+@njit(cache=True)
+def _emit(col, v0, v1, v2, w, g, sx, jmap) -> None:
+    """One d log f record: g[col] += v . w (reverse mode), sx[jmap[col]] += v (forward mode)."""
+    if col < 0:
+        return
+    if g.shape[0] > 0:
+        g[col] += v0 * w[0] + v1 * w[1] + v2 * w[2]
+    if sx.shape[0] > 0:
+        j = jmap[col]
+        if j >= 0:
+            sx[j, 0] += v0
+            sx[j, 1] += v1
+            sx[j, 2] += v2
+
+
+@njit(cache=True)
+def _emit_diag(col0, v, w, g, sx, jmap) -> None:
+    """Records col0 + c with value v[c] on channel c only."""
+    if col0 < 0:
+        return
+    _emit(col0, v[0], 0.0, 0.0, w, g, sx, jmap)
+    _emit(col0 + 1, 0.0, v[1], 0.0, w, g, sx, jmap)
+    _emit(col0 + 2, 0.0, 0.0, v[2], w, g, sx, jmap)
+
+
+# ------------------------------------------------------------------------------------------ ray walks
+@njit(cache=True)
+def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t):
+    """Crossings along o + t d (see ``path_tracer._Tracer.through``): path mode passes index-matched
+    surfaces and stops at the first other one; shadow mode passes every non-opaque surface up to tmax.
+    Each hit must lie RAY_EPS beyond the previous one, as when every crossing casts a new ray from there.
+    Fills tri_x, t_x (crossings), meds (medium of each piece); returns (k, end_tri, end_t, blocked, casts).
+    One traversal gathers the hits up to the first stopping surface; where that cannot decide (buffer
+    overflow, a stopping hit within RAY_EPS of a crossing) the walk goes on one ray cast per crossing."""
+    tris_s, normal_s, kind, inside, outside = geo[0], geo[2], geo[3], geo[4], geo[5]
+    nodes, stops = geo[11:17], (geo[24] if shadow else geo[25])
+    k = 0
+    tcur = 0.0
+    meds[0] = med0
+    casts = 1
+    n = hits_until_stop(nodes, 0, tris_s, stops, o, d, RAY_EPS, tmax, stack, buf_tri, buf_t)
+    if n <= buf_t.shape[0]:
+        for i in range(1, n):  # insertion sort by distance
+            ti, ki = buf_t[i], buf_tri[i]
+            j = i - 1
+            while j >= 0 and buf_t[j] > ti:
+                buf_t[j + 1] = buf_t[j]
+                buf_tri[j + 1] = buf_tri[j]
+                j -= 1
+            buf_t[j + 1] = ti
+            buf_tri[j + 1] = ki
+        decided = True
+        for i in range(n):
+            t, tri = buf_t[i], buf_tri[i]
+            if t <= tcur + RAY_EPS and k > 0:
+                if stops[tri]:  # a stopping hit the one-ray-per-crossing walk would step over
+                    decided = False
+                    break
+                continue
+            if stops[tri]:
+                return k, tri, t, shadow, casts
+            if k >= MAX_CROSSINGS:  # degenerate geometry: give up on this ray
+                return k, -1, np.inf, True, casts
+            tri_x[k] = tri
+            t_x[k] = t
+            cosv = normal_s[tri, 0] * d[0] + normal_s[tri, 1] * d[1] + normal_s[tri, 2] * d[2]
+            meds[k + 1] = inside[tri] if cosv < 0.0 else outside[tri]
+            k += 1
+            tcur = t
+        if decided:
+            return k, -1, np.inf, False, casts
+    while True:
+        tri, t = first_hit(nodes, 0, tris_s, o, d, tcur + RAY_EPS, tmax, stack)
+        casts += 1
+        if tri < 0:
+            return k, -1, np.inf, False, casts
+        kd = kind[tri]
+        if shadow:
+            if kd == KIND_OPAQUE:
+                return k, tri, t, True, casts
+        elif kd != KIND_INDEX_MATCHED:
+            return k, tri, t, False, casts
+        if k >= MAX_CROSSINGS:  # degenerate geometry: give up on this ray
+            return k, -1, np.inf, True, casts
+        tri_x[k] = tri
+        t_x[k] = t
+        cosv = normal_s[tri, 0] * d[0] + normal_s[tri, 1] * d[1] + normal_s[tri, 2] * d[2]
+        meds[k + 1] = inside[tri] if cosv < 0.0 else outside[tri]
+        k += 1
+        tcur = t
+
+
+@njit(cache=True)
+def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
+    """Crossing distances on the evaluation geometry, ordered and within [0, upper]; which were clipped
+    (``path_tracer._Tracer.eval_crossings``)."""
+    tris_e, kind = geo[1], geo[3]
+    any_matched = False
+    for j in range(k):
+        clipped[j] = False
+        if kind[tri_x[j]] == KIND_INDEX_MATCHED:
+            t_e[j] = ray_triangle(tris_e, tri_x[j], o, d)[0]
+            any_matched = True
+        else:
+            t_e[j] = t_x[j]
+    if not any_matched:
+        return
+    run = 0.0
+    for j in range(k):
+        run = max(run, max(t_e[j], 0.0))
+        kept = min(run, upper)
+        if kept != t_e[j]:
+            clipped[j] = True
+            t_e[j] = kept
+
+
+@njit(cache=True)
+def _crossing_record(geo, med, o, d, tri, m_before, m_after, w, g, sx, jmap) -> None:
+    """(S_i - S_e) dt/dc of one dentin crossing (eq. 5.29-5.32)."""
+    tris_e, dtooth, tri_delta = geo[1], geo[9], geo[10]
+    sigma_e, c_col = med[1], med[19]
+    _, u, v = ray_triangle(tris_e, tri, o, d)
+    b0, b1, b2 = 1.0 - u - v, u, v
+    e1 = tris_e[tri, 1] - tris_e[tri, 0]
+    e2 = tris_e[tri, 2] - tris_e[tri, 0]
+    n0 = e1[1] * e2[2] - e1[2] * e2[1]
+    n1 = e1[2] * e2[0] - e1[0] * e2[2]
+    n2 = e1[0] * e2[1] - e1[1] * e2[0]
+    nd = n0 * d[0] + n1 * d[1] + n2 * d[2]
+    g0, g1, g2 = n0 / nd, n1 / nd, n2 / nd
+    col0 = c_col[dtooth[tri]]
+    for mode in range(3):
+        dt = 0.0
+        for vv in range(3):
+            bw = b0 if vv == 0 else (b1 if vv == 1 else b2)
+            dt += bw * (g0 * tri_delta[tri, mode, vv, 0] + g1 * tri_delta[tri, mode, vv, 1]
+                        + g2 * tri_delta[tri, mode, vv, 2])
+        _emit(col0 + mode, dt * (sigma_e[m_after, 0] - sigma_e[m_before, 0]),
+              dt * (sigma_e[m_after, 1] - sigma_e[m_before, 1]), dt * (sigma_e[m_after, 2] - sigma_e[m_before, 2]),
+              w, g, sx, jmap)
+
+
+@njit(cache=True)
+def _a_t(geo, tex, tri, o, d, which_e, a, idx, wts) -> int:
+    """Bilinear a_t at the boundary hit of o + t d on tri (eq. 5.2): values into a (3), texel indices and
+    weights into idx, wts (4); returns the texture's first parameter column."""
+    tris_s, tex_id, corner_uv = geo[0], geo[7], geo[8]
+    flat = tex[1] if which_e else tex[0]
+    off, hh, ww, tex_col = tex[2], tex[3], tex[4], tex[5]
+    _, u, v = ray_triangle(tris_s, tri, o, d)
+    b0 = 1.0 - u - v
+    uu = b0 * corner_uv[tri, 0, 0] + u * corner_uv[tri, 1, 0] + v * corner_uv[tri, 2, 0]
+    vv = b0 * corner_uv[tri, 0, 1] + u * corner_uv[tri, 1, 1] + v * corner_uv[tri, 2, 1]
+    k = tex_id[tri]
+    h, w = hh[k], ww[k]
+    x = uu * w - 0.5
+    y = min(max(vv * h - 0.5, 0.0), h - 1.0)
+    x0 = np.floor(x)
+    y0 = min(np.floor(y), max(h - 2, 0))
+    fx = x - x0
+    fy = y - y0 if h > 1 else 0.0
+    j0 = int(x0) % w
+    j1 = (j0 + 1) % w
+    i0 = int(y0)
+    i1 = min(i0 + 1, h - 1)
+    idx[0], idx[1], idx[2], idx[3] = i0 * w + j0, i0 * w + j1, i1 * w + j0, i1 * w + j1
+    wts[0], wts[1], wts[2], wts[3] = (1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy
+    for c in range(3):
+        a[c] = 0.0
+        for i in range(4):
+            a[c] += wts[i] * flat[off[k] + idx[i], c]
+    return tex_col[k]
+
+
+@njit(cache=True)
+def _a_t_records(col0, a, idx, wts, w, g, sx, jmap) -> None:
+    """d log a_t / d texel = w_i / a_t per channel (eq. 5.10)."""
+    for i in range(4):
+        base = col0 + 3 * idx[i]
+        _emit(base, wts[i] / a[0], 0.0, 0.0, w, g, sx, jmap)
+        _emit(base + 1, 0.0, wts[i] / a[1], 0.0, w, g, sx, jmap)
+        _emit(base + 2, 0.0, 0.0, wts[i] / a[2], w, g, sx, jmap)
+
+
+@njit(cache=True)
+def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
+    """d log f_p of the blended two-lobe phase function at one vertex and direction (eq. 5.11-5.19)."""
+    ph_ee, ph_de, col_ph_e, col_ph_d, med_tooth, c_col = med[13], med[14], med[17], med[18], med[3], med[19]
+    g1, g2, beta = mix[0], mix[1], mix[2]
+    h1, h2 = _hg(mu, g1), _hg(mu, g2)
+    f = beta * h1 + (1.0 - beta) * h2
+    d1 = beta * h1 * _hg_dlog(mu, g1) / f
+    d2 = (1.0 - beta) * h2 * _hg_dlog(mu, g2) / f
+    db = (h1 - h2) / f
+    for i, val in ((0, d1), (1, d2), (2, db)):
+        _emit(col_ph_e[mv, i], val * lw, val * lw, val * lw, w, g, sx, jmap)
+        _emit(col_ph_d[mv, i], val * (1 - lw), val * (1 - lw), val * (1 - lw), w, g, sx, jmap)
+    tooth = med_tooth[mv]
+    if tooth >= 0:
+        dmix = (d1 * (ph_ee[mv, 0] - ph_de[mv, 0]) + d2 * (ph_ee[mv, 1] - ph_de[mv, 1])
+                + db * (ph_ee[mv, 2] - ph_de[mv, 2]))
+        for m in range(3):
+            val = dmix * dl * dqdc[m]
+            _emit(c_col[tooth] + m, val, val, val, w, g, sx, jmap)
+
+
+@njit(cache=True)
+def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
+    """Signed distance to the tooth's dentin on the sampling and evaluation geometry, dq_e/dc into dqdc
+    (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
+    0 or 1 to the last bit and dl/dq is 0), returns +-reach for both and dq/dc = 0."""
+    tris_s, tris_e, tri_delta, dnodes, droots = geo[0], geo[1], geo[10], geo[17:23], geo[23]
+    tri, dist = closest_triangle(dnodes, droots[tooth], tris_s, p, stack, bary, reach)
+    if tri < 0:
+        dqdc[:] = 0.0
+        return sign * reach, sign * reach
+    dist_e = closest_point_triangle(tris_e, tri, p, bary)
+    ux = p[0] - (bary[0] * tris_e[tri, 0, 0] + bary[1] * tris_e[tri, 1, 0] + bary[2] * tris_e[tri, 2, 0])
+    uy = p[1] - (bary[0] * tris_e[tri, 0, 1] + bary[1] * tris_e[tri, 1, 1] + bary[2] * tris_e[tri, 2, 1])
+    uz = p[2] - (bary[0] * tris_e[tri, 0, 2] + bary[1] * tris_e[tri, 1, 2] + bary[2] * tris_e[tri, 2, 2])
+    inv = 1.0 / max(dist_e, 1e-300)
+    for m in range(3):
+        s = 0.0
+        for vv in range(3):
+            s += bary[vv] * (ux * tri_delta[tri, m, vv, 0] + uy * tri_delta[tri, m, vv, 1]
+                             + uz * tri_delta[tri, m, vv, 2])
+        dqdc[m] = -sign * s * inv
+    return sign * dist, sign * dist_e
+
+
+# ------------------------------------------------------------------------------------------ one path
+@njit(cache=True)
+def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li, inv_spp, row, cam, pix, b,
+         img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch):
+    """Connect vertex x to every light; splat, and the connection's own d log f terms (``path_tracer._nee``).
+    Returns (shadow rays, ray casts)."""
+    sigma_e, col_sigma = med[1], med[4]
+    kind, normal_s, eta = geo[3], geo[2], geo[6]
+    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t = scratch
+    w, contrib, logt = vec[0], vec[1], vec[2]
+    n_shadow = 0
+    casts = 0
+    for lt in range(lp.shape[0]):
+        r2 = 0.0
+        for c in range(3):
+            w[c] = lp[lt, c] - x[c]
+            r2 += w[c] * w[c]
+        r = np.sqrt(r2)
+        for c in range(3):
+            w[c] /= r
+        mu = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]
+        if is_phase:
+            geo_f = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+        else:
+            geo_f = max(w[0] * nrm[0] + w[1] * nrm[1] + w[2] * nrm[2], 0.0) / np.pi
+        if geo_f <= 0.0:
+            continue
+        n_shadow += 1
+        k, _, _, blocked, nc = _walk(geo, x, w, mv, True, r, tri_x, t_x, meds, stack, buf_tri, buf_t)
+        casts += nc
+        if blocked:
+            continue
+        _eval_crossings(geo, x, w, k, tri_x, t_x, r, t_e, clipped)
+        for c in range(3):
+            logt[c] = 0.0
+        prev = 0.0
+        for j in range(k + 1):
+            end = t_e[j] if j < k else r
+            for c in range(3):
+                logt[c] -= (end - prev) * sigma_e[meds[j], c]
+            prev = end
+        for j in range(k):
+            tri = tri_x[j]
+            if kind[tri] == KIND_DIELECTRIC:
+                _a_t(geo, tex, tri, x, w, True, a, idx, wts)
+                cosv = normal_s[tri, 0] * w[0] + normal_s[tri, 1] * w[1] + normal_s[tri, 2] * w[2]
+                lf = np.log1p(-_fresnel(cosv, eta[tri]))
+                for c in range(3):
+                    logt[c] += np.log(a[c]) + lf
+        for c in range(3):
+            contrib[c] = wv[c] * geo_f * np.exp(logt[c]) * li[lt, c] / r2 * inv_spp
+            if img_on:
+                out_rows[row, lt, c] += contrib[c]
+        if gradpass == 0 and jac.shape[0] == 0:
+            continue
+        if gradpass == 1:
+            for c in range(3):
+                ab[b, c] += adj[cam, lt, pix, c] * contrib[c]
+        sinks = 0
+        if gradpass == 2:
+            for c in range(3):
+                wgt[c] = adj[cam, lt, pix, c] * contrib[c]
+            sinks = 1
+        if jac.shape[0] > 0:
+            score[:, :] = s_run
+            sinks += 2
+        for sink in (1, 2):
+            if sinks & sink == 0:
+                continue
+            g = grad if sink == 1 else emp1
+            sx = emp2 if sink == 1 else score
+            prev = 0.0
+            for j in range(k + 1):
+                end = t_e[j] if j < k else r
+                ln = end - prev
+                prev = end
+                if ln != 0.0 and meds[j] != MED_AIR:
+                    _emit_diag(col_sigma[meds[j]], (-ln, -ln, -ln), wgt, g, sx, jmap)
+            for j in range(k):
+                tri = tri_x[j]
+                if kind[tri] == KIND_DIELECTRIC:
+                    col0 = _a_t(geo, tex, tri, x, w, True, a, idx, wts)
+                    _a_t_records(col0, a, idx, wts, wgt, g, sx, jmap)
+                elif not clipped[j]:
+                    _crossing_record(geo, med, x, w, tri, meds[j], meds[j + 1], wgt, g, sx, jmap)
+            if is_phase:
+                _phase_records(med, mv, mu, mix_e, lw, dl, dqdc, wgt, g, sx, jmap)
+        if sinks & 2:
+            for c in range(3):
+                for j in range(score.shape[0]):
+                    jac[row, lt, c, j] += contrib[c] * score[j, c]
+    return n_shadow, casts
+
+
+@njit(cache=True)
+def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp, row,
+                cam, pix, img_on, gradpass, out_rows, adj, ab, grad, jac, jmap, n_j, scratch, rs):
+    """One camera path (``path_tracer._trace_chunk`` for a single path). Returns (vertices, shadow rays,
+    casts, capped, levels used)."""
+    sigma_s, sigma_e, med_kind, med_tooth, col_sigma, med_e_of, med_d_of = med[:7]
+    alb_es, alb_ds, alb_ee, alb_de, ph_es, ph_ds, ph_ee, ph_de = med[7:15]
+    col_alb_e, col_alb_d, c_col, rho_s, rho_e, col_rho, spread = med[15], med[16], med[19], med[20], med[21], \
+        med[22], med[23]
+    kind, normal_s, eta = geo[3], geo[2], geo[6]
+    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t = scratch
+    s_run = np.zeros((n_j, 3))
+    ones = np.ones(3)
+    use_g = gradpass == 2
+    use_s = jac.shape[0] > 0
+    g_lvl = grad if use_g else emp1
+    sx_lvl = s_run if use_s else emp2
+    o = o0.copy()
+    d = d0.copy()
+    x = np.empty(3)
+    nd = np.empty(3)
+    nrm = np.empty(3)
+    logf = np.zeros(3)
+    logp = np.zeros(3)
+    logfs = np.zeros(3)
+    wv = np.empty(3)
+    dqdc = np.zeros(3)
+    mix_e = np.empty(3)
+    mix_s = np.empty(3)
+    tau_cum = np.empty(3)
+    tau_at = np.empty(3)
+    sig_k = np.empty(3)
+    tmp = np.empty(3)
+    _seed(rs, seed, seed_path)
+    _rand(rs)  # the camera jitter (drawn by the caller's formula): keep the stream aligned
+    _rand(rs)
+    hero = min(int(_rand(rs) * 3.0), 2)
+    m = MED_AIR
+    n_vert = n_shadow = casts = 0
+    capped = 0
+    levels = 0
+    for b in range(depth_cap):
+        levels = b + 1
+        u0, u1, u2, u3, u4, u5 = _rand(rs), _rand(rs), _rand(rs), _rand(rs), _rand(rs), _rand(rs)
+        k, end_tri, end_t, _, nc = _walk(geo, o, d, m, False, np.inf, tri_x, t_x, meds, stack, buf_tri, buf_t)
+        casts += nc
+        in_medium = m != MED_AIR
+        end_f = end_t if end_t < np.inf else 0.0
+        # ---- free flight on the sampling scene (hero channel, balance heuristic over channels)
+        tau_star = -np.log1p(-u0)
+        for c in range(3):
+            tau_cum[c] = 0.0
+        kstar = k
+        scatter = False
+        prev = 0.0
+        for j in range(k + 1):
+            bnd = t_x[j] if j < k else end_f
+            ln = bnd - prev
+            if in_medium and end_tri >= 0 and tau_cum[hero] + ln * sigma_s[meds[j], hero] > tau_star:
+                kstar = j
+                scatter = True
+                break
+            if j < k:  # tau_cum: the optical depth before piece kstar
+                for c in range(3):
+                    tau_cum[c] += ln * sigma_s[meds[j], c]
+            prev = bnd
+        tb_k = 0.0 if kstar == 0 else t_x[kstar - 1]
+        mk = meds[min(kstar, k)]
+        for c in range(3):
+            sig_k[c] = sigma_s[mk, c]
+        if scatter:
+            s = tb_k + (tau_star - tau_cum[hero]) / max(sig_k[hero], 1e-300)
+        else:
+            s = end_f
+        for c in range(3):
+            tau_at[c] = tau_cum[c] + sig_k[c] * (s - tb_k)
+            logp[c] -= tau_at[c]
+            if scatter:
+                logp[c] += np.log(sig_k[c])
+        # ---- evaluation: piece lengths on the evaluation geometry up to s
+        _eval_crossings(geo, o, d, k, tri_x, t_x, s if scatter else end_t, t_e, clipped)
+        if in_medium:
+            prev = 0.0
+            for j in range(kstar + 1):
+                end = (t_e[j] if j < k else end_f) if j < kstar else s
+                ln = end - prev
+                prev = end
+                for c in range(3):
+                    logf[c] -= ln * sigma_e[meds[j], c]
+                if (use_g or use_s) and ln != 0.0 and meds[j] != MED_AIR:
+                    _emit_diag(col_sigma[meds[j]], (-ln, -ln, -ln), ab[b], g_lvl, sx_lvl, jmap)
+            if roulette:
+                for c in range(3):
+                    logfs[c] -= tau_at[c]
+            if use_g or use_s:
+                for j in range(kstar):
+                    if kind[tri_x[j]] == KIND_INDEX_MATCHED and not clipped[j]:
+                        _crossing_record(geo, med, o, d, tri_x[j], meds[j], meds[j + 1], ab[b], g_lvl, sx_lvl, jmap)
+        for c in range(3):
+            x[c] = o[c] + s * d[c]
+            nd[c] = d[c]
+        new_m = mk
+        alive = True
+        if scatter:
+            # ---- volume scattering vertex
+            n_vert += 1
+            mv = new_m
+            lw_s = lw_e = 1.0
+            dl = 0.0
+            dqdc[:] = 0.0
+            tooth = med_tooth[mv]
+            if tooth >= 0:
+                sign = -1.0 if med_kind[mv] == MED_DENTIN else 1.0
+                q_s, q_e = _dentin_query(geo, tooth, x, sign, dqdc, stack, tmp, BLEND_REACH * spread)
+                lw_s = _blend(q_s, spread)
+                lw_e = _blend(q_e, spread)
+                dl = lw_e * (1.0 - lw_e) / spread
+            me_, md_ = med_e_of[mv], med_d_of[mv]
+            for c in range(3):
+                s_mix = sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e)
+                a_mix = alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e)
+                logf[c] += np.log(s_mix) + np.log(a_mix)
+                if roulette:
+                    logfs[c] += (np.log(sigma_s[me_, c] * lw_s + sigma_s[md_, c] * (1 - lw_s))
+                                 + np.log(alb_es[mv, c] * lw_s + alb_ds[mv, c] * (1 - lw_s)))
+            if use_g or use_s:
+                for c in range(3):
+                    tmp[c] = lw_e / (sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e))
+                _emit_diag(col_sigma[me_], tmp, ab[b], g_lvl, sx_lvl, jmap)
+                for c in range(3):
+                    tmp[c] = (1 - lw_e) / (sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e))
+                _emit_diag(col_sigma[md_], tmp, ab[b], g_lvl, sx_lvl, jmap)
+                for c in range(3):
+                    tmp[c] = lw_e / (alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e))
+                _emit_diag(col_alb_e[mv], tmp, ab[b], g_lvl, sx_lvl, jmap)
+                for c in range(3):
+                    tmp[c] = (1 - lw_e) / (alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e))
+                _emit_diag(col_alb_d[mv], tmp, ab[b], g_lvl, sx_lvl, jmap)
+                if tooth >= 0:
+                    for c in range(3):
+                        s_mix = sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e)
+                        a_mix = alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e)
+                        tmp[c] = ((alb_ee[mv, c] - alb_de[mv, c]) / a_mix
+                                  + (sigma_e[me_, c] - sigma_e[md_, c]) / s_mix)
+                    for mm in range(3):
+                        f_ = dl * dqdc[mm]
+                        _emit(c_col[tooth] + mm, tmp[0] * f_, tmp[1] * f_, tmp[2] * f_, ab[b], g_lvl, sx_lvl,
+                              jmap)
+            for i in range(3):
+                mix_e[i] = ph_ee[mv, i] * lw_e + ph_de[mv, i] * (1 - lw_e)
+                mix_s[i] = ph_es[mv, i] * lw_s + ph_ds[mv, i] * (1 - lw_s)
+            lme = _logmeanexp3(logp)
+            for c in range(3):
+                wv[c] = np.exp(logf[c] - lme)
+            ns, nc = _nee(geo, med, tex, x, d, mv, wv, nrm, True, mix_e, lw_e, dl, dqdc, lp, li, inv_spp, row,
+                          cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
+            n_shadow += ns
+            casts += nc
+            # continue: sample the phase function with the sampling parameters
+            gsel = mix_s[0] if u1 < mix_s[2] else mix_s[1]
+            mu = _sample_hg_mu(gsel, u2)
+            _direction_from_mu(d, mu, 2.0 * np.pi * u3, nd)
+            f_e = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+            f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
+            for c in range(3):
+                logf[c] += np.log(f_e)
+                logp[c] += np.log(f_s)
+                if roulette:
+                    logfs[c] += np.log(f_s)
+            if use_g or use_s:  # pushed at level b + 1: weight R_{b+1}
+                _phase_records(med, mv, mu, mix_e, lw_e, dl, dqdc, ab[b + 1], g_lvl, sx_lvl, jmap)
+        elif end_tri >= 0:
+            kd = kind[end_tri]
+            if kd == KIND_DIELECTRIC:
+                # ---- thin dielectric boundary (eq. 5.1-5.2)
+                n_vert += 1
+                cosv = normal_s[end_tri, 0] * d[0] + normal_s[end_tri, 1] * d[1] + normal_s[end_tri, 2] * d[2]
+                if u4 < _fresnel(cosv, eta[end_tri]):
+                    for c in range(3):
+                        nd[c] = d[c] - 2.0 * cosv * normal_s[end_tri, c]
+                    new_m = m
+                else:
+                    new_m = geo[4][end_tri] if cosv < 0.0 else geo[5][end_tri]
+                    col0 = _a_t(geo, tex, end_tri, o, d, True, a, idx, wts)
+                    for c in range(3):
+                        logf[c] += np.log(a[c])
+                    if use_g or use_s:
+                        _a_t_records(col0, a, idx, wts, ab[b], g_lvl, sx_lvl, jmap)
+                    if roulette:
+                        _a_t(geo, tex, end_tri, o, d, False, a, idx, wts)
+                        for c in range(3):
+                            logfs[c] += np.log(a[c])
+            elif kd == KIND_OPAQUE:
+                # ---- opaque Lambertian oral cavity
+                n_vert += 1
+                dn = normal_s[end_tri, 0] * d[0] + normal_s[end_tri, 1] * d[1] + normal_s[end_tri, 2] * d[2]
+                sg = -1.0 if dn > 0.0 else (1.0 if dn < 0.0 else 0.0)
+                for c in range(3):
+                    nrm[c] = normal_s[end_tri, c] * sg
+                    logf[c] += np.log(rho_e[c])
+                    if roulette:
+                        logfs[c] += np.log(rho_s[c])
+                if use_g or use_s:
+                    for c in range(3):
+                        tmp[c] = 1.0 / rho_e[c]
+                    _emit_diag(col_rho, tmp, ab[b], g_lvl, sx_lvl, jmap)
+                lme = _logmeanexp3(logp)
+                for c in range(3):
+                    wv[c] = np.exp(logf[c] - lme)
+                ns, nc = _nee(geo, med, tex, x, d, m, wv, nrm, False, ones, 1.0, 0.0, dqdc, lp, li, inv_spp, row,
+                              cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
+                n_shadow += ns
+                casts += nc
+                mu = np.sqrt(1.0 - u4)
+                _direction_from_mu(nrm, mu, 2.0 * np.pi * u5, nd)
+                new_m = MED_AIR
+            else:
+                alive = False
+        else:
+            alive = False
+        # ---- Russian roulette at theta_0 (see ``path_tracer.RenderSettings``)
+        if alive and roulette and b + 1 >= rr_depth:
+            ur = _rand(rs)
+            beta = np.exp(max(logfs[0], max(logfs[1], logfs[2])) - _logmeanexp3(logp))
+            q = 0.0 if np.isnan(beta) else min(beta, 1.0)
+            if ur < q:
+                lq = np.log(q)
+                for c in range(3):
+                    logp[c] += lq
+            else:
+                alive = False
+        if not alive:
+            return n_vert, n_shadow, casts, 0, levels
+        for c in range(3):
+            o[c] = x[c]
+            d[c] = nd[c]
+        m = new_m
+    if roulette:
+        capped = 1
+    return n_vert, n_shadow, casts, capped, levels
+
+
+@njit(cache=True, parallel=True)
+def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li,
+                adj, want_grad, jmap, n_j, out_rows, grad_blocks, jac, counters):
+    """Trace every row (traced pixel) x spp in N_BLOCKS row blocks in parallel."""
+    fxy, rot, center, width = cams
+    n_rows = cam_of.shape[0]
+    n_blocks = grad_blocks.shape[0] if want_grad else counters.shape[0]
+    inv_spp = 1.0 / spp
+    for blk in prange(counters.shape[0]):
+        r0 = blk * n_rows // counters.shape[0]
+        r1 = (blk + 1) * n_rows // counters.shape[0]
+        scratch = (np.empty(MAX_CROSSINGS + 1, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
+                   np.empty(MAX_CROSSINGS + 2, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
+                   np.empty(MAX_CROSSINGS + 1, dtype=np.bool_), np.empty(3), np.empty(4, dtype=np.int64),
+                   np.empty(4), np.empty(3), np.empty((n_j, 3)), np.empty((0, 3)), np.empty(0),
+                   np.empty(STACK_SIZE, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
+                   np.empty(HIT_BUFFER))
+        jac_off = np.empty((0, 1, 3, 1))
+        ab = np.zeros((depth_cap + 2, 3))
+        g = grad_blocks[blk] if want_grad else np.empty(0)
+        rs = np.empty(1, dtype=np.uint64)
+        o = np.empty(3)
+        d = np.empty(3)
+        for row in range(r0, r1):
+            cam = cam_of[row]
+            pix = pix_of[row]
+            for smp in range(spp):
+                path = row * spp + smp
+                _seed(rs, seed, path)
+                jx = _rand(rs) if jitter else 0.5
+                jy = _rand(rs) if jitter else 0.5
+                px = pix % width[cam] + jx
+                py = pix // width[cam] + jy
+                dcx = (px - fxy[cam, 2]) / fxy[cam, 0]
+                dcy = (py - fxy[cam, 3]) / fxy[cam, 1]
+                nn = 0.0
+                for c in range(3):
+                    d[c] = dcx * rot[cam, 0, c] + dcy * rot[cam, 1, c] + rot[cam, 2, c]
+                    nn += d[c] * d[c]
+                nn = np.sqrt(nn)
+                for c in range(3):
+                    d[c] /= nn
+                    o[c] = center[cam, c]
+                if not want_grad:
+                    nv, ns, nc, cap, _ = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth,
+                                                     lp, li, inv_spp, row, cam, pix, True, 0, out_rows, adj, ab, g,
+                                                     jac, jmap, n_j, scratch, rs)
+                else:
+                    ab[:, :] = 0.0
+                    nv, ns, nc, cap, lv = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette,
+                                                      rr_depth, lp, li, inv_spp, row, cam, pix, True, 1, out_rows,
+                                                      adj, ab, g, jac, jmap, n_j, scratch, rs)
+                    for lvl in range(lv, -1, -1):  # suffix sums R_L = sum_{b >= L} A_b
+                        for c in range(3):
+                            ab[lvl, c] += ab[lvl + 1, c]
+                    _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp,
+                                row, cam, pix, False, 2, out_rows, adj, ab, g, jac_off, jmap, n_j, scratch, rs)
+                counters[blk, 0] += nv
+                counters[blk, 1] += ns
+                counters[blk, 2] += nc
+                counters[blk, 3] += cap
+    return n_blocks
+
+
+def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, pix_of: np.ndarray, spp: int,
+          seed: int, max_depth: int | None, rr_depth: int, jitter: bool, lp: np.ndarray, li: np.ndarray,
+          adj: np.ndarray | None, jmap: np.ndarray | None, n_j: int):
+    """Trace rows (camera, flat pixel) x spp; (per-row images (n_rows, L, 3), grad or None, per-row
+    Jacobian (n_rows, L, 3, n_j) or None, counters (vertices, shadow rays, casts, capped))."""
+    geo, med, tex = packed
+    cams = (np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in cameras], dtype=np.float64),
+            np.array([c.R for c in cameras], dtype=np.float64), np.array([c.center for c in cameras], dtype=np.float64),
+            np.array([c.width for c in cameras], dtype=np.int64))
+    n_rows, n_l = len(cam_of), len(lp)
+    roulette = max_depth is None
+    depth_cap = MAX_PATH_VERTICES if roulette else int(max_depth)
+    want_grad = adj is not None
+    n_blocks = max(1, min(N_BLOCKS, n_rows))
+    out_rows = np.zeros((n_rows, n_l, 3))
+    grad_blocks = np.zeros((n_blocks if want_grad else 0, cs.layout.size))
+    jac = np.zeros((n_rows, n_l, 3, n_j)) if jmap is not None else np.zeros((0, n_l, 3, 0))
+    counters = np.zeros((n_blocks, 4), dtype=np.int64)
+    _trace_rows(geo, med, tex, cams, np.asarray(cam_of, dtype=np.int64), np.asarray(pix_of, dtype=np.int64),
+                int(spp), int(seed), depth_cap, roulette, int(rr_depth), bool(jitter),
+                np.ascontiguousarray(lp, dtype=np.float64), np.ascontiguousarray(li, dtype=np.float64),
+                np.zeros((0, 0, 0, 3)) if adj is None else np.ascontiguousarray(adj, dtype=np.float64), want_grad,
+                np.full(1, -1, dtype=np.int64) if jmap is None else jmap, max(n_j, 0), out_rows, grad_blocks, jac,
+                counters)
+    grad = grad_blocks.sum(axis=0) if want_grad else None
+    return out_rows, grad, (jac if jmap is not None else None), counters.sum(axis=0), get_num_threads()
