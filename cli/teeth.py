@@ -69,7 +69,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "near the optimum its noise dominates the gradient's (the acceptance fit uses 32 with --spp 4)")
     f.add_argument("--lights-per-iteration", type=int, default=None,
                    help=f"random lights per iteration (default {FIT_CLI_DEFAULTS['lights_per_iteration']})")
-    f.add_argument("--max-depth", type=int, default=6)
+    f.add_argument("--max-depth", type=int, default=None,
+                   help="stop every path after this many bounces (an experiment: biased dark); default all bounces")
     f.add_argument("--anchor-spp", type=int, default=0,
                    help="image control variate: spp of an anchor image of all lights (0 = off); cuts the "
                         "gradient noise of pass A, see core/teeth/optimise.py Anchor")
@@ -150,7 +151,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     noise.add_argument("--noise-variance", type=float, help="the photographs' noise variance per pixel value")
     v.add_argument("--passes", type=int, default=6, help="independent 1-spp Jacobian passes (>= 2)")
     v.add_argument("--block", type=int, default=8, help="pixel tile size the image changes are pooled over")
-    v.add_argument("--max-depth", type=int, default=6)
+    v.add_argument("--max-depth", type=int, default=None,
+                   help="stop every path after this many bounces (an experiment: biased dark); default all bounces")
     v.add_argument("--json", default=None, help="also write the table to this JSON file")
     v.set_defaults(func=run_sensitivity)
 

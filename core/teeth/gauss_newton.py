@@ -60,7 +60,7 @@ def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray,
 
 
 def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, cols: np.ndarray, y: np.ndarray,
-                        domain: str = "thesis", *, passes: int = 4, block: int = 8, max_depth: int = 6,
+                        domain: str = "thesis", *, passes: int = 4, block: int = 8, max_depth: int | None = None,
                         seed: int = 0, workers: int = 1, lights_per_render: int = 9,
                         estimator: str = "per-pass") -> np.ndarray:
     """(k, k) Gauss-Newton matrix of the per-pixel L2 loss over all of ``capture``'s lights in the

@@ -78,7 +78,7 @@ def _homogeneous(scene: TeethScene, mat: VolumeMaterial) -> TeethScene:
 
 def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_albedo: int = 8,
                      pixel_stride: int = 3, n_lights: int = 6, seed: int = 0, spp: int = 1, tile: int = 8,
-                     max_depth: int = 4, scale_invariant: bool = True,
+                     max_depth: int | None = None, scale_invariant: bool = True,
                      progress: Callable[[int], None] | None = None) -> TeethScene:
     """Start scene whose enamel and dentin take, per channel, the best table point (c = 0).
 

@@ -66,9 +66,9 @@ MAX_PATH_VERTICES = 1000
 class RenderSettings:
     """Sampling settings of ``render``.
 
-    ``max_depth``: an int stops every path after that many vertices (scattering + surface events), a
-    biased but deterministic-length estimator (the fit's default, 6). ``None`` renders all bounces with
-    Russian roulette from vertex ``rr_depth`` on (capped at ``MAX_PATH_VERTICES``):
+    ``max_depth``: ``None`` (the default) renders all bounces with Russian roulette from vertex
+    ``rr_depth`` on (capped at ``MAX_PATH_VERTICES``); an int stops every path after that many vertices
+    (scattering + surface events), a biased estimator kept for experiments:
 
     Roulette. After each of its vertices b >= ``rr_depth`` (counted from 1) a path survives with probability
         q = min(1, max_c beta_c),   beta_c = f_c(x_0..x_b; theta_0) / mean_k p_k(x_0..x_b; theta_0),
@@ -97,7 +97,9 @@ class RenderSettings:
     """
 
     spp: int = 4
-    max_depth: int | None = 6  # path vertices (scattering + surface events); None: all, with roulette
+    # None: all bounces, paths ended by Russian roulette (unbiased); an int stops every path after that many
+    # vertices (scattering + surface events): biased dark, for experiments only (docs/teeth-tracer.md)
+    max_depth: int | None = None
     seed: int = 0
     chunk: int = 4096  # camera paths per wavefront batch
     jitter: bool = True

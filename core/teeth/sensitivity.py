@@ -54,7 +54,7 @@ def default_directions(scene: TeethScene, layout: ParamLayout | None = None, rel
 
 def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndarray, *, passes: int = 6,
                         block: int = 8, noise_variance: float | None = None, capture_spp: int | None = None,
-                        max_depth: int = 6, seed: int = 0) -> dict:
+                        max_depth: int | None = None, seed: int = 0) -> dict:
     """chi2 of each row of ``directions`` (K, P physical displacements) for ``capture`` (module docstring).
 
     The capture's per-value noise variance is ``noise_variance`` or, for a synthetic capture rendered with

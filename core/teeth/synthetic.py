@@ -106,7 +106,7 @@ def tooth_masks(scene: TeethScene, cameras: list[Camera], compiled: CompiledScen
 
 
 def render_capture(scene: TeethScene, cameras: list[Camera], lights: list, spp: int = 16,
-                   spp_background: int = 2, seed: int = 12345, max_depth: int = 6, progress=None,
+                   spp_background: int = 2, seed: int = 12345, max_depth: int | None = None, progress=None,
                    workers: int = 1):
     """Synthetic capture of ``scene``: masked tooth pixels at ``spp``, the rest at ``spp_background``;
     ``workers`` processes trace each batch of lights (same images up to floating-point summation order)."""

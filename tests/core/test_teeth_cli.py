@@ -23,7 +23,7 @@ def test_synth_then_fit_with_resume(tmp_path):
     # the stored images are the renderer's output for the stored ground-truth scene (same seeds)
     scene = load_scene(cap_dir / "scene.json")
     pixels = [np.flatnonzero(m.ravel()) for m in cap.masks]
-    res = render(scene, cap.cameras, cap.lights, RenderSettings(2, 6, 12345), pixels=pixels,
+    res = render(scene, cap.cameras, cap.lights, RenderSettings(2, None, 12345), pixels=pixels,
                  light_ids=np.arange(4))
     masked = cap.masks[:, None, :, :, None] & np.ones((1, 4, 1, 1, 3), dtype=bool)
     np.testing.assert_allclose(cap.images[masked], res.images[masked], rtol=1e-6, atol=1e-9)

@@ -124,12 +124,14 @@ def test_full_tooth_matches_mitsuba(mitsuba_refs):
         _compare(mine, refs[k], mask, ("depth 60", k))
 
 
-def test_roulette_all_bounces_matches_mitsuba(mitsuba_refs):
-    """Russian roulette (``max_depth=None``, all bounces) against Mitsuba ``volpath`` ``max_depth: -1``.
-    (The same comparison at max_depth 6 fails by 6-17 % per channel, see docs/teeth-tracer.md.)"""
+@pytest.mark.parametrize("reference", [pytest.param(False, id="compiled"), pytest.param(True, id="reference")])
+def test_defaults_render_all_bounces_like_mitsuba(mitsuba_refs, reference):
+    """``render`` at its defaults (Russian roulette, all bounces) against Mitsuba ``volpath``
+    ``max_depth: -1``, the compiled tracer and the numpy reference. (The same comparison at max_depth 6
+    fails by 6-17 % per channel, see docs/teeth-tracer.md.)"""
     sc, cam, lights, mask, refs = mitsuba_refs
     for k, light in enumerate(lights):
-        res = [render(sc, [cam], [light], RenderSettings(spp=32, max_depth=None, seed=100 + 10 * k + s))
+        res = [render(sc, [cam], [light], RenderSettings(spp=32, seed=100 + 10 * k + s), reference=reference)
                for s in range(3)]
         assert all(r.stats["capped_paths"] == 0 for r in res)
         _compare([r.images[0, 0] for r in res], refs[k], mask, ("roulette", k))
