@@ -97,9 +97,9 @@ def fit_demo(workdir: str, iterations: int = 30, seed: int = 0):
     truth = make_scene(n_teeth=1, resolution=20)
     cams, lights = default_rig(target=scene_target(truth), width=24, height=16, n_lights=9, n_cameras=2,
                                fov_x_deg=2.8)
-    cap = render_capture(truth, cams, lights, spp=4, spp_background=1, max_depth=5)
+    cap = render_capture(truth, cams, lights, spp=4, spp_background=1)
     start = perturbed_start(truth, seed=seed, sigma_factor=0.5, kappa_shift=0.4, reset_c=False)
-    settings = FitSettings(iterations=iterations, lr=0.06, lights_per_iteration=4, spp=1, max_depth=5, seed=seed,
+    settings = FitSettings(iterations=iterations, lr=0.06, lights_per_iteration=4, spp=1, seed=seed,
                            free=DEMO_FREE)
     out = os.path.join(workdir, "teeth-fit") if workdir else None
     best, log = fit(start, cap, settings, out_dir=out)
