@@ -134,7 +134,7 @@ def _sah_split(cen: np.ndarray, tlo: np.ndarray, thi: np.ndarray) -> np.ndarray 
     return best[1]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _slab(lo, hi, i, o, ix, iy, iz, tmin, tmax) -> float:
     """Entry distance of the ray into box i, or inf when it misses within (tmin, tmax)."""
     t0, t1 = tmin, tmax
@@ -147,7 +147,7 @@ def _slab(lo, hi, i, o, ix, iy, iz, tmin, tmax) -> float:
     return t0 if t0 <= t1 * (1.0 + 1e-12) else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
     """(t, u, v) of the ray o + t d with the plane of triangle k; barycentrics (1 - u - v, u, v)."""
     e1x, e1y, e1z = tris[k, 1, 0] - tris[k, 0, 0], tris[k, 1, 1] - tris[k, 0, 1], tris[k, 1, 2] - tris[k, 0, 2]
@@ -165,7 +165,7 @@ def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
     return t, u, v
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def first_hit(nodes, root, tris, o, d, tmin, tmax, stack) -> tuple[int, float]:
     """Nearest triangle hit by o + t d with tmin < t < tmax: (triangle or -1, t). ``stack``: int64
     scratch of ``STACK_SIZE``."""
@@ -202,7 +202,7 @@ def first_hit(nodes, root, tris, o, d, tmin, tmax, stack) -> tuple[int, float]:
     return best, best_t
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def closest_point_triangle(tris, k, p, out) -> float:
     """Closest point on triangle k to p: barycentrics into ``out`` (3,), returns the distance."""
     ax, ay, az = tris[k, 0, 0], tris[k, 0, 1], tris[k, 0, 2]
@@ -246,7 +246,7 @@ def closest_point_triangle(tris, k, p, out) -> float:
     return np.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _box_dist2(lo, hi, i, p) -> float:
     s = 0.0
     for a in range(3):
@@ -257,7 +257,7 @@ def _box_dist2(lo, hi, i, p) -> float:
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tuple[int, float]:
     """Triangle of the tree at ``root`` nearest to point p, (triangle, distance), or (-1, max_dist) when
     none is closer than ``max_dist``. ``stack``, ``bary``: scratch (``STACK_SIZE`` int64, 3 float64)."""
@@ -288,7 +288,7 @@ def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tupl
     return best, best_d
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def hits_until_stop(nodes, root, tris, stops, o, d, tmin, tmax, stack, buf_tri, buf_t) -> int:
     """Every triangle hit by o + t d with tmin < t < tmax up to the nearest one with ``stops[k]``, in one
     traversal (boxes beyond the nearest stopping hit found so far are skipped). Hits go unsorted into

@@ -192,4 +192,12 @@ class CompiledScene:
         self.dentin_face = np.concatenate(dface).astype(np.int64)
         n = np.cross(self.tris_s[:, 1] - self.tris_s[:, 0], self.tris_s[:, 2] - self.tris_s[:, 0])
         self.normal_s = n / np.linalg.norm(n, axis=1, keepdims=True)
-        self.caster = RayCaster(self.tris_s, use_embree=use_embree)
+        self._use_embree = use_embree
+        self._caster: RayCaster | None = None
+
+    @property
+    def caster(self) -> RayCaster:
+        """First-hit queries on the sampling geometry (built on first use: the compiled tracer has its own)."""
+        if self._caster is None:
+            self._caster = RayCaster(self.tris_s, use_embree=self._use_embree)
+        return self._caster

@@ -21,6 +21,8 @@ Jacobian) carries the running score d log f per path as the reference does.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from numba import get_num_threads, njit, prange
 
@@ -46,20 +48,31 @@ INV_4PI = 1.0 / (4.0 * np.pi)
 N_BLOCKS = 64  # row blocks traced in parallel; fixed so that sums do not depend on the thread count
 
 
+_TREES: dict = {}  # (sampling geometry, dentin assignment) digest -> BVH arrays; a fit re-packs every iteration
+
+
+def _trees(cs: CompiledScene) -> tuple:
+    """(scene BVH arrays, dentin BVH arrays, dentin roots) of ``cs``'s sampling geometry, cached by content."""
+    key = hashlib.sha1(cs.tris_s.tobytes() + cs.dentin_tooth.tobytes()).hexdigest()
+    if key not in _TREES:
+        dentin_trees = [TriangleBVH(cs.tris_s, np.flatnonzero(cs.dentin_tooth == i)) for i in range(len(cs.dentin))]
+        dnodes, droots = TriangleBVH.merge(dentin_trees)
+        if len(_TREES) >= 8:
+            _TREES.pop(next(iter(_TREES)))
+        _TREES[key] = (TriangleBVH(cs.tris_s).arrays(), dnodes, droots)
+    return _TREES[key]
+
+
 def pack_scene(cs: CompiledScene) -> tuple:
     """The arrays of ``cs`` the kernels read: (geometry, media, textures)."""
-    nt = len(cs.dentin)
     tri_delta = np.zeros((len(cs.tris_s), 3, 3, 3))
-    dentin_trees = []
-    for i in range(nt):
+    for i, dp in enumerate(cs.dentin):
         ids = np.flatnonzero(cs.dentin_tooth == i)
-        dp = cs.dentin[i]
         tri_delta[ids] = np.transpose(dp.deltas[:, dp.faces[cs.dentin_face[ids]], :], (1, 0, 2, 3))
-        dentin_trees.append(TriangleBVH(cs.tris_s, ids))
-    dnodes, droots = TriangleBVH.merge(dentin_trees)
+    nodes, dnodes, droots = _trees(cs)
     geo = (np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
            cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
-           cs.dentin_tooth, tri_delta) + TriangleBVH(cs.tris_s).arrays() + dnodes + (
+           cs.dentin_tooth, tri_delta) + nodes + dnodes + (
                droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED)
     has_cavity = bool(cs.has_cavity)
     med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
@@ -164,7 +177,7 @@ def _blend(q, spread) -> float:
 
 
 # ------------------------------------------------------------------------------------------ score sinks
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _emit(col, v0, v1, v2, w, g, sx, jmap) -> None:
     """One d log f record: g[col] += v . w (reverse mode), sx[jmap[col]] += v (forward mode)."""
     if col < 0:
@@ -179,7 +192,7 @@ def _emit(col, v0, v1, v2, w, g, sx, jmap) -> None:
             sx[j, 2] += v2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _emit_diag(col0, v, w, g, sx, jmap) -> None:
     """Records col0 + c with value v[c] on channel c only."""
     if col0 < 0:
@@ -190,7 +203,7 @@ def _emit_diag(col0, v, w, g, sx, jmap) -> None:
 
 
 # ------------------------------------------------------------------------------------------ ray walks
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t):
     """Crossings along o + t d (see ``path_tracer._Tracer.through``): path mode passes index-matched
     surfaces and stops at the first other one; shadow mode passes every non-opaque surface up to tmax.
@@ -256,7 +269,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
         tcur = t
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
     """Crossing distances on the evaluation geometry, ordered and within [0, upper]; which were clipped
     (``path_tracer._Tracer.eval_crossings``)."""
@@ -280,18 +293,20 @@ def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
             t_e[j] = kept
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _crossing_record(geo, med, o, d, tri, m_before, m_after, w, g, sx, jmap) -> None:
     """(S_i - S_e) dt/dc of one dentin crossing (eq. 5.29-5.32)."""
     tris_e, dtooth, tri_delta = geo[1], geo[9], geo[10]
     sigma_e, c_col = med[1], med[19]
     _, u, v = ray_triangle(tris_e, tri, o, d)
     b0, b1, b2 = 1.0 - u - v, u, v
-    e1 = tris_e[tri, 1] - tris_e[tri, 0]
-    e2 = tris_e[tri, 2] - tris_e[tri, 0]
-    n0 = e1[1] * e2[2] - e1[2] * e2[1]
-    n1 = e1[2] * e2[0] - e1[0] * e2[2]
-    n2 = e1[0] * e2[1] - e1[1] * e2[0]
+    a0, a1, a2 = tris_e[tri, 1, 0] - tris_e[tri, 0, 0], tris_e[tri, 1, 1] - tris_e[tri, 0, 1], \
+        tris_e[tri, 1, 2] - tris_e[tri, 0, 2]
+    c0, c1, c2 = tris_e[tri, 2, 0] - tris_e[tri, 0, 0], tris_e[tri, 2, 1] - tris_e[tri, 0, 1], \
+        tris_e[tri, 2, 2] - tris_e[tri, 0, 2]
+    n0 = a1 * c2 - a2 * c1
+    n1 = a2 * c0 - a0 * c2
+    n2 = a0 * c1 - a1 * c0
     nd = n0 * d[0] + n1 * d[1] + n2 * d[2]
     g0, g1, g2 = n0 / nd, n1 / nd, n2 / nd
     col0 = c_col[dtooth[tri]]
@@ -306,7 +321,7 @@ def _crossing_record(geo, med, o, d, tri, m_before, m_after, w, g, sx, jmap) -> 
               w, g, sx, jmap)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _a_t(geo, tex, tri, o, d, which_e, a, idx, wts) -> int:
     """Bilinear a_t at the boundary hit of o + t d on tri (eq. 5.2): values into a (3), texel indices and
     weights into idx, wts (4); returns the texture's first parameter column."""
@@ -338,7 +353,7 @@ def _a_t(geo, tex, tri, o, d, which_e, a, idx, wts) -> int:
     return tex_col[k]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _a_t_records(col0, a, idx, wts, w, g, sx, jmap) -> None:
     """d log a_t / d texel = w_i / a_t per channel (eq. 5.10)."""
     for i in range(4):
@@ -348,7 +363,7 @@ def _a_t_records(col0, a, idx, wts, w, g, sx, jmap) -> None:
         _emit(base + 2, 0.0, 0.0, wts[i] / a[2], w, g, sx, jmap)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
     """d log f_p of the blended two-lobe phase function at one vertex and direction (eq. 5.11-5.19)."""
     ph_ee, ph_de, col_ph_e, col_ph_d, med_tooth, c_col = med[13], med[14], med[17], med[18], med[3], med[19]
@@ -370,7 +385,7 @@ def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
             _emit(c_col[tooth] + m, val, val, val, w, g, sx, jmap)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     """Signed distance to the tooth's dentin on the sampling and evaluation geometry, dq_e/dc into dqdc
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
@@ -395,7 +410,7 @@ def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
 
 
 # ------------------------------------------------------------------------------------------ one path
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li, inv_spp, row, cam, pix, b,
          img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch):
     """Connect vertex x to every light; splat, and the connection's own d log f terms (``path_tracer._nee``).
@@ -458,7 +473,9 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
                 wgt[c] = adj[cam, lt, pix, c] * contrib[c]
             sinks = 1
         if jac.shape[0] > 0:
-            score[:, :] = s_run
+            for j in range(score.shape[0]):
+                for c in range(3):
+                    score[j, c] = s_run[j, c]
             sinks += 2
         for sink in (1, 2):
             if sinks & sink == 0:
@@ -642,7 +659,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             lme = _logmeanexp3(logp)
             for c in range(3):
                 wv[c] = np.exp(logf[c] - lme)
-            ns, nc = _nee(geo, med, tex, x, d, mv, wv, nrm, True, mix_e, lw_e, dl, dqdc, lp, li, inv_spp, row,
+            ns, nc = _nee(geo, med, tex, x, d, mv, wv, nrm, scatter, mix_e, lw_e, dl, dqdc, lp, li, inv_spp, row,
                           cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
             n_shadow += ns
             casts += nc
@@ -697,7 +714,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 lme = _logmeanexp3(logp)
                 for c in range(3):
                     wv[c] = np.exp(logf[c] - lme)
-                ns, nc = _nee(geo, med, tex, x, d, m, wv, nrm, False, ones, 1.0, 0.0, dqdc, lp, li, inv_spp, row,
+                ns, nc = _nee(geo, med, tex, x, d, m, wv, nrm, scatter, ones, 1.0, 0.0, dqdc, lp, li, inv_spp, row,
                               cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
                 n_shadow += ns
                 casts += nc
@@ -748,6 +765,10 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                    np.empty(STACK_SIZE, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
                    np.empty(HIT_BUFFER))
         jac_off = np.empty((0, 1, 3, 1))
+        # the passes (0 image, 1 image + vertex contributions, 2 replay) as run-time values: literal
+        # arguments would compile a copy of _trace_path for each
+        mode = np.arange(3)
+        yes, no = mode[0] == 0, mode[0] == 1
         ab = np.zeros((depth_cap + 2, 3))
         g = grad_blocks[blk] if want_grad else np.empty(0)
         rs = np.empty(1, dtype=np.uint64)
@@ -775,18 +796,18 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                     o[c] = center[cam, c]
                 if not want_grad:
                     nv, ns, nc, cap, _ = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth,
-                                                     lp, li, inv_spp, row, cam, pix, True, 0, out_rows, adj, ab, g,
+                                                     lp, li, inv_spp, row, cam, pix, yes, mode[0], out_rows, adj, ab, g,
                                                      jac, jmap, n_j, scratch, rs)
                 else:
                     ab[:, :] = 0.0
                     nv, ns, nc, cap, lv = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette,
-                                                      rr_depth, lp, li, inv_spp, row, cam, pix, True, 1, out_rows,
+                                                      rr_depth, lp, li, inv_spp, row, cam, pix, yes, mode[1], out_rows,
                                                       adj, ab, g, jac, jmap, n_j, scratch, rs)
                     for lvl in range(lv, -1, -1):  # suffix sums R_L = sum_{b >= L} A_b
                         for c in range(3):
                             ab[lvl, c] += ab[lvl + 1, c]
                     _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp,
-                                row, cam, pix, False, 2, out_rows, adj, ab, g, jac_off, jmap, n_j, scratch, rs)
+                                row, cam, pix, no, mode[2], out_rows, adj, ab, g, jac_off, jmap, n_j, scratch, rs)
                 counters[blk, 0] += nv
                 counters[blk, 1] += ns
                 counters[blk, 2] += nc
