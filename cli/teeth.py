@@ -52,8 +52,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     acceptance = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in FIT_PRESETS["acceptance"].items())
     f.add_argument("--preset", choices=tuple(FIT_PRESETS), default="thesis",
                    help="named settings: thesis (the defaults below: Adam, 1 spp, 18 lights) or acceptance (the "
-                        f"recovery acceptance fit's: {acceptance}; give --no-dask --workers N to trace on N "
-                        "cores); flags given explicitly win over the preset")
+                        f"recovery acceptance fit's: {acceptance}); flags given explicitly win over the preset")
     f.add_argument("--iterations", type=int, default=None,
                    help=f'"homogeneous" phase iterations (default {FIT_CLI_DEFAULTS["iterations"]})')
     f.add_argument("--textured-iterations", type=int, default=0, help='"textured" phase iterations')
@@ -130,7 +129,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="processes of the local Dask cluster (default: CPU count)")
     f.add_argument("--no-dask", action="store_true", help="render in this process instead of on Dask")
     f.add_argument("--workers", type=int, default=1,
-                   help="with --no-dask: forked processes that trace each pass (e.g. the number of cores)")
+                   help="with --no-dask and no numba installed: forked processes that trace each pass (the "
+                        "compiled tracer uses every core by itself)")
     f.add_argument("--no-progress", action="store_true")
     f.set_defaults(func=run_fit)
 

@@ -72,7 +72,8 @@ class FitSettings:
     # the optimum the gradient's variance is mostly pass A's per-pixel noise times the pixel's
     # derivative, so pass A gets more samples than pass B (forward only, no derivative bookkeeping)
     image_spp: int = 0
-    # processes that trace each pass (``RenderSettings.workers``; on 2 cores a pass takes 1.4-2x less
+    # processes that trace each pass with the numpy reference tracer, where numba is missing (the compiled
+    # tracer runs one thread per core by itself) (``RenderSettings.workers``; on 2 cores a pass takes 1.4-2x less
     # time: the chunks of paths are dealt round-robin, so few chunks balance unevenly)
     workers: int = 1
     # optimiser domain of sigma_t / albedo: "thesis" (log sigma_t, log10(1 - albedo), eq. 5.22-5.24)

@@ -73,7 +73,8 @@ def pack_scene(cs: CompiledScene) -> tuple:
     geo = (np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
            cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
            cs.dentin_tooth, tri_delta) + nodes + dnodes + (
-               droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED)
+               droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED,
+               np.array([np.array_equal(cs.tris_s, cs.tris_e)]))
     has_cavity = bool(cs.has_cavity)
     med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
            cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"], cs.ph["De"],
@@ -274,6 +275,11 @@ def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
     """Crossing distances on the evaluation geometry, ordered and within [0, upper]; which were clipped
     (``path_tracer._Tracer.eval_crossings``)."""
     tris_e, kind = geo[1], geo[3]
+    if geo[26][0]:  # evaluation geometry = sampling geometry: the distances are the sampled ones, and a
+        for j in range(k):  # crossing beyond ``upper`` is never read
+            t_e[j] = t_x[j]
+            clipped[j] = False
+        return
     any_matched = False
     for j in range(k):
         clipped[j] = False
@@ -418,7 +424,7 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
     sigma_e, col_sigma = med[1], med[4]
     kind, normal_s, eta = geo[3], geo[2], geo[6]
     tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t = scratch
-    w, contrib, logt = vec[0], vec[1], vec[2]
+    w, contrib, trans = vec[0], vec[1], vec[2]
     n_shadow = 0
     casts = 0
     for lt in range(lp.shape[0]):
@@ -443,23 +449,25 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
             continue
         _eval_crossings(geo, x, w, k, tri_x, t_x, r, t_e, clipped)
         for c in range(3):
-            logt[c] = 0.0
+            trans[c] = 0.0
         prev = 0.0
         for j in range(k + 1):
             end = t_e[j] if j < k else r
             for c in range(3):
-                logt[c] -= (end - prev) * sigma_e[meds[j], c]
+                trans[c] -= (end - prev) * sigma_e[meds[j], c]
             prev = end
+        for c in range(3):
+            trans[c] = np.exp(trans[c])  # Beer-Lambert, then the boundaries' a_t (1 - F)
         for j in range(k):
             tri = tri_x[j]
             if kind[tri] == KIND_DIELECTRIC:
                 _a_t(geo, tex, tri, x, w, True, a, idx, wts)
                 cosv = normal_s[tri, 0] * w[0] + normal_s[tri, 1] * w[1] + normal_s[tri, 2] * w[2]
-                lf = np.log1p(-_fresnel(cosv, eta[tri]))
+                tf = 1.0 - _fresnel(cosv, eta[tri])
                 for c in range(3):
-                    logt[c] += np.log(a[c]) + lf
+                    trans[c] *= a[c] * tf
         for c in range(3):
-            contrib[c] = wv[c] * geo_f * np.exp(logt[c]) * li[lt, c] / r2 * inv_spp
+            contrib[c] = wv[c] * geo_f * trans[c] * li[lt, c] / r2 * inv_spp
             if img_on:
                 out_rows[row, lt, c] += contrib[c]
         if gradpass == 0 and jac.shape[0] == 0:
