@@ -131,20 +131,25 @@ def bench_teeth() -> dict:
     start = perturbed_start(truth, seed=1)
     settings = FitSettings()
     lay = ParamLayout(start)
-    # path throughput: one process, 4 spp in both passes
+    # path throughput: 4 spp in both passes
     st = RenderSettings(spp=RECOVERY_SETTINGS["spp"], max_depth=settings.max_depth)
     ids = np.sort(np.random.default_rng(0).choice(54, RECOVERY_SETTINGS["lights_per_iteration"], replace=False))
     _, _, stats = iteration_gradient(start, capture, ids, st, 0, lay)
-    # the acceptance fit's iteration (RECOVERY_SETTINGS: 32-spp pass A, 4-spp pass B, 2 processes)
+    # the acceptance fit's iteration (RECOVERY_SETTINGS: 32-spp pass A, 4-spp pass B; 2 processes where the
+    # numpy tracer traces)
     st_fit = RenderSettings(spp=RECOVERY_SETTINGS["spp"], max_depth=settings.max_depth,
                             workers=RECOVERY_SETTINGS["workers"])
     t0 = time.perf_counter()
     iteration_gradient(start, capture, ids, st_fit, 0, lay, image_spp=RECOVERY_SETTINGS["image_spp"],
                        loss_block=RECOVERY_SETTINGS["loss_block"])
     out["seconds_per_iteration"] = time.perf_counter() - t0
+    from material_structures.core.teeth.path_tracer import _compiled_tracer
+
+    tracer = ("compiled tracer, one thread per core" if _compiled_tracer() is not None
+              else f"numpy tracer, {RECOVERY_SETTINGS['workers']} processes")
+    depth = "all bounces" if settings.max_depth is None else f"max_depth {settings.max_depth}"
     out["iteration_config"] = (f"2 teeth, 3 cameras 96x64 (masked pixels), {len(ids)} of 54 lights, pass A "
-                               f"{RECOVERY_SETTINGS['image_spp']} spp, pass B {st.spp} spp, "
-                               f"{RECOVERY_SETTINGS['workers']} processes")
+                               f"{RECOVERY_SETTINGS['image_spp']} spp, pass B {st.spp} spp, {depth}, {tracer}")
     half = stats["path_vertices"] / 2
     out["path_vertices_per_second"] = {"forward": half / stats["render_seconds"],
                                        "forward_and_gradient": half / stats["gradient_seconds"]}
