@@ -55,6 +55,21 @@ ensure_gl_libs() {  # bpy needs X/GL libraries even headless
   fi
 }
 
+ensure_llvm_lib() {  # Mitsuba's llvm_* variants (Dr.Jit's LLVM backend) load libLLVM; Debian ships it as libllvm19
+  ldconfig -p 2>/dev/null | grep -q "libLLVM.so.19" && return 0
+  local installed=""
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    log "installing libllvm19 (for Mitsuba's llvm_ad_rgb variant)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null && installed=1
+  elif command -v apt-get >/dev/null 2>&1 && command -v sudo >/dev/null 2>&1; then
+    log "installing libllvm19 (for Mitsuba's llvm_ad_rgb variant)"
+    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null \
+      && installed=1
+  fi
+  # not fatal: without it Mitsuba's scalar variants still work (bench teeth-vs-mitsuba needs llvm_ad_rgb)
+  [ -n "$installed" ] || log "libLLVM 19 not found (needed by Mitsuba's llvm_ad_rgb variant): install libllvm19"
+}
+
 stamp="$venv/.material-structures-stamp"
 digest=$(cat "$reqs" pyproject.toml | sha256sum | cut -d' ' -f1)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$digest" ] && [ -x "$venv/bin/python" ]; then
@@ -73,6 +88,7 @@ MSG
 }
 log "using $py ($("$py" --version 2>&1)) for $venv"
 ensure_gl_libs
+if [ "$kind" = main ]; then ensure_llvm_lib; fi
 
 if [ ! -x "$venv/bin/python" ] || ! is_version "$venv/bin/python" "$want"; then
   rm -rf "$venv"
