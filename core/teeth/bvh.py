@@ -148,6 +148,23 @@ def _slab(lo, hi, i, o, ix, iy, iz, tmin, tmax) -> float:
 
 
 @njit(cache=True, inline="always")
+def _push_children(lo, hi, a, o, ix, iy, iz, tmin, tmax, stack, sp) -> int:
+    """Push the children a, a + 1 that the ray enters within (tmin, tmax), the nearer on top; new sp."""
+    b = a + 1
+    ta = _slab(lo, hi, a, o, ix, iy, iz, tmin, tmax)
+    tb = _slab(lo, hi, b, o, ix, iy, iz, tmin, tmax)
+    if ta > tb:
+        a, b, ta, tb = b, a, tb, ta
+    if tb < np.inf and sp < STACK_SIZE:
+        stack[sp] = b
+        sp += 1
+    if ta < np.inf and sp < STACK_SIZE:
+        stack[sp] = a
+        sp += 1
+    return sp
+
+
+@njit(cache=True, inline="always")
 def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
     """(t, u, v) of the ray o + t d with the plane of triangle k; barycentrics (1 - u - v, u, v)."""
     e1x, e1y, e1z = tris[k, 1, 0] - tris[k, 0, 0], tris[k, 1, 1] - tris[k, 0, 1], tris[k, 1, 2] - tris[k, 0, 2]
@@ -188,17 +205,7 @@ def first_hit(nodes, root, tris, o, d, tmin, tmax, stack) -> tuple[int, float]:
                 if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tmin < t < best_t:
                     best, best_t = k, t
             continue
-        a, b = left[i], left[i] + 1
-        ta = _slab(lo, hi, a, o, ix, iy, iz, tmin, best_t)
-        tb = _slab(lo, hi, b, o, ix, iy, iz, tmin, best_t)
-        if ta > tb:
-            a, b, ta, tb = b, a, tb, ta
-        if tb < np.inf and sp < STACK_SIZE:
-            stack[sp] = b
-            sp += 1
-        if ta < np.inf and sp < STACK_SIZE:
-            stack[sp] = a
-            sp += 1
+        sp = _push_children(lo, hi, left[i], o, ix, iy, iz, tmin, best_t, stack, sp)
     return best, best_t
 
 
@@ -320,15 +327,5 @@ def hits_until_stop(nodes, root, tris, stops, o, d, tmin, tmax, stack, buf_tri, 
                     if stops[k]:
                         tlim = t
             continue
-        a, b = left[i], left[i] + 1
-        ta = _slab(lo, hi, a, o, ix, iy, iz, tmin, tlim)
-        tb = _slab(lo, hi, b, o, ix, iy, iz, tmin, tlim)
-        if ta > tb:
-            a, b, ta, tb = b, a, tb, ta
-        if tb < np.inf and sp < STACK_SIZE:
-            stack[sp] = b
-            sp += 1
-        if ta < np.inf and sp < STACK_SIZE:
-            stack[sp] = a
-            sp += 1
+        sp = _push_children(lo, hi, left[i], o, ix, iy, iz, tmin, tlim, stack, sp)
     return n

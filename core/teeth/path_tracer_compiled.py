@@ -205,6 +205,16 @@ def _emit_diag(col0, v, w, g, sx, jmap) -> None:
 
 # ------------------------------------------------------------------------------------------ ray walks
 @njit(cache=True, inline="always")
+def _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds) -> int:
+    """Record crossing k of triangle tri at t and the medium beyond it; returns k + 1."""
+    tri_x[k] = tri
+    t_x[k] = t
+    cosv = normal_s[tri, 0] * d[0] + normal_s[tri, 1] * d[1] + normal_s[tri, 2] * d[2]
+    meds[k + 1] = inside[tri] if cosv < 0.0 else outside[tri]
+    return k + 1
+
+
+@njit(cache=True, inline="always")
 def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t):
     """Crossings along o + t d (see ``path_tracer._Tracer.through``): path mode passes index-matched
     surfaces and stops at the first other one; shadow mode passes every non-opaque surface up to tmax.
@@ -241,11 +251,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
                 return k, tri, t, shadow, casts
             if k >= MAX_CROSSINGS:  # degenerate geometry: give up on this ray
                 return k, -1, np.inf, True, casts
-            tri_x[k] = tri
-            t_x[k] = t
-            cosv = normal_s[tri, 0] * d[0] + normal_s[tri, 1] * d[1] + normal_s[tri, 2] * d[2]
-            meds[k + 1] = inside[tri] if cosv < 0.0 else outside[tri]
-            k += 1
+            k = _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds)
             tcur = t
         if decided:
             return k, -1, np.inf, False, casts
@@ -262,11 +268,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
             return k, tri, t, False, casts
         if k >= MAX_CROSSINGS:  # degenerate geometry: give up on this ray
             return k, -1, np.inf, True, casts
-        tri_x[k] = tri
-        t_x[k] = t
-        cosv = normal_s[tri, 0] * d[0] + normal_s[tri, 1] * d[1] + normal_s[tri, 2] * d[2]
-        meds[k + 1] = inside[tri] if cosv < 0.0 else outside[tri]
-        k += 1
+        k = _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds)
         tcur = t
 
 
