@@ -50,7 +50,10 @@ import time
 
 import numpy as np
 
-LIBLLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
+from ..core.teeth.mitsuba_capture import import_mitsuba as _import_mitsuba
+from ..core.teeth.mitsuba_capture import mitsuba_image, set_light
+from ..core.teeth.mitsuba_capture import mitsuba_scene as _mitsuba_scene
+
 VARIANT = "llvm_ad_rgb"
 SPP = 16
 RUNS = 3
@@ -68,12 +71,13 @@ def _log(msg: str) -> None:
 def import_mitsuba():
     """Mitsuba 3 with the ``llvm_ad_rgb`` variant (Dr.Jit's LLVM backend finds libLLVM 19 through
     DRJIT_LIBLLVM_PATH where Debian's libllvm19 is installed)."""
-    if os.path.exists(LIBLLVM):
-        os.environ.setdefault("DRJIT_LIBLLVM_PATH", LIBLLVM)
-    import mitsuba as mi
+    return _import_mitsuba(VARIANT)[0]
 
-    mi.set_variant(VARIANT)
-    return mi
+
+def mitsuba_scene(mi, sc, cameras, folder: str):
+    """``sc`` as a Mitsuba scene (``core.teeth.mitsuba_capture.mitsuba_scene``, sensors at ``SPP`` samples):
+    (scene, the names of the parameters that map to ours)."""
+    return _mitsuba_scene(mi, sc, cameras, folder, spp=SPP)
 
 
 def bench_scene():
@@ -90,87 +94,6 @@ def bench_scene():
     sc.blend_spread = 1e-5  # sharp enamel/dentin interface, as in Mitsuba
     cams, lights = default_rig(target=scene_target(sc), width=WIDTH, height=HEIGHT, fov_x_deg=4.8)
     return sc, cams, lights
-
-
-def _medium(m) -> dict:
-    """Mitsuba ``homogeneous`` medium of a ``VolumeMaterial`` (sigma_t as an RGB in [0, 1] times ``scale``;
-    ``blendphase``: (1 - beta) HG(g2) + beta HG(g1))."""
-    smax = float(m.sigma_t.max())
-    return {"type": "homogeneous", "sigma_t": {"type": "rgb", "value": (m.sigma_t / smax).tolist()}, "scale": smax,
-            "albedo": {"type": "rgb", "value": m.albedo.tolist()},
-            "phase": {"type": "blendphase", "weight": m.beta,
-                      "phase1": {"type": "hg", "g": m.g2}, "phase2": {"type": "hg", "g": m.g1}}}
-
-
-MEDIUM_PARAMS = ("sigma_t.value.value", "albedo.value.value", "phase_function.weight.value.value",
-                 "phase_function.phase_0.g", "phase_function.phase_1.g")
-CAVITY_PARAM = "cavity.bsdf.brdf_0.reflectance.value"
-
-
-def mitsuba_scene(mi, sc, cameras, folder: str):
-    """``sc`` as a Mitsuba scene (meshes written as PLY into ``folder``): one sensor per camera (``sensor{k}``),
-    one point light ``light`` (moved by ``set_light``), one medium per tooth part and the gums, referenced by the
-    shapes that bound them. Loaded with ``optimize=False``: Mitsuba would otherwise merge the teeth's media
-    (equal values) into one, and their meshes with them (the forward time is the same within 2 %).
-    Returns (scene, the names of the parameters that map to ours)."""
-    from ..core.teeth.mesh import TriMesh, save_mesh
-
-    def ply(name: str, mesh) -> str:
-        path = os.path.join(folder, f"{name}.ply")
-        save_mesh(TriMesh(mesh.vertices, mesh.faces), path)
-        return path
-
-    d: dict = {"type": "scene"}
-    media = []
-    for i, t in enumerate(sc.teeth):
-        enamel, dentin = f"tooth{i}_enamel", f"tooth{i}_dentin"
-        d[enamel], d[dentin] = _medium(t.enamel), _medium(t.dentin)
-        media += [enamel, dentin]
-        d[f"{enamel}_mesh"] = {"type": "ply", "filename": ply(enamel, t.enamel_mesh), "face_normals": True,
-                               "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": enamel}}
-        d[f"{dentin}_mesh"] = {"type": "ply", "filename": ply(dentin, t.dentin_shape.mesh(t.c)), "face_normals": True,
-                               "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": dentin},
-                               "exterior": {"type": "ref", "id": enamel}}
-    if sc.gums is not None:
-        d["gums"] = _medium(sc.gums.material)
-        media.append("gums")
-        d["gums_mesh"] = {"type": "ply", "filename": ply("gums", sc.gums.mesh), "face_normals": True,
-                          "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": "gums"}}
-    keys = [f"{m}.{p}" for m in media for p in MEDIUM_PARAMS]
-    if sc.cavity is not None:
-        d["cavity"] = {"type": "ply", "filename": ply("cavity", sc.cavity.mesh), "face_normals": True,
-                       "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance":
-                                                             {"type": "rgb", "value": sc.cavity.albedo.tolist()}}}}
-        keys.append(CAVITY_PARAM)
-    for k, cam in enumerate(cameras):
-        eye, fwd, up = cam.center, cam.R[2], -cam.R[1]
-        fov = float(np.degrees(2 * np.arctan(0.5 * cam.width / cam.K[0, 0])))
-        d[f"sensor{k}"] = {
-            "type": "perspective", "fov": fov, "fov_axis": "x",
-            "to_world": mi.ScalarTransform4f().look_at(origin=eye.tolist(), target=(eye + fwd).tolist(),
-                                                       up=up.tolist()),
-            "sampler": {"type": "independent", "sample_count": SPP},
-            "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height, "rfilter": {"type": "box"},
-                     "pixel_format": "rgb"}}
-    d["light"] = {"type": "point", "position": [0.0, 0.0, 0.0], "intensity": {"type": "rgb", "value": [1.0] * 3}}
-    return mi.load_dict(d, optimize=False), keys
-
-
-def set_light(mi, params, light) -> None:
-    """Move the scene's point light (opaque values: the rendering kernels are reused, not recompiled)."""
-    import drjit as dr
-
-    pos = mi.Point3f(*(float(v) for v in light.position))
-    val = mi.Color3f(*(float(v) for v in light.intensity))
-    dr.make_opaque(pos, val)
-    params["light.position"] = pos
-    params["light.intensity.value"] = val
-    params.update()
-
-
-def mitsuba_image(mi, scene, sensor: int, spp: int, seed: int, integrator) -> np.ndarray:
-    """One Mitsuba image (H, W, 3) in host memory."""
-    return np.asarray(mi.render(scene, sensor=int(sensor), integrator=integrator, spp=int(spp), seed=int(seed)))
 
 
 def _median_times(fns: list, runs: list[int]) -> list[tuple[float, list[float], float, list[float], object]]:
