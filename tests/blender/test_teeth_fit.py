@@ -4,6 +4,7 @@ result written into the teeth materials and dentin shape keys."""
 from __future__ import annotations
 
 import os
+import subprocess
 import time
 
 import bpy
@@ -127,7 +128,6 @@ def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path)
     (the numpy reference tracer, where numba is missing: 2 workers; a 64-spp pass A on 192 pixels is 3
     chunks of paths, so every pass A forks; the compiled tracer runs threads in the fit process)."""
     from material_structures.addon.teeth.fit_job import FitJob
-    from material_structures.core.teeth.path_tracer import _compiled_tracer
 
     t0 = time.perf_counter()
     job = FitJob(capture_dir, str(tmp_path / "fit"), iterations=10000, init="scene", lights_per_iteration=1,
@@ -141,7 +141,9 @@ def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path)
     assert job.done_iterations >= 2 and job.loss is not None and job.loss > 0
     assert 0.0 < job.progress < 0.01
     assert "iteration" in job.status_text()
-    if os.path.isdir("/proc") and _compiled_tracer() is None:
+    # the fit's interpreter (python_executable: this one or the checkout's .venv) decides the tracer
+    compiled = subprocess.run([job.cmd[0], "-c", "import numba"], capture_output=True).returncode == 0
+    if os.path.isdir("/proc") and not compiled:
         deadline = time.time() + 60  # catch a moment when the fit has forked its workers
         while len(_live_in_group(job.proc.pid)) < 2 and time.time() < deadline:
             time.sleep(0.01)
