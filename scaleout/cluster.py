@@ -11,7 +11,8 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, thre
     """``Client`` for ``scheduler`` (``tcp://host:8786``) or a local cluster of ``n_workers`` processes.
 
     The local default has one single-threaded worker process per core, so numpy's own threads do
-    not oversubscribe the machine.
+    not oversubscribe the machine; the compiled teeth tracer (numba) in each worker gets as many
+    threads as the worker has (it would otherwise start one per core in every worker).
     """
     from distributed import Client, LocalCluster
 
@@ -27,6 +28,7 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, thre
         n_workers=n_workers,
         threads_per_worker=threads_per_worker,
         processes=True,
+        env={"NUMBA_NUM_THREADS": str(threads_per_worker)},
         dashboard_address=None,
         silence_logs=40,
     ) as cluster, Client(cluster) as client:
