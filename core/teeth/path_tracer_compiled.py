@@ -36,10 +36,9 @@ from .bvh import (
     ray_triangle,
 )
 from .compiled_scene import KIND_DIELECTRIC, KIND_INDEX_MATCHED, KIND_OPAQUE, MED_AIR, MED_DENTIN, CompiledScene
+from .path_tracer import MAX_CROSSINGS, MAX_PATH_VERTICES  # the reference's limits, the same estimator
 from .ray_queries import RAY_EPS
 
-MAX_CROSSINGS = 12
-MAX_PATH_VERTICES = 1000
 # l(q) = (1 + tanh(q / 2 s)) / 2 is 1 in float64 from q / s = 38.2 on (tanh rounds to 1 beyond 19.1):
 # the dentin distance is searched only this many spreads far
 BLEND_REACH = 40.0
