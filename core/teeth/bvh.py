@@ -148,6 +148,19 @@ def _slab(lo, hi, i, o, ix, iy, iz, tmin, tmax) -> float:
 
 
 @njit(cache=True, inline="always")
+def _start(lo, hi, root, o, d, tmin, tmax, stack) -> tuple[float, float, float, int]:
+    """Inverse direction of a ray and its traversal stack holding the root when the ray enters it:
+    (ix, iy, iz, stack size)."""
+    ix = 1.0 / d[0] if d[0] != 0.0 else 1e300
+    iy = 1.0 / d[1] if d[1] != 0.0 else 1e300
+    iz = 1.0 / d[2] if d[2] != 0.0 else 1e300
+    if _slab(lo, hi, root, o, ix, iy, iz, tmin, tmax) < np.inf:
+        stack[0] = root
+        return ix, iy, iz, 1
+    return ix, iy, iz, 0
+
+
+@njit(cache=True, inline="always")
 def _push_children(lo, hi, a, o, ix, iy, iz, tmin, tmax, stack, sp) -> int:
     """Push the children a, a + 1 that the ray enters within (tmin, tmax), the nearer on top; new sp."""
     b = a + 1
@@ -187,14 +200,8 @@ def first_hit(nodes, root, tris, o, d, tmin, tmax, stack) -> tuple[int, float]:
     """Nearest triangle hit by o + t d with tmin < t < tmax: (triangle or -1, t). ``stack``: int64
     scratch of ``STACK_SIZE``."""
     lo, hi, left, start, count, order = nodes
-    ix = 1.0 / d[0] if d[0] != 0.0 else 1e300
-    iy = 1.0 / d[1] if d[1] != 0.0 else 1e300
-    iz = 1.0 / d[2] if d[2] != 0.0 else 1e300
+    ix, iy, iz, sp = _start(lo, hi, root, o, d, tmin, tmax, stack)
     best, best_t = -1, tmax
-    sp = 0
-    if _slab(lo, hi, root, o, ix, iy, iz, tmin, best_t) < np.inf:
-        stack[0] = root
-        sp = 1
     while sp > 0:
         sp -= 1
         i = stack[sp]
@@ -302,16 +309,10 @@ def hits_until_stop(nodes, root, tris, stops, o, d, tmin, tmax, stack, buf_tri, 
     ``buf_tri``, ``buf_t``; a few beyond the final stopping hit may be among them. Returns the number
     of hits, which exceeds the buffer when it overflowed (the extra ones are not stored)."""
     lo, hi, left, start, count, order = nodes
-    ix = 1.0 / d[0] if d[0] != 0.0 else 1e300
-    iy = 1.0 / d[1] if d[1] != 0.0 else 1e300
-    iz = 1.0 / d[2] if d[2] != 0.0 else 1e300
+    ix, iy, iz, sp = _start(lo, hi, root, o, d, tmin, tmax, stack)
     cap = buf_t.shape[0]
     n = 0
     tlim = tmax
-    sp = 0
-    if _slab(lo, hi, root, o, ix, iy, iz, tmin, tlim) < np.inf:
-        stack[0] = root
-        sp = 1
     while sp > 0:
         sp -= 1
         i = stack[sp]

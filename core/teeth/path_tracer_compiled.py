@@ -762,7 +762,6 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
     """Trace every row (traced pixel) x spp in N_BLOCKS row blocks in parallel."""
     fxy, rot, center, width = cams
     n_rows = cam_of.shape[0]
-    n_blocks = grad_blocks.shape[0] if want_grad else counters.shape[0]
     inv_spp = 1.0 / spp
     for blk in prange(counters.shape[0]):
         r0 = blk * n_rows // counters.shape[0]
@@ -807,8 +806,7 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                     nv, ns, nc, cap, _ = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth,
                                                      lp, li, inv_spp, row, cam, pix, yes, mode[0], out_rows, adj, ab, g,
                                                      jac, jmap, n_j, scratch, rs)
-                else:
-                    ab[:, :] = 0.0
+                else:  # ab is zero here: zeroed once, and after each replay as far as it was used
                     nv, ns, nc, cap, lv = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette,
                                                       rr_depth, lp, li, inv_spp, row, cam, pix, yes, mode[1], out_rows,
                                                       adj, ab, g, jac, jmap, n_j, scratch, rs)
@@ -817,11 +815,13 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                             ab[lvl, c] += ab[lvl + 1, c]
                     _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp,
                                 row, cam, pix, no, mode[2], out_rows, adj, ab, g, jac_off, jmap, n_j, scratch, rs)
+                    for lvl in range(lv + 1):
+                        for c in range(3):
+                            ab[lvl, c] = 0.0
                 counters[blk, 0] += nv
                 counters[blk, 1] += ns
                 counters[blk, 2] += nc
                 counters[blk, 3] += cap
-    return n_blocks
 
 
 def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, pix_of: np.ndarray, spp: int,
