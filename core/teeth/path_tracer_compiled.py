@@ -58,7 +58,7 @@ def _trees(cs: CompiledScene) -> tuple:
         dnodes, droots = TriangleBVH.merge(dentin_trees)
         if len(_TREES) >= 8:
             _TREES.pop(next(iter(_TREES)))
-        _TREES[key] = (TriangleBVH(cs.tris_s).arrays(), dnodes, droots)
+        _TREES[key] = (TriangleBVH(cs.tris_s).ray_arrays(cs.tris_s), dnodes, droots)
     return _TREES[key]
 
 
@@ -221,13 +221,13 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
     Fills tri_x, t_x (crossings), meds (medium of each piece); returns (k, end_tri, end_t, blocked, casts).
     One traversal gathers the hits up to the first stopping surface; where that cannot decide (buffer
     overflow, a stopping hit within RAY_EPS of a crossing) the walk goes on one ray cast per crossing."""
-    tris_s, normal_s, kind, inside, outside = geo[0], geo[2], geo[3], geo[4], geo[5]
-    nodes, stops = geo[11:17], (geo[24] if shadow else geo[25])
+    normal_s, kind, inside, outside = geo[2], geo[3], geo[4], geo[5]
+    nodes, stops = geo[11:15], (geo[22] if shadow else geo[23])
     k = 0
     tcur = 0.0
     meds[0] = med0
     casts = 1
-    n = hits_until_stop(nodes, 0, tris_s, stops, o, d, RAY_EPS, tmax, stack, buf_tri, buf_t)
+    n = hits_until_stop(nodes, stops, o, d, RAY_EPS, tmax, stack, buf_tri, buf_t)
     if n <= buf_t.shape[0]:
         for i in range(1, n):  # insertion sort by distance
             ti, ki = buf_t[i], buf_tri[i]
@@ -255,7 +255,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
         if decided:
             return k, -1, np.inf, False, casts
     while True:
-        tri, t = first_hit(nodes, 0, tris_s, o, d, tcur + RAY_EPS, tmax, stack)
+        tri, t = first_hit(nodes, o, d, tcur + RAY_EPS, tmax, stack)
         casts += 1
         if tri < 0:
             return k, -1, np.inf, False, casts
@@ -276,7 +276,7 @@ def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
     """Crossing distances on the evaluation geometry, ordered and within [0, upper]; which were clipped
     (``path_tracer._Tracer.eval_crossings``)."""
     tris_e, kind = geo[1], geo[3]
-    if geo[26][0]:  # evaluation geometry = sampling geometry: the distances are the sampled ones, and a
+    if geo[24][0]:  # evaluation geometry = sampling geometry: the distances are the sampled ones, and a
         for j in range(k):  # crossing beyond ``upper`` is never read
             t_e[j] = t_x[j]
             clipped[j] = False
@@ -397,7 +397,7 @@ def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     """Signed distance to the tooth's dentin on the sampling and evaluation geometry, dq_e/dc into dqdc
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
     0 or 1 to the last bit and dl/dq is 0), returns +-reach for both and dq/dc = 0."""
-    tris_s, tris_e, tri_delta, dnodes, droots = geo[0], geo[1], geo[10], geo[17:23], geo[23]
+    tris_s, tris_e, tri_delta, dnodes, droots = geo[0], geo[1], geo[10], geo[15:21], geo[21]
     tri, dist = closest_triangle(dnodes, droots[tooth], tris_s, p, stack, bary, reach)
     if tri < 0:
         dqdc[:] = 0.0
@@ -514,39 +514,30 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
     return n_shadow, casts
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp, row,
-                cam, pix, img_on, gradpass, out_rows, adj, ab, grad, jac, jmap, n_j, scratch, rs):
+                cam, pix, img_on, gradpass, out_rows, adj, ab, grad, jac, jmap, scratch, path_vecs, rs):
     """One camera path (``path_tracer._trace_chunk`` for a single path). Returns (vertices, shadow rays,
-    casts, capped, levels used)."""
+    casts, capped, levels used). Allocates nothing (its vectors are the caller's ``path_vecs``), so it runs
+    without reference counting."""
     sigma_s, sigma_e, med_kind, med_tooth, col_sigma, med_e_of, med_d_of = med[:7]
     alb_es, alb_ds, alb_ee, alb_de, ph_es, ph_ds, ph_ee, ph_de = med[7:15]
     col_alb_e, col_alb_d, c_col, rho_s, rho_e, col_rho, spread = med[15], med[16], med[19], med[20], med[21], \
         med[22], med[23]
     kind, normal_s, eta = geo[3], geo[2], geo[6]
     tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t = scratch
-    s_run = np.zeros((n_j, 3))
-    ones = np.ones(3)
+    s_run, vecs = path_vecs
+    o, d, x, nd, nrm, logf, logp, logfs, wv, dqdc, mix_e, mix_s, tau_cum, tau_at, sig_k, tmp, ones = vecs
+    s_run[:] = 0.0
     use_g = gradpass == 2
     use_s = jac.shape[0] > 0
     g_lvl = grad if use_g else emp1
     sx_lvl = s_run if use_s else emp2
-    o = o0.copy()
-    d = d0.copy()
-    x = np.empty(3)
-    nd = np.empty(3)
-    nrm = np.empty(3)
-    logf = np.zeros(3)
-    logp = np.zeros(3)
-    logfs = np.zeros(3)
-    wv = np.empty(3)
-    dqdc = np.zeros(3)
-    mix_e = np.empty(3)
-    mix_s = np.empty(3)
-    tau_cum = np.empty(3)
-    tau_at = np.empty(3)
-    sig_k = np.empty(3)
-    tmp = np.empty(3)
+    for c in range(3):
+        o[c] = o0[c]
+        d[c] = d0[c]
+        logf[c] = logp[c] = logfs[c] = dqdc[c] = 0.0
+        ones[c] = 1.0
     _seed(rs, seed, seed_path)
     _rand(rs)  # the camera jitter (drawn by the caller's formula): keep the stream aligned
     _rand(rs)
@@ -772,6 +763,10 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                    np.empty(4), np.empty(3), np.empty((n_j, 3)), np.empty((0, 3)), np.empty(0),
                    np.empty(STACK_SIZE, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
                    np.empty(HIT_BUFFER))
+        vecs = np.empty((17, 3))
+        path_vecs = (np.empty((n_j, 3)), (vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5], vecs[6], vecs[7],
+                                          vecs[8], vecs[9], vecs[10], vecs[11], vecs[12], vecs[13], vecs[14],
+                                          vecs[15], vecs[16]))
         jac_off = np.empty((0, 1, 3, 1))
         # the passes (0 image, 1 image + vertex contributions, 2 replay) as run-time values: literal
         # arguments would compile a copy of _trace_path for each
@@ -805,16 +800,16 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                 if not want_grad:
                     nv, ns, nc, cap, _ = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth,
                                                      lp, li, inv_spp, row, cam, pix, yes, mode[0], out_rows, adj, ab, g,
-                                                     jac, jmap, n_j, scratch, rs)
+                                                     jac, jmap, scratch, path_vecs, rs)
                 else:  # ab is zero here: zeroed once, and after each replay as far as it was used
                     nv, ns, nc, cap, lv = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette,
                                                       rr_depth, lp, li, inv_spp, row, cam, pix, yes, mode[1], out_rows,
-                                                      adj, ab, g, jac, jmap, n_j, scratch, rs)
+                                                      adj, ab, g, jac, jmap, scratch, path_vecs, rs)
                     for lvl in range(lv, -1, -1):  # suffix sums R_L = sum_{b >= L} A_b
                         for c in range(3):
                             ab[lvl, c] += ab[lvl + 1, c]
                     _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp,
-                                row, cam, pix, no, mode[2], out_rows, adj, ab, g, jac_off, jmap, n_j, scratch, rs)
+                                row, cam, pix, no, mode[2], out_rows, adj, ab, g, jac_off, jmap, scratch, path_vecs, rs)
                     for lvl in range(lv + 1):
                         for c in range(3):
                             ab[lvl, c] = 0.0

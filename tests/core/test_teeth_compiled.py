@@ -30,7 +30,7 @@ def test_bvh_first_hit_and_gathered_hits_match_brute_force():
     hits gathered up to the first stopping triangle are exactly the brute-force hits up to it."""
     cs = CompiledScene(make_scene(n_teeth=2, resolution=12))
     tris = cs.tris_s
-    nodes = TriangleBVH(tris).arrays()
+    nodes = TriangleBVH(tris).ray_arrays(tris)
     o, d = _rays(tris, 1000)
     ref_tri = cs.caster._brute(o, d, None)
     stack = np.empty(64, dtype=np.int64)
@@ -38,7 +38,7 @@ def test_bvh_first_hit_and_gathered_hits_match_brute_force():
     buf_tri, buf_t = np.empty(64, dtype=np.int64), np.empty(64)
     n_multi = 0
     for i in range(len(o)):
-        tri, t = first_hit(nodes, 0, tris, o[i], d[i], 0.0, np.inf, stack)
+        tri, t = first_hit(nodes, o[i], d[i], 0.0, np.inf, stack)
         assert tri == ref_tri[i]
         # brute force: all hits along the ray, sorted
         e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
@@ -56,7 +56,7 @@ def test_bvh_first_hit_and_gathered_hits_match_brute_force():
         first_stop = next((k for k in order if stops[k]), None)
         t_stop = np.inf if first_stop is None else tt[first_stop]
         want = {int(k) for k in order if tt[k] <= t_stop}
-        n = hits_until_stop(nodes, 0, tris, stops, o[i], d[i], 0.0, np.inf, stack, buf_tri, buf_t)
+        n = hits_until_stop(nodes, stops, o[i], d[i], 0.0, np.inf, stack, buf_tri, buf_t)
         got = {int(k) for k, tk in zip(buf_tri[:n], buf_t[:n], strict=True) if tk <= t_stop + 1e-9}
         assert got == want
         n_multi += len(want) > 1
