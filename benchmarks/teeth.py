@@ -13,22 +13,23 @@ from __future__ import annotations
 import os
 import sys
 import time
+from dataclasses import asdict
 
 import numpy as np
 
-from ..core.teeth.fit_presets import FIT_PRESETS
+from ..core.teeth.fit_settings import FitSettings
 
 RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.dentin.albedo", "tooth*.c")
-# the acceptance fit's settings (besides free): 6 random lights per iteration; pass A
-# (the image in the adjoint 2 (C_A - C_ref)) at 32 spp, pass B (the gradient) at 4 spp, both traced
-# by 2 processes. Near the optimum the gradient's variance is mostly pass A's per-pixel noise times
+# the fit's default settings (besides free; docs/teeth-fit.md has the measurements): 6 random lights
+# per iteration; pass A (the image in the adjoint 2 (C_A - C_ref)) at 32 spp, pass B (the gradient) at 4 spp,
+# both traced by 2 processes. Near the optimum the gradient's variance is mostly pass A's per-pixel noise times
 # the pixel's derivative: at the stall point of the earlier anchored fits (8-spp anchor image of all
 # lights every 10 iterations, 4-spp brackets), a fresh 32-spp pass A has about 2x lower gradient
 # variance per iteration even before counting the anchor's own noise, which the anchored gradients
 # shared for 10 iterations; it costs about 2.6x the CPU time per iteration (16.4 s in 2 processes
 # against 12.6 s in one). From iteration 80 the materials step along the damped inverse Gauss-Newton
 # matrix (estimated every 40 iterations; gauss_newton.py), which follows the valley where enamel and
-# dentin absorption trade off; Adam alone crept along it (README, "Why Adam stalls"). The loss is the L2
+# dentin absorption trade off; Adam alone crept along it (docs/teeth-fit.md). The loss is the L2
 # loss of 8 x 8 box-filtered images (loss_block 8): near the optimum most of the gradient's noise is the
 # product of the residual's per-pixel noise and pass B's per-pixel derivative noise, which averages over
 # a tile while the smooth signal does not; measured at the truth with c moved by 0.1 (8 gradients each),
@@ -37,8 +38,8 @@ RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.d
 # made the steps along the valley's flattest directions 3-10 % of Newton's, divided by 8), damped by
 # 0.01; the guard reacts to a doubled loss only (windows vary by +-10 % from noise). The dentin
 # coefficients keep Adam and random-walk along their valley with the dentin materials; the result is the
-# mean of the last 30 % of 300 iterations (average_tail), over which that walk averages out (README)
-RECOVERY_SETTINGS = {**FIT_PRESETS["acceptance"], "workers": 2}
+# mean of the last 30 % of 300 iterations (average_tail), over which that walk averages out
+RECOVERY_SETTINGS = {**asdict(FitSettings()), "workers": 2}
 
 
 def recovery_errors(fit_scene, truth) -> dict:
@@ -79,7 +80,7 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     truth, capture = acceptance_setup(synth_spp, workers=RECOVERY_SETTINGS["workers"])
     out: dict = {"synth_seconds": time.perf_counter() - t0}
     start = perturbed_start(truth, seed=seed, sigma_factor=0.25, kappa_shift=0.2)
-    settings = FitSettings(**{**RECOVERY_SETTINGS, "iterations": iterations}, free=RECOVERY_FREE)
+    settings = FitSettings(**{**RECOVERY_SETTINGS, "iterations": iterations, "free": RECOVERY_FREE})
     n_done, best = 0, start
     t0 = time.perf_counter()
 
@@ -107,7 +108,7 @@ def run_recovery(iterations: int | None = None, synth_spp: int | None = None, se
     out.update(recovery_errors(result, truth))
     out["recovery_best_loss_params"] = recovery_errors(best, truth)
     out["recovery_start"] = recovery_errors(start, truth)
-    settings_text = {k: v for k, v in RECOVERY_SETTINGS.items() if k != "iterations"}
+    settings_text = {k: v for k, v in RECOVERY_SETTINGS.items() if k not in ("iterations", "free")}
     out["recovery_config"] = (f"capture {synth_spp} spp; perturbed start (sigma_t x exp(+-0.25), kappa +-0.2, "
                               "c = 0); free: enamel/dentin sigma_t, albedo, c of both teeth; "
                               f"{iterations} iterations ({RECOVERY_SETTINGS.get('optimiser', 'adam')}), "

@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m material_structures",
         description="Material Structures: pile fabric, scratched metal and teeth for Blender/Cycles.",
     )
+    parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in SUBCOMMANDS:
         try:
@@ -43,8 +44,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+    except (ValueError, OSError, RuntimeError) as exc:
+        # a user's mistake (a bad value, a file that is missing, unreadable, a directory, read-only, ...):
+        # one line; --debug shows the traceback
         if getattr(args, "debug", False):
             raise
-        print(f"error: {exc}", file=sys.stderr)
+        text = str(exc) if not isinstance(exc, OSError) or exc.filename is None else \
+            f"{exc.filename}: {exc.strerror or exc}"
+        print(f"error: {text}", file=sys.stderr)
         return 2

@@ -1,7 +1,7 @@
 """``teeth``: synthetic captures, appearance fitting and rendering of the teeth model (chapter 5).
 
     python -m material_structures teeth synth OUT [--teeth 2] [--width 96 --height 64] [--spp 16] [--renderer mitsuba]
-    python -m material_structures teeth fit CAPTURE_DIR --out FIT_DIR [--iterations 100] [--resume]
+    python -m material_structures teeth fit CAPTURE_DIR --out FIT_DIR [--iterations 300] [--resume]
     python -m material_structures teeth render SCENE_JSON CAPTURE_DIR --out DIR
     python -m material_structures teeth sensitivity CAPTURE_DIR (--capture-spp N | --noise-variance V)
 """
@@ -12,13 +12,9 @@ import argparse
 import json
 import os
 
-from ..core.teeth.fit_presets import FIT_PRESETS
+from ..core.teeth.fit_settings import FitSettings
 
-# ``teeth fit``'s defaults for the settings a --preset may set (flag None = not given on the command line)
-FIT_CLI_DEFAULTS = {"iterations": 100, "lr": 0.05, "lr_decay": 0.02, "spp": 1, "image_spp": 0,
-                    "lights_per_iteration": 18, "loss_block": 1, "optimiser": "adam", "gn_lr": 0.3,
-                    "gn_start": 0, "gn_every": 50, "gn_passes": 4, "gn_damping": 0.03, "gn_estimator": "per-pass",
-                    "gn_c_lr": 1.0, "gn_guard_rise": 0.25, "average_tail": 0.0}
+FIT_DEFAULTS = FitSettings()  # the defaults of ``teeth fit``: the fit's own, no second table
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -43,99 +39,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(eta 1, a_t 1, sharp enamel/dentin blend spread 1e-5 mm) and scene.json is that scene")
     s.set_defaults(func=run_synth)
 
-    f = tsub.add_parser("fit", help="fit the appearance model to a capture folder")
+    f = tsub.add_parser("fit", help="fit the appearance model to a capture folder",
+                        description="Fit enamel, dentin and gums to a capture with the best measured settings "
+                                    "(about 35 minutes for 300 iterations of a 3-camera, 54-light capture on 2 "
+                                    "cores). Writes scene_fit.json (the result), fit_report.json and check.png "
+                                    "(the result against lights the fit never used), loss.json, loss.png, "
+                                    "scene_best.json and checkpoint.json.")
     f.add_argument("capture", help="capture folder with capture.json, images, masks and scene.json")
-    f.add_argument("--out", required=True,
-                   help="fit folder: checkpoint.json, loss.json, loss.png, scene_fit.json, scene_best.json")
+    f.add_argument("--out", required=True, help="fit folder (created if missing)")
     f.add_argument("--scene", default=None, help="scene JSON with geometry/start (default CAPTURE/scene.json)")
     f.add_argument("--init", choices=("literature", "scene", "perturbed"), default="literature",
-                   help="start point: literature-table search (thesis), the scene's values, or a "
-                        "perturbation of them (recovery tests)")
-    f.add_argument("--init-error", choices=("scale-invariant", "absolute"), default="scale-invariant",
-                   help="literature search error: scale-invariant (thesis; uncalibrated exposure) or absolute "
-                        "(calibrated light intensities and camera)")
-    acceptance = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in FIT_PRESETS["acceptance"].items())
-    f.add_argument("--preset", choices=tuple(FIT_PRESETS), default="thesis",
-                   help="named settings: thesis (the defaults below: Adam, 1 spp, 18 lights) or acceptance (the "
-                        f"recovery acceptance fit's: {acceptance}); flags given explicitly win over the preset")
-    f.add_argument("--iterations", type=int, default=None,
-                   help=f'"homogeneous" phase iterations (default {FIT_CLI_DEFAULTS["iterations"]})')
-    f.add_argument("--textured-iterations", type=int, default=0, help='"textured" phase iterations')
-    f.add_argument("--texture-size", type=int, default=8)
-    f.add_argument("--lr", type=float, default=None,
-                   help=f"Adam's learning rate (default {FIT_CLI_DEFAULTS['lr']})")
-    f.add_argument("--lr-decay", type=float, default=None,
-                   help=f"lr_n = lr / (1 + decay n) (default {FIT_CLI_DEFAULTS['lr_decay']})")
-    f.add_argument("--spp", type=int, default=None,
-                   help=f"samples per pixel of the gradient pass (default {FIT_CLI_DEFAULTS['spp']})")
-    f.add_argument("--image-spp", type=int, default=None,
-                   help="samples per pixel of pass A, the image in the loss gradient's adjoint (default 0 = --spp); "
-                        "near the optimum its noise dominates the gradient's (the acceptance fit uses 32 with --spp 4)")
-    f.add_argument("--lights-per-iteration", type=int, default=None,
-                   help=f"random lights per iteration (default {FIT_CLI_DEFAULTS['lights_per_iteration']})")
-    f.add_argument("--max-depth", type=int, default=None,
-                   help="stop every path after this many bounces (an experiment: biased dark); default all bounces")
-    f.add_argument("--anchor-spp", type=int, default=0,
-                   help="image control variate: spp of an anchor image of all lights (0 = off); cuts the "
-                        "gradient noise of pass A, see core/teeth/optimise.py Anchor")
-    f.add_argument("--anchor-every", type=int, default=20, help="iterations between anchor re-renders")
-    f.add_argument("--loss-block", type=int, default=None,
-                   help="L2 loss of box-filtered images over N x N pixel tiles (default 1 = per pixel, as in the "
-                        "thesis); averages the gradient's pass A x pass B noise over each tile (8: 7-18x lower "
-                        "noise in the dentin coefficients' gradient on the acceptance capture)")
-    f.add_argument("--domain", choices=("thesis", "absorption"), default="thesis",
-                   help="optimiser variables of sigma_t/albedo: thesis (log sigma_t, log10(1 - albedo)) or "
-                        "absorption (log sigma_s, log sigma_a)")
-    f.add_argument("--optimiser", choices=("adam", "gauss-newton"), default=None,
-                   help="adam (thesis, the default) or gauss-newton: the material parameters step along the damped "
-                        "inverse Gauss-Newton matrix (estimated from 1-spp Jacobian passes of all lights; the dentin "
-                        "coefficients keep Adam), which follows the valley where enamel and dentin absorption "
-                        "trade off; the acceptance fit (--preset acceptance) runs Adam first, then gauss-newton "
-                        "(README, 'Why Adam stalls'); see core/teeth/gauss_newton.py")
-    f.add_argument("--gn-lr", type=float, default=None,
-                   help=f"gauss-newton: fraction of the Gauss-Newton step (default {FIT_CLI_DEFAULTS['gn_lr']})")
-    f.add_argument("--gn-start", type=int, default=None,
-                   help="gauss-newton: Adam iterations before Gauss-Newton takes over (far from the optimum the "
-                        "linearised model misleads; default 0)")
-    f.add_argument("--gn-every", type=int, default=None,
-                   help=f"gauss-newton: iterations between matrix estimates (default {FIT_CLI_DEFAULTS['gn_every']})")
-    f.add_argument("--gn-passes", type=int, default=None,
-                   help=f"gauss-newton: 1-spp Jacobian passes per estimate (default {FIT_CLI_DEFAULTS['gn_passes']})")
-    f.add_argument("--gn-damping", type=float, default=None,
-                   help="gauss-newton: Levenberg-Marquardt damping, relative to the matrix diagonal (default "
-                        f"{FIT_CLI_DEFAULTS['gn_damping']})")
-    f.add_argument("--gn-estimator", choices=("per-pass", "pooled"), default=None,
-                   help="gauss-newton: per-pass (the mean of the passes' J^T J; its Monte Carlo bias adds curvature "
-                        "and shortens the steps along the flattest directions 6-16x on the acceptance capture) or "
-                        "pooled ((mean J)^T (mean J), that bias divided by the passes; default "
-                        f"{FIT_CLI_DEFAULTS['gn_estimator']})")
-    f.add_argument("--gn-c-lr", type=float, default=None,
-                   help="gauss-newton: factor on the dentin coefficients' Adam learning rate while Gauss-Newton steps "
-                        f"the materials (default {FIT_CLI_DEFAULTS['gn_c_lr']})")
-    f.add_argument("--gn-guard-window", type=int, default=10,
-                   help="gauss-newton: iterations per loss window of the divergence guard (a window whose mean loss "
-                        "rises more than --gn-guard-rise above the best one's goes back to the best window's mean "
-                        "iterate and raises the damping 4x); 0 = no guard")
-    f.add_argument("--gn-guard-rise", type=float, default=None,
-                   help="gauss-newton: relative loss rise that counts as a divergence (default "
-                        f"{FIT_CLI_DEFAULTS['gn_guard_rise']})")
-    f.add_argument("--average-tail", type=float, default=None,
-                   help="result = the mean of the iterates of this last fraction of the iterations (Polyak "
-                        "averaging; near the optimum it is closer than any one iterate or the best-loss one); 0 = "
-                        f"the best-loss parameters as in the thesis (default {FIT_CLI_DEFAULTS['average_tail']}; "
-                        "scene_best.json has the best-loss parameters either way)")
+                   help="start point: literature-table search (default, as the thesis), the scene's values, or "
+                        "a perturbation of them")
+    f.add_argument("--iterations", type=int, default=FIT_DEFAULTS.iterations,
+                   help=f"iterations (default {FIT_DEFAULTS.iterations}; fewer: a quicker, rougher fit)")
+    f.add_argument("--textured-iterations", type=int, default=FIT_DEFAULTS.textured_iterations,
+                   help="then this many iterations with the enamel transmittance as a texture (default "
+                        f"{FIT_DEFAULTS.textured_iterations})")
+    f.add_argument("--held-out-lights", type=int, default=FIT_DEFAULTS.held_out_lights,
+                   help=f"lights left out of the fit to check it by (default {FIT_DEFAULTS.held_out_lights})")
     f.add_argument("--free", default=None,
-                   help="comma-separated parameter name patterns to optimise (default: all volume, a_t, c)")
-    f.add_argument("--seed", type=int, default=0)
-    f.add_argument("--resume", action="store_true", help="continue from FIT_DIR/checkpoint.json")
+                   help="comma-separated parameter name patterns to fit (default: every material, a_t and the "
+                        "dentin shape)")
+    f.add_argument("--seed", type=int, default=FIT_DEFAULTS.seed)
+    f.add_argument("--resume", action="store_true", help="continue an interrupted fit from FIT_DIR")
     f.add_argument("--scheduler", default=None,
                    help="Dask scheduler address (tcp://host:8786): per-view gradient renders become tasks there")
     f.add_argument("--dask-workers", type=int, default=None,
                    help="processes of the local Dask cluster (default: CPU count)")
     f.add_argument("--no-dask", action="store_true", help="render in this process instead of on Dask")
-    f.add_argument("--workers", type=int, default=1,
-                   help="with --no-dask and no numba installed: forked processes that trace each pass (the "
-                        "compiled tracer uses every core by itself)")
+    f.add_argument("--workers", type=int, default=FIT_DEFAULTS.workers,
+                   help="with --no-dask where numba is missing: processes that trace each pass")
     f.add_argument("--no-progress", action="store_true")
     f.set_defaults(func=run_fit)
 
@@ -195,42 +129,45 @@ def run_synth(args: argparse.Namespace) -> int:
     return 0
 
 
-def fit_preset_settings(args: argparse.Namespace) -> dict:
-    """FitSettings values of FIT_CLI_DEFAULTS' keys: the flag where given, else the preset's, else the default."""
-    preset = FIT_PRESETS[args.preset]
-    return {k: getattr(args, k) if getattr(args, k) is not None else preset.get(k, default)
-            for k, default in FIT_CLI_DEFAULTS.items()}
+def fit_settings(args: argparse.Namespace) -> FitSettings:
+    """The FitSettings of a ``teeth fit`` command line: FitSettings' defaults, with the flags given."""
+    from dataclasses import replace
+
+    free = tuple(p.strip() for p in args.free.split(",") if p.strip()) if args.free else FIT_DEFAULTS.free
+    return replace(FIT_DEFAULTS, iterations=args.iterations, textured_iterations=args.textured_iterations,
+                   held_out_lights=args.held_out_lights, seed=args.seed, free=free, workers=args.workers)
 
 
 def run_fit(args: argparse.Namespace) -> int:
+    import time
+
     from tqdm import tqdm
 
     from ..core.teeth.capture import Capture
+    from ..core.teeth.fit_checkpoint import save_json
+    from ..core.teeth.fit_report import held_out_check, plot_loss
     from ..core.teeth.literature_init import literature_start, literature_table
-    from ..core.teeth.optimise import DEFAULT_FREE, FitSettings, fit, plot_loss
+    from ..core.teeth.optimise import fit, held_out_light_ids
     from ..core.teeth.scene import load_scene
     from ..core.teeth.synthetic import perturbed_start
 
+    t_start = time.perf_counter()
     cap = Capture.load(args.capture)
     scene_path = args.scene or os.path.join(args.capture, "scene.json")
     scene = load_scene(scene_path)
     if len(cap.cameras) == 0 or len(cap.lights) == 0:
         raise ValueError("the capture has no cameras or lights")
-    free = tuple(p.strip() for p in args.free.split(",")) if args.free else DEFAULT_FREE
-    preset = fit_preset_settings(args)
-    fs = FitSettings(textured_iterations=args.textured_iterations,
-                     texture_size=args.texture_size, max_depth=args.max_depth, seed=args.seed,
-                     free=free, anchor_spp=args.anchor_spp, anchor_every=args.anchor_every,
-                     domain=args.domain, workers=args.workers, gn_guard_window=args.gn_guard_window, **preset)
+    fs = fit_settings(args)
     if args.workers != 1 and not args.no_dask:
         raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
+    if args.no_dask and args.scheduler:
+        raise ValueError("--no-dask and --scheduler exclude each other")
     if not args.resume:
         if args.init == "literature":
             table, gs = literature_table()
             n_points = len(table) * len(gs)
             with tqdm(total=n_points, desc="init", unit="point", disable=args.no_progress) as init_bar:
-                scene = literature_start(scene, cap, scale_invariant=args.init_error == "scale-invariant",
-                                         progress=init_bar.update)
+                scene = literature_start(scene, cap, progress=init_bar.update)
         elif args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
     total = fs.iterations + fs.textured_iterations
@@ -249,8 +186,6 @@ def run_fit(args: argparse.Namespace) -> int:
     if args.resume and bar is not None:
         with open(os.path.join(args.out, "checkpoint.json")) as f:
             bar.update(len(json.load(f)["log"]))
-    if args.no_dask and args.scheduler:
-        raise ValueError("--no-dask and --scheduler exclude each other")
     if not args.no_dask:
         from ..scaleout.cluster import dask_client
         from ..scaleout.teeth import DaskGradient
@@ -263,10 +198,17 @@ def run_fit(args: argparse.Namespace) -> int:
     if bar is not None:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))
-    result = (f"mean of the last {fs.average_tail:.0%} of the iterates" if fs.average_tail > 0
-              else "the best-loss parameters")
-    print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json ({result}), "
-          "scene_best.json, loss.json, loss.png")
+    held_out = held_out_light_ids(len(cap.lights), fs.held_out_lights)
+    if not args.no_progress and len(held_out):
+        print(f"checking the fit on {len(held_out)} held-out lights", flush=True)
+    check = held_out_check(best, cap, held_out, os.path.join(args.out, "check.png"), workers=fs.workers)
+    report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,
+              "seconds_this_run": time.perf_counter() - t_start, "held_out": check}
+    save_json(os.path.join(args.out, "fit_report.json"), report)
+    summary = (f"held-out lights: {check['rms_relative']:.1%} RMS per pixel, {check['rms_relative_tiles']:.1%} "
+               f"on 8 x 8 tiles (check.png)" if check["lights"] else "no held-out lights")
+    print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json; {summary}; "
+          "fit_report.json, loss.png, scene_best.json")
     return 0
 
 

@@ -12,49 +12,21 @@ disturbed run equals an undisturbed one.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
-from ..core.teeth.compiled_scene import CompiledScene
-from ..core.teeth.optimise import l2_loss, paired_loss, pass_a_image
-from ..core.teeth.path_tracer import RenderSettings, render
+from ..core.teeth.fit_gradient import pass_pair
+from ..core.teeth.path_tracer import RenderSettings
 
 
 def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSettings, seed: int, layout, norm: float,
-                       anchor_scene=None, anchor_images=None, loss_block: int = 1, image_spp: int = 0):
-    """Loss share and physical-parameter gradient of one camera (runs on a worker); ``anchor_*``: the
-    image control variate of ``optimise.Anchor`` (``anchor_images``: this camera, these lights);
-    ``loss_block``: tile size of the box-filtered L2 loss (``optimise.l2_loss``; tiles never span cameras);
-    ``image_spp``: pass A's samples per pixel (0 = ``st.spp``)."""
-    cams = [capture.cameras[camera]]
-    mask = capture.masks[camera]
-    pixels = [np.flatnonzero(mask.ravel())]
-    cs = CompiledScene(scene, layout=layout)
-    ref = capture.images[camera : camera + 1, light_ids].astype(np.float64)
+                       loss_block: int = 1, image_spp: int = 0):
+    """Loss share and physical-parameter gradient of one camera (runs on a worker): the fit's estimator
+    (``fit_gradient.pass_pair``) for this camera, scaled by its share of the global normaliser ``norm``,
+    with seeds from (seed, camera)."""
     seed_a, seed_b = [int(s) for s in np.random.SeedSequence([seed, camera]).generate_state(2)]
-    sa = RenderSettings(image_spp or st.spp, st.max_depth, seed_a, st.chunk, True)
-    t0 = time.perf_counter()
-    img_a, vert_a = pass_a_image(scene, cams, capture.lights, sa, pixels, light_ids, cs, layout, anchor_scene,
-                                 anchor_images)
-    seconds_a = time.perf_counter() - t0
     # this camera's share of the global mean: its own mean times (its values / all values)
-    share = max(float(np.count_nonzero(mask)) * len(light_ids) * 3.0, 1.0) / norm
-    loss_a, adj = l2_loss(img_a, ref, mask[None], loss_block)
-    rb = render(scene, cams, capture.lights, RenderSettings(st.spp, st.max_depth, seed_b, st.chunk, True),
-                pixels=pixels, light_ids=light_ids, adjoint=adj * share, compiled=cs)
-    # the loss estimator of optimise.iteration_gradient: mean((C_A - C_ref)(C_B - C_ref))
-    loss = paired_loss(img_a, rb.images, ref, mask[None], loss_block) * share
-    stats = {"path_vertices": vert_a + rb.stats["path_vertices"],
-             "render_seconds": seconds_a, "gradient_seconds": rb.stats["seconds"],
-             "loss_single_pass": loss_a * share}
-    return loss, rb.grad, stats
-
-
-def _anchor_args(anchor, camera: int, light_ids) -> tuple:
-    if anchor is None:
-        return (None, None)
-    return (anchor.scene, anchor.images[camera : camera + 1, np.asarray(light_ids)])
+    share = max(float(np.count_nonzero(capture.masks[camera])) * len(light_ids) * 3.0, 1.0) / norm
+    return pass_pair(scene, capture, [camera], light_ids, st, seed_a, seed_b, layout, loss_block, image_spp, share)
 
 
 def loss_normaliser(capture, n_lights: int) -> float:
@@ -78,8 +50,7 @@ class DaskGradient:
     def _scatter_capture(self):
         [self.capture_future] = self.client.scatter([self.capture], broadcast=True, hash=False)
 
-    def __call__(self, scene, capture, light_ids, st, seed, layout, anchor=None, loss_block: int = 1,
-                 image_spp: int = 0):
+    def __call__(self, scene, capture, light_ids, st, seed, layout, loss_block: int = 1, image_spp: int = 0):
         from distributed.client import FutureCancelledError
 
         light_ids = np.asarray(light_ids)
@@ -90,8 +61,7 @@ class DaskGradient:
             [scene_future] = self.client.scatter([scene], broadcast=True, hash=False)
             futures = [
                 self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
-                                   layout, norm, *_anchor_args(anchor, c, light_ids), loss_block, image_spp, pure=False,
-                                   retries=3)
+                                   layout, norm, loss_block, image_spp, pure=False, retries=3)
                 for c in range(len(capture.cameras))
             ]
             try:
@@ -114,11 +84,10 @@ class DaskGradient:
 def local_gradient(capture):
     """The same per-camera decomposition evaluated in this process (reference for the Dask path)."""
 
-    def gradient(scene, capture_, light_ids, st, seed, layout, anchor=None, loss_block: int = 1, image_spp: int = 0):
+    def gradient(scene, capture_, light_ids, st, seed, layout, loss_block: int = 1, image_spp: int = 0):
         light_ids = np.asarray(light_ids)
         norm = loss_normaliser(capture_, len(light_ids))
-        results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm,
-                                      *_anchor_args(anchor, c, light_ids), loss_block, image_spp)
+        results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm, loss_block, image_spp)
                    for c in range(len(capture_.cameras))]
         return (float(sum(r[0] for r in results)), np.sum([r[1] for r in results], axis=0),
                 {"path_vertices": int(sum(r[2]["path_vertices"] for r in results))})

@@ -8,7 +8,7 @@ import bpy
 
 from ..teeth.fit_job import _JOB, job_running  # _JOB: the one background fit of this Blender session
 from ..teeth.materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
-from ..teeth.properties import owner
+from ..teeth.properties import CHECK_IMAGE_NAME, owner
 
 TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar", "Premolar", ""),
                ("molar", "Molar", "")]
@@ -18,6 +18,34 @@ def _mm_per_unit(scene) -> float:
     """Millimetres per Blender unit from the scene's unit scale (metres by default: 1000)."""
     return 1000.0 * float(scene.unit_settings.scale_length or 1.0)
 
+
+
+
+def show_fit_check(fs, out_dir: str) -> None:
+    """The fit's held-out check (fit_report.json, check.png) into the panel: its error as text, the image
+    as the Image datablock ``CHECK_IMAGE_NAME`` (reloaded, not packed: the file stays the fit's)."""
+    import json
+
+    fs.check_error, fs.check_image = "", ""
+    try:
+        with open(os.path.join(out_dir, "fit_report.json")) as f:
+            held = json.load(f).get("held_out", {})
+    except (OSError, ValueError):
+        return
+    if held.get("lights"):
+        fs.check_error = (f"Held-out lights: {held['rms_relative']:.1%} RMS per pixel, "
+                          f"{held['rms_relative_tiles']:.1%} on 8 x 8 tiles")
+    png = os.path.join(out_dir, "check.png")
+    if os.path.isfile(png):
+        fs.check_image = png
+        img = bpy.data.images.get(CHECK_IMAGE_NAME)
+        if img is None:
+            img = bpy.data.images.load(png)
+            img.name = CHECK_IMAGE_NAME
+        else:
+            img.filepath = png
+            img.reload()
+        img.preview_ensure()
 
 class MS_OT_teeth_add_tooth(bpy.types.Operator):
     """Add a tooth: enamel shell + dentin core with the buccal/proximal/occlusal dentin modes as shape keys"""
@@ -260,9 +288,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             return None
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)
-            lights = fs.lights_per_iteration if fs.preset == "thesis" else None  # else the preset's
-            job = FitJob(capture, out, fs.iterations, fs.init, lights, workers=usable_cores(),
-                         preset=fs.preset).start()
+            job = FitJob(capture, out, fs.iterations, fs.init, workers=usable_cores()).start()
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return None
@@ -288,6 +314,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
                                        f"then Apply Fit Result on {job.result_path}")
                 return {"CANCELLED"}
             job.outcome = fs.last_result = f"done: applied {', '.join(done)}; log {job.log_path}"
+            show_fit_check(fs, job.out_dir)
             self.report({"INFO"}, f"Teeth fit finished; loss plot {job.loss_plot}")
             return {"FINISHED"}
         job.outcome = f"{state.lower()}: see {job.log_path}"

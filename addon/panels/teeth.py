@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..teeth.properties import owner
+from ..teeth.properties import CHECK_IMAGE_NAME, owner
 
 
 class VIEW3D_PT_material_structures_teeth(bpy.types.Panel):
@@ -52,11 +52,7 @@ class VIEW3D_PT_material_structures_teeth(bpy.types.Panel):
                 col.label(text="No capture tooth is mapped to a tooth of this scene", icon="ERROR")
         box.operator("material_structures.teeth_read_capture_teeth", icon="FILE_REFRESH")
         box.prop(fs, "out_dir")
-        box.prop(fs, "preset")
-        row = box.row(align=True)
-        row.prop(fs, "iterations")
-        if fs.preset == "thesis":
-            row.prop(fs, "lights_per_iteration", text="Lights")
+        box.prop(fs, "iterations")
         box.prop(fs, "init")
         if fs.running:
             box.prop(fs, "progress", slider=True)
@@ -66,6 +62,12 @@ class VIEW3D_PT_material_structures_teeth(bpy.types.Panel):
             box.operator("material_structures.teeth_apply_fit_file", icon="FILE_TICK")
         if fs.status:
             box.label(text=fs.status)
+        if fs.check_error:
+            box.label(text=fs.check_error, icon="CHECKMARK")
+        img = bpy.data.images.get(CHECK_IMAGE_NAME) if fs.check_image else None
+        if img is not None and img.preview is not None:
+            box.label(text="Capture | Fit | Difference x4")
+            box.template_icon(icon_value=img.preview.icon_id, scale=10.0)
 
 
 CLASSES: list[type] = [VIEW3D_PT_material_structures_teeth]

@@ -19,6 +19,10 @@ import subprocess
 import sys
 import threading
 
+from ...core.teeth.fit_settings import FitSettings
+
+FIT_DEFAULTS = FitSettings()
+
 _PROGRESS = re.compile(r"(\d+)/(\d+)")
 _LOSS = re.compile(r"loss=([0-9.eE+-]+)")
 
@@ -49,19 +53,17 @@ def python_executable() -> str:
     return sys.executable
 
 
-def fit_command(capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
-                lights_per_iteration: int | None = 18, extra: list[str] | None = None, workers: int = 1,
-                preset: str = "thesis") -> list[str]:
-    """The CLI call. ``--no-dask``: the fit renders in the one background process (with ``workers`` > 1
-    in that many processes it forks per render), so that cancelling stops all of it; pass
-    ``extra=["--scheduler", ADDRESS]`` to use a Dask cluster instead. ``preset``: ``teeth fit --preset``
-    (``lights_per_iteration`` None leaves the preset's)."""
+def fit_command(capture_dir: str, out_dir: str, iterations: int = FIT_DEFAULTS.iterations, init: str = "literature",
+                extra: list[str] | None = None, workers: int = 1) -> list[str]:
+    """The CLI call (the fit's own settings; the panel sets only the iterations and the start). ``--no-dask``:
+    the fit renders in the one background process (with ``workers`` > 1 in that many processes it forks per
+    render where numba is missing), so that cancelling stops all of it; pass ``extra=["--scheduler", ADDRESS]``
+    to use a Dask cluster instead."""
     extra = list(extra or [])
     if "--scheduler" not in extra:
         extra[:0] = ["--no-dask"] + (["--workers", str(int(workers))] if workers > 1 else [])
-    lights = [] if lights_per_iteration is None else ["--lights-per-iteration", str(int(lights_per_iteration))]
     return [python_executable(), "-m", "material_structures", "teeth", "fit", capture_dir, "--out", out_dir,
-            "--iterations", str(int(iterations)), "--init", init, "--preset", preset, *lights, *extra]
+            "--iterations", str(int(iterations)), "--init", init, *extra]
 
 
 def usable_cores() -> int:
@@ -94,14 +96,13 @@ class FitJob:
     """One background fit. ``poll()`` -> state; ``cancel()``; ``result_path`` once finished. ``outcome``: what
     became of the result (set by whoever applied it; ``settled`` then)."""
 
-    def __init__(self, capture_dir: str, out_dir: str, iterations: int = 40, init: str = "literature",
-                 lights_per_iteration: int | None = 18, extra: list[str] | None = None, workers: int = 1,
-                 preset: str = "thesis"):
+    def __init__(self, capture_dir: str, out_dir: str, iterations: int = FIT_DEFAULTS.iterations,
+                 init: str = "literature", extra: list[str] | None = None, workers: int = 1):
         if not os.path.isfile(os.path.join(capture_dir, "capture.json")):
             raise FileNotFoundError(f"no capture.json in {capture_dir!r}")
         self.capture_dir, self.out_dir = capture_dir, out_dir
         self.iterations = int(iterations)
-        self.cmd = fit_command(capture_dir, out_dir, iterations, init, lights_per_iteration, extra, workers, preset)
+        self.cmd = fit_command(capture_dir, out_dir, iterations, init, extra, workers)
         self.proc: subprocess.Popen | None = None
         self.done_iterations = 0
         self.loss: float | None = None
@@ -239,6 +240,11 @@ class FitJob:
     @property
     def loss_plot(self) -> str:
         return os.path.join(self.out_dir, "loss.png")
+
+    @property
+    def check_image(self) -> str:
+        """capture | fit | difference for the held-out lights (written when the fit ends)."""
+        return os.path.join(self.out_dir, "check.png")
 
     def status_text(self) -> str:
         loss = "" if self.loss is None else f", loss {self.loss:.3e}"

@@ -12,7 +12,7 @@ from __future__ import annotations
 import bpy
 
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
-from ...core.teeth.fit_presets import FIT_PRESETS
+from ...core.teeth.fit_settings import FitSettings
 from ...core.teeth.param_vector import RANGES
 
 C_MIN, C_MAX = RANGES["c"]
@@ -80,12 +80,8 @@ class MS_ToothSettings(bpy.types.PropertyGroup):
         _update_coefficients(self, None)
 
 
-THESIS_FIT_ITERATIONS = 40  # the panel's default for the thesis settings (quick interactive fits)
-
-
-def _fit_preset_changed(self, _context) -> None:
-    """Choosing fit settings sets Iterations to theirs (the user may change it after)."""
-    self.iterations = FIT_PRESETS[self.preset].get("iterations", THESIS_FIT_ITERATIONS)
+FIT_DEFAULTS = FitSettings()  # the panel's defaults are the fit's own (tests/blender/test_teeth_fit.py)
+CHECK_IMAGE_NAME = "Teeth Fit Check"  # the Image datablock showing the last fit's held-out check
 
 
 def _get_running(_self) -> bool:
@@ -147,22 +143,17 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                                                         "is applied to")
     out_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH",
                                       description="fit folder: log, loss plot, checkpoint, scene_fit.json")
-    iterations: bpy.props.IntProperty(name="Iterations", default=THESIS_FIT_ITERATIONS, min=1, max=100000)
+    iterations: bpy.props.IntProperty(name="Iterations", default=FIT_DEFAULTS.iterations, min=1, max=100000,
+                                      description="fit iterations (about 7 s each for a 3-camera capture on 2 "
+                                                  "cores; fewer: a quicker, rougher fit)")
     init: bpy.props.EnumProperty(name="Start", items=[("literature", "Literature", "literature-table search"),
                                                        ("scene", "Scene", "the capture's scene.json values"),
                                                        ("perturbed", "Perturbed", "perturbed scene values")],
                                  default="literature")
-    lights_per_iteration: bpy.props.IntProperty(name="Lights / Iteration", default=18, min=1, max=1000)
-    preset: bpy.props.EnumProperty(
-        name="Settings",
-        items=[("thesis", "Thesis", "Adam with 1-sample gradients on the lights per iteration set here (fast "
-                                    "iterations, as in the thesis)"),
-               ("acceptance", "Accurate", "the recovery acceptance fit's settings (teeth fit --preset "
-                                          "acceptance): 6 lights per iteration at 32 / 4 samples, 8 x 8 tile "
-                                          "loss, Gauss-Newton steps for the materials from iteration 80; about "
-                                          "10 s per iteration on 2 cores")],
-        default="thesis", update=_fit_preset_changed,
-        description="fit settings; choosing them also sets Iterations to theirs")
+    check_image: bpy.props.StringProperty(name="Check Image", default="", subtype="FILE_PATH",
+                                          description="the last fit's held-out lights: capture | fit | difference")
+    check_error: bpy.props.StringProperty(name="Held-out Error", default="",
+                                          description="the last fit's error on lights it never used")
     # Job state: read from this Blender session's background fit, never stored in the .blend (a file saved
     # while a fit ran reopens idle). ``last_result`` is what became of the last fit, kept with the file.
     running: bpy.props.BoolProperty(name="Running", get=_get_running,

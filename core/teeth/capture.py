@@ -125,6 +125,14 @@ def default_rig(target=(0.0, 0.0, 5.0), width: int = 96, height: int = 64, n_lig
     return cams, lights
 
 
+def _write_json(path: str, obj, indent: int | None = None) -> None:
+    """``obj`` as JSON at ``path``, written under a temporary name and renamed when complete."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w") as f:
+        json.dump(obj, f, indent=indent)
+    os.replace(tmp, path)
+
+
 @dataclass
 class Capture:
     """Cameras, lights, images (n_cam, n_light, H, W, 3) and masks (n_cam, H, W) bool."""
@@ -150,37 +158,86 @@ class Capture:
                     write_exr(os.path.join(folder, rel), self.images[c, li])
         meta = {"format": FORMAT, "units": "mm", "cameras": [c.to_dict() for c in self.cameras],
                 "lights": [li.to_dict() for li in self.lights], "images": images, "masks": masks}
-        with open(os.path.join(folder, "capture.json"), "w") as f:
-            json.dump(meta, f, indent=1)
+        _write_json(os.path.join(folder, "capture.json"), meta, indent=1)
         if scene_dict is not None:
-            with open(os.path.join(folder, "scene.json"), "w") as f:
-                json.dump(scene_dict, f)
+            _write_json(os.path.join(folder, "scene.json"), scene_dict)
 
     @classmethod
     def load(cls, folder: str | os.PathLike) -> Capture:
+        """Read a capture folder, refusing what would be fitted as garbage: a missing or malformed
+        capture.json, cameras or lights with non-finite or impossible values, images missing for some
+        (camera, light), image or mask sizes that differ from their camera, non-finite or negative
+        pixels. Every error names the file and the problem."""
         folder = os.fspath(folder)
         path = os.path.join(folder, "capture.json")
-        if not os.path.exists(path):
+        if not os.path.isfile(path):
             raise FileNotFoundError(f"no capture.json in {folder!r}")
-        with open(path) as f:
-            meta = json.load(f)
+        try:
+            with open(path) as f:
+                meta = json.load(f)
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise ValueError(f"{path}: not a JSON file ({e})") from None
+        if not isinstance(meta, dict):
+            raise ValueError(f"{path}: expected a JSON object")
         if meta.get("format") != FORMAT:
             raise ValueError(f"{path}: unknown format {meta.get('format')!r}, expected {FORMAT!r}")
-        cams = [Camera.from_dict(c) for c in meta["cameras"]]
-        lights = [PointLight.from_dict(li) for li in meta["lights"]]
+        for key in ("cameras", "lights"):
+            if not isinstance(meta.get(key), list) or not meta[key]:
+                raise ValueError(f"{path}: needs a non-empty list {key!r}")
+        try:
+            cams = [Camera.from_dict(c) for c in meta["cameras"]]
+            lights = [PointLight.from_dict(li) for li in meta["lights"]]
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"{path}: a camera or light is malformed ({type(e).__name__}: {e})") from None
+        for i, c in enumerate(cams):
+            if c.width < 1 or c.height < 1 or not (np.isfinite(c.K).all() and np.isfinite(c.R).all()
+                                                    and np.isfinite(c.t).all()):
+                raise ValueError(f"{path}: camera {i} has a non-positive size or non-finite K, R or t")
+            if (c.width, c.height) != (cams[0].width, cams[0].height):
+                raise ValueError(f"{path}: camera {i} is {c.width} x {c.height}, camera 0 "
+                                 f"{cams[0].width} x {cams[0].height}; all cameras need one image size")
+        for i, li in enumerate(lights):
+            if not (np.isfinite(li.position).all() and np.isfinite(li.intensity).all()) or (li.intensity < 0).any():
+                raise ValueError(f"{path}: light {i} has a non-finite position or a negative or non-finite intensity")
+        h, w = cams[0].height, cams[0].width
         images = None
         if meta.get("images"):
-            h, w = cams[0].height, cams[0].width
             images = np.zeros((len(cams), len(lights), h, w, 3), dtype=np.float32)
+            seen = np.zeros((len(cams), len(lights)), dtype=bool)
             for key, rel in meta["images"].items():
-                c, li = (int(v) for v in key.split(","))
+                try:
+                    c, li = (int(v) for v in key.split(","))
+                except ValueError:
+                    raise ValueError(f"{path}: image key {key!r} is not 'camera,light'") from None
+                if not (0 <= c < len(cams) and 0 <= li < len(lights)):
+                    raise ValueError(f"{path}: image {key!r} names a camera or light that does not exist")
                 img = read_exr(os.path.join(folder, rel), channels=["R", "G", "B"])
-                if img.shape[:2] != (cams[c].height, cams[c].width):
-                    raise ValueError(f"{rel}: image size {img.shape[:2]} does not match camera {c}")
+                if img.shape[:2] != (h, w):
+                    raise ValueError(f"{rel}: image size {img.shape[:2]} does not match camera {c} ({h}, {w})")
+                if not np.isfinite(img).all() or (img < 0).any():
+                    raise ValueError(f"{rel}: has non-finite or negative pixels")
                 images[c, li] = img
+                seen[c, li] = True
+            if not seen.all():
+                missing = [f"{c},{li}" for c, li in zip(*np.nonzero(~seen), strict=True)]
+                raise ValueError(f"{path}: no image for {len(missing)} (camera, light) pairs, e.g. "
+                                 f"{', '.join(missing[:4])}")
         masks = None
         if meta.get("masks"):
-            masks = np.zeros((len(cams), cams[0].height, cams[0].width), dtype=bool)
+            masks = np.zeros((len(cams), h, w), dtype=bool)
+            seen_m = np.zeros(len(cams), dtype=bool)
             for key, rel in meta["masks"].items():
-                masks[int(key)] = read_exr(os.path.join(folder, rel))[:, :, 0] > 0.5
+                try:
+                    c = int(key)
+                except ValueError:
+                    raise ValueError(f"{path}: mask key {key!r} is not a camera index") from None
+                if not 0 <= c < len(cams):
+                    raise ValueError(f"{path}: mask {key!r} names a camera that does not exist")
+                m = read_exr(os.path.join(folder, rel))
+                if m.shape[:2] != (h, w):
+                    raise ValueError(f"{rel}: mask size {m.shape[:2]} does not match camera {c} ({h}, {w})")
+                masks[c] = m[:, :, 0] > 0.5
+                seen_m[c] = True
+            if not seen_m.all():
+                raise ValueError(f"{path}: no mask for cameras {np.flatnonzero(~seen_m).tolist()}")
         return cls(cams, lights, images, masks)

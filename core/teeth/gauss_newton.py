@@ -28,10 +28,10 @@ of 0.03 the steps there were 3-10 % of the Newton step per-pass, 4-39 % pooled, 
 damping 0.01. ``tests/core/test_teeth_gauss_newton.py`` checks the bias against a 128-pass
 reference on a slab.
 
-In the acceptance fit (``fit_presets.FIT_PRESETS["acceptance"]``: Adam for 80 iterations, then this
+In the fit (``FitSettings``' defaults: Adam for 80 iterations, then this
 every 40 iterations) the per-pass matrix took the materials from 20 % to about 8 % (sigma_t) in 120
-iterations, and the pooled one of 8 passes with damping 0.01 to about 4 % from the same state (README,
-"Why Adam stalls"). An earlier version clipped each coordinate's step on its own and had no guard, and
+iterations, and the pooled one of 8 passes with damping 0.01 to about 4 % from the same state
+(docs/teeth-fit.md). An earlier version clipped each coordinate's step on its own and had no guard, and
 a sigma_t diverged after 30 iterations; the step is now shortened as a whole, and
 :class:`DivergenceGuard` rolls back and raises the damping when windows of the loss rise.
 """

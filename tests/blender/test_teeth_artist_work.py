@@ -182,7 +182,6 @@ def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_pat
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 10000
-    fs.lights_per_iteration = 1
     fs.init = "scene"
     # what a click on "Fit Teeth to Capture" does (invoke: background fit + modal timer), headless
     wm = _WindowManager()
@@ -235,7 +234,6 @@ def test_fit_refuses_to_start_when_no_capture_tooth_is_mapped(addon_module, capt
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 1
-    fs.lights_per_iteration = 1
     t0 = time.perf_counter()
     with pytest.raises(RuntimeError, match="No capture tooth is mapped"):
         bpy.ops.material_structures.teeth_fit()
@@ -254,7 +252,6 @@ def test_fit_applies_to_the_mapped_tooth(addon_module, capture_dir, tmp_path):
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 2
-    fs.lights_per_iteration = 2
     fs.init = "perturbed"
     assert bpy.ops.material_structures.teeth_read_capture_teeth() == {"FINISHED"}
     assert [m.capture_tooth for m in fs.tooth_map] == ["tooth0"]

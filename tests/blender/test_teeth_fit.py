@@ -14,13 +14,13 @@ import pytest
 
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory):
-    """A tiny synthetic capture (1 tooth, 1 camera, 3 lights, 16 x 12 px) written by the core."""
+    """A tiny synthetic capture (1 tooth, 1 camera, 4 lights, 16 x 12 px) written by the core."""
     from material_structures.core.teeth.capture import default_rig
     from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
 
     folder = str(tmp_path_factory.mktemp("teeth-capture"))
     scene = make_scene(n_teeth=1, resolution=12)
-    cams, lights = default_rig(target=scene_target(scene), width=16, height=12, n_lights=3, n_cameras=1,
+    cams, lights = default_rig(target=scene_target(scene), width=16, height=12, n_lights=4, n_cameras=1,
                                fov_x_deg=2.6)
     render_capture(scene, cams, lights, spp=2, spp_background=1, max_depth=4).save(folder, scene.to_dict())
     return folder
@@ -42,7 +42,6 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 3
-    fs.lights_per_iteration = 2
     fs.init = "perturbed"  # c reset to 0, volumes perturbed: the fit result differs from the import
     assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}  # EXEC: blocking
     fit = load_scene(str(tmp_path / "fit" / "scene_fit.json"))
@@ -62,33 +61,33 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     assert fs.progress == pytest.approx(1.0) and not fs.running
 
 
-def test_fit_operator_accurate_settings_run_the_acceptance_preset(addon_module, capture_dir, tmp_path):
+def test_fit_button_runs_the_fit_settings_defaults_and_shows_the_check(addon_module, capture_dir, tmp_path):
+    """The panel's defaults are FitSettings' (one set), the Fit button runs FitSettings (loss.json records
+    them), and the held-out check (1 of the 4 lights) shows in the panel: its error and its image."""
+    import dataclasses
     import json
 
-    from material_structures.core.teeth.fit_presets import FIT_PRESETS
+    from material_structures.addon.teeth.properties import CHECK_IMAGE_NAME
+    from material_structures.core.teeth.fit_settings import FitSettings
 
     _import(capture_dir)
     fs = bpy.context.scene.ms_teeth_fit
+    props = type(fs).bl_rna.properties
+    assert props["iterations"].default == FitSettings().iterations
+    assert "preset" not in props and "lights_per_iteration" not in props
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
-    fs.iterations = 7
-    fs.preset = "acceptance"
-    try:
-        # choosing the settings sets their iteration count (the user may change it after)
-        assert fs.iterations == FIT_PRESETS["acceptance"]["iterations"]
-        fs.iterations = 2
-        fs.lights_per_iteration = 2  # hidden and not passed with these settings: the preset's 6 (capped at 3 lights)
-        fs.init = "scene"
-        assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
-    finally:
-        fs.preset = "thesis"
-    assert fs.iterations == 40  # back to the thesis settings' default
+    fs.iterations = 2
+    fs.init = "scene"
+    assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
     ran = json.loads((tmp_path / "fit" / "loss.json").read_text())
-    for key, value in {**FIT_PRESETS["acceptance"], "iterations": 2}.items():
-        assert ran["settings"][key] == value, key
-    assert len(ran["log"]) == 2 and len(ran["log"][0]["lights"]) == 3
-    cmd = open(tmp_path / "fit" / "fit_log.txt").readline()
-    assert "--preset acceptance" in cmd and "--lights-per-iteration" not in cmd
+    want = dataclasses.asdict(dataclasses.replace(FitSettings(), iterations=2))
+    assert {k: v for k, v in ran["settings"].items() if k != "workers"} == \
+        {k: v for k, v in json.loads(json.dumps(want)).items() if k != "workers"}
+    assert len(ran["log"]) == 2 and ran["held_out_lights"] == [2]
+    assert fs.check_error.startswith("Held-out lights:") and fs.check_image.endswith("check.png")
+    img = bpy.data.images[CHECK_IMAGE_NAME]
+    assert tuple(img.size)[1] == 12 and tuple(img.size)[0] > 3 * 16  # capture | fit | difference
 
 
 def _live_in_group(pgid: int) -> list[int]:
@@ -125,13 +124,12 @@ def _process_report(job) -> str:
 
 def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path):
     """Progress and loss while it runs; cancel stops the fit process and the render workers it forks
-    (the numpy reference tracer, where numba is missing: 2 workers; a 64-spp pass A on 192 pixels is 3
-    chunks of paths, so every pass A forks; the compiled tracer runs threads in the fit process)."""
+    (the numpy reference tracer, where numba is missing: 2 workers; the default 32-spp pass A on 192 pixels
+    is 2 chunks of paths, so every pass A forks; the compiled tracer runs threads in the fit process)."""
     from material_structures.addon.teeth.fit_job import FitJob
 
     t0 = time.perf_counter()
-    job = FitJob(capture_dir, str(tmp_path / "fit"), iterations=10000, init="scene", lights_per_iteration=1,
-                 extra=["--image-spp", "64"], workers=2).start()
+    job = FitJob(capture_dir, str(tmp_path / "fit"), iterations=10000, init="scene", workers=2).start()
     assert job.cmd[job.cmd.index("--workers") + 1] == "2"
     assert time.perf_counter() - t0 < 1.0  # returns at once: Blender keeps running
     deadline = time.time() + 90
@@ -200,8 +198,7 @@ def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp
     fake = SimpleNamespace(_timer=object(), report=lambda *a: None)
     fake._cleanup = lambda ctx: ops.MS_OT_teeth_fit._cleanup(fake, ctx)
     fake._finish = lambda ctx, job, state: ops.MS_OT_teeth_fit._finish(fake, ctx, job, state)
-    ops._JOB["job"] = FitJob(capture_dir, str(tmp_path / "fit"), iterations=4, init="scene",
-                             lights_per_iteration=2).start()
+    ops._JOB["job"] = FitJob(capture_dir, str(tmp_path / "fit"), iterations=4, init="scene").start()
     timer = SimpleNamespace(type="TIMER")
     result, deadline = {"PASS_THROUGH"}, time.time() + 120
     while result == {"PASS_THROUGH"} and time.time() < deadline:

@@ -29,7 +29,7 @@ def test_default_epsilon_keeps_the_step_independent_of_the_gradient_scale():
     s = FitSettings()
     steps = {}
     for scale in (1.0, 1e-6):
-        opt = Adam(s.lr, s.b1, s.b2, s.eps)
+        opt = Adam(s.lr)  # Adam's own b1, b2, eps (adam.py)
         y = np.zeros(6)
         for g in gs:
             y = opt.step(y, scale * g)

@@ -22,6 +22,16 @@ from material_structures.core.teeth.scene import VolumeMaterial
 
 from ._teeth_scenes import down_camera, light, slab_scene
 
+# the settings these tests were written for (FitSettings' defaults before the fit's defaults became the
+# best measured ones): Gauss-Newton from iteration 0, every 50, damping 0.03, guard at +25 %, per-pixel loss,
+# the best-loss result, every light in the fit
+PINNED = dict(gn_start=0, gn_every=50, gn_damping=0.03, gn_guard_rise=0.25, gn_passes=4, loss_block=1,
+              average_tail=0.0, lr=0.03, lr_decay=0.0, image_spp=0, held_out_lights=0)
+
+
+def _settings(**kw) -> FitSettings:
+    return FitSettings(**{**PINNED, **kw})
+
 
 def _problem():
     truth = slab_scene([1.0, 1.3, 1.7], [0.95, 0.9, 0.8], floor_albedo=[0.4, 0.3, 0.2])
@@ -167,7 +177,7 @@ def test_fit_goes_back_when_the_loss_rises(tmp_path):
     layout = ParamLayout(theta)
     seen: list = []
     said: list = []  # status texts and iterations, in call order
-    _, log = fit(theta, cap, FitSettings(**base), gradient=rising, status=said.append,
+    _, log = fit(theta, cap, _settings(**base), gradient=rising, status=said.append,
                  progress=lambda e: said.append(e["iteration"]),
                  callback=lambda e, sc: seen.append(to_optimiser(scene_to_vector(sc, layout), layout)))
     # the Gauss-Newton matrix (gn_start 0, gn_every 50) is estimated once, before iteration 0, and said so
@@ -178,14 +188,14 @@ def test_fit_goes_back_when_the_loss_rises(tmp_path):
     losses = [e["loss"] for e in log]
     best = int(np.argmin([np.mean(losses[0:3]), np.mean(losses[3:6])]))
     # one more iteration shows where the rollback went
-    more, log2 = fit(theta, cap, FitSettings(**{**base, "iterations": 10}), gradient=rising, out_dir=str(tmp_path),
+    more, log2 = fit(theta, cap, _settings(**{**base, "iterations": 10}), gradient=rising, out_dir=str(tmp_path),
                      callback=lambda e, sc: seen.append(to_optimiser(scene_to_vector(sc, layout), layout)))
     np.testing.assert_allclose(seen[-1], np.mean(seen[3 * best:3 * best + 3], axis=0), rtol=1e-9)
     np.testing.assert_allclose([e["loss"] for e in log2[:9]], losses, rtol=1e-12)
     # interrupted after 7 iterations (mid-window), resumed: the same as straight through
     out = str(tmp_path / "cut")
-    fit(theta, cap, FitSettings(**{**base, "iterations": 7}), gradient=rising, out_dir=out)
-    resumed, log_r = fit(theta, cap, FitSettings(**{**base, "iterations": 10}), gradient=rising, out_dir=out,
+    fit(theta, cap, _settings(**{**base, "iterations": 7}), gradient=rising, out_dir=out)
+    resumed, log_r = fit(theta, cap, _settings(**{**base, "iterations": 10}), gradient=rising, out_dir=out,
                          resume=True)
     np.testing.assert_allclose([e["loss"] for e in log_r], [e["loss"] for e in log2], rtol=1e-9)
     assert log_r[8].get("gauss_newton_rollback")
@@ -197,13 +207,13 @@ def test_checkpoint_of_the_earlier_gauss_newton_format_is_a_clear_error(tmp_path
     base = dict(iterations=2, spp=1, lights_per_iteration=1, free=("slab.enamel.albedo",), optimiser="gauss-newton",
                 gn_passes=1, gn_block=4, seed=0, max_depth=3)
     out = tmp_path / "fit"
-    fit(theta, cap, FitSettings(**base), out_dir=str(out))
+    fit(theta, cap, _settings(**base), out_dir=str(out))
     ckpt = out / "checkpoint.json"
     d = __import__("json").loads(ckpt.read_text())
     d["precond"] = d.pop("gn_hmat")
     ckpt.write_text(__import__("json").dumps(d))
     with pytest.raises(ValueError, match="earlier version"):
-        fit(theta, cap, FitSettings(**{**base, "iterations": 3}), out_dir=str(out), resume=True)
+        fit(theta, cap, _settings(**{**base, "iterations": 3}), out_dir=str(out), resume=True)
 
 
 def _albedo_error(scene, truth) -> float:
@@ -217,7 +227,7 @@ def test_gauss_newton_fit_lowers_the_error_and_resumes_exactly(tmp_path):
     base = dict(iterations=8, spp=2, image_spp=4, lights_per_iteration=3, free=("slab.enamel.albedo",),
                 optimiser="gauss-newton", gn_lr=0.5, gn_passes=2, gn_block=4, gn_every=4, checkpoint_every=1,
                 seed=3, max_depth=6)
-    fitted, log = fit(theta, cap, FitSettings(**base))
+    fitted, log = fit(theta, cap, _settings(**base))
     assert "gauss_newton_seconds" in log[0] and "gauss_newton_seconds" in log[4]
     assert "gauss_newton_seconds" not in log[1]
     assert _albedo_error(theta, truth) == pytest.approx(0.25, abs=0.01)
@@ -226,9 +236,9 @@ def test_gauss_newton_fit_lowers_the_error_and_resumes_exactly(tmp_path):
     # sigma_t free too, and the dentin-coefficient-free split (Adam for c) is exercised by the recovery
     base["free"] = ("slab.enamel.sigma_t", "slab.enamel.albedo")
     out = str(tmp_path / "fit")
-    fit(theta, cap, FitSettings(**{**base, "iterations": 5}), out_dir=out)
-    resumed, log_r = fit(theta, cap, FitSettings(**base), out_dir=out, resume=True)
-    straight, log_s = fit(theta, cap, FitSettings(**base), out_dir=str(tmp_path / "straight"))
+    fit(theta, cap, _settings(**{**base, "iterations": 5}), out_dir=out)
+    resumed, log_r = fit(theta, cap, _settings(**base), out_dir=out, resume=True)
+    straight, log_s = fit(theta, cap, _settings(**base), out_dir=str(tmp_path / "straight"))
     np.testing.assert_allclose([e["loss"] for e in log_r], [e["loss"] for e in log_s], rtol=1e-9)
     np.testing.assert_allclose(resumed.teeth[0].enamel.sigma_t, straight.teeth[0].enamel.sigma_t, rtol=1e-9)
 
@@ -238,8 +248,9 @@ def test_gauss_newton_takes_over_from_adam_at_gn_start():
     _, theta, cap = _problem()
     base = dict(iterations=3, spp=1, lights_per_iteration=2, free=("slab.enamel.albedo",), seed=5, max_depth=4)
     seen: dict = {"adam": [], "gn": []}
-    _, log_a = fit(theta, cap, FitSettings(**base), callback=lambda e, sc: seen["adam"].append(sc.copy()))
-    _, log_g = fit(theta, cap, FitSettings(**base, optimiser="gauss-newton", gn_start=2, gn_passes=1, gn_block=4),
+    _, log_a = fit(theta, cap, _settings(**base, optimiser="adam"),
+                   callback=lambda e, sc: seen["adam"].append(sc.copy()))
+    _, log_g = fit(theta, cap, _settings(**base, optimiser="gauss-newton", gn_start=2, gn_passes=1, gn_block=4),
                    callback=lambda e, sc: seen["gn"].append(sc.copy()))
     assert ["gauss_newton_seconds" in e for e in log_g] == [False, False, True]
     np.testing.assert_allclose([e["loss"] for e in log_g[:2]], [e["loss"] for e in log_a[:2]], rtol=1e-12)
@@ -253,10 +264,9 @@ def test_gauss_newton_takes_over_from_adam_at_gn_start():
                                        ({"optimiser": "gauss-newton", "gn_passes": 0}, "gn_passes"),
                                        ({"optimiser": "gauss-newton", "gn_start": -1}, "gn_start"),
                                        ({"optimiser": "gauss-newton", "gn_max_step": 0.0}, "gn_max_step"),
-                                       ({"optimiser": "gauss-newton", "gn_estimator": "mean"}, "gn_estimator"),
                                        ({"optimiser": "gauss-newton", "gn_c_lr": 0.0}, "gn_c_lr"),
                                        ({"optimiser": "gauss-newton", "gn_lr": 0.0}, "gn_lr"),
-                                       ({"optimiser": "gauss-newton", "gn_guard_factor": 1.0}, "gn_guard"),
+                                       ({"optimiser": "gauss-newton", "gn_guard_rise": 0.0}, "gn_guard"),
                                        ({"optimiser": "gauss-newton", "gn_guard_window": -1}, "gn_guard")])
 def test_bad_optimiser_settings_are_clear_errors(kw, match):
     with pytest.raises(ValueError, match=match):
@@ -297,7 +307,7 @@ def test_gn_c_lr_scales_the_coefficients_adam_steps_once_gauss_newton_runs():
                 max_depth=4, optimiser="gauss-newton", gn_start=1, gn_passes=1, gn_block=4)
     seen: dict = {1.0: [], 0.25: []}
     for factor in seen:
-        fit(start, cap, FitSettings(**base, gn_c_lr=factor), callback=lambda e, sc, f=factor: seen[f].append(sc.copy()))
+        fit(start, cap, _settings(**base, gn_c_lr=factor), callback=lambda e, sc, f=factor: seen[f].append(sc.copy()))
     full, scaled = seen[1.0], seen[0.25]
     # iteration 0 (Adam for all, before gn_start) is the same in both fits ...
     np.testing.assert_allclose(scaled[1].teeth[0].c, full[1].teeth[0].c, rtol=0, atol=1e-14)
@@ -319,7 +329,7 @@ def test_resumed_fit_takes_the_guard_settings_of_the_resuming_settings(tmp_path)
                 optimiser="gauss-newton", gn_passes=1, gn_block=4, seed=0, max_depth=4, checkpoint_every=1,
                 gn_guard_rise=0.25, gn_damping=0.03)
     out = str(tmp_path / "fit")
-    fit(theta, cap, FitSettings(**base), out_dir=out)
+    fit(theta, cap, _settings(**base), out_dir=out)
     path = f"{out}/checkpoint.json"
     with open(path) as f:
         ck = json.load(f)
@@ -327,12 +337,12 @@ def test_resumed_fit_takes_the_guard_settings_of_the_resuming_settings(tmp_path)
     ck["gn_guard"]["damping"] = 0.12  # as after one rollback (4x the base 0.03)
     with open(path, "w") as f:
         json.dump(ck, f)
-    fit(theta, cap, FitSettings(**{**base, "iterations": 4, "gn_guard_rise": 1.0, "gn_damping": 0.01}), out_dir=out,
+    fit(theta, cap, _settings(**{**base, "iterations": 4, "gn_guard_rise": 1.0, "gn_damping": 0.01}), out_dir=out,
         resume=True)
     with open(path) as f:
         guard = json.load(f)["gn_guard"]
     assert guard["rise"] == 1.0 and guard["n"] == 4  # the window's first 3 iterations carried over
     assert guard["min_damping"] == pytest.approx(0.01) and guard["damping"] == pytest.approx(0.04)
-    fit(theta, cap, FitSettings(**{**base, "iterations": 5, "gn_guard_window": 0}), out_dir=out, resume=True)
+    fit(theta, cap, _settings(**{**base, "iterations": 5, "gn_guard_window": 0}), out_dir=out, resume=True)
     with open(path) as f:
         assert json.load(f)["gn_guard"] is None

@@ -95,6 +95,7 @@ def test_image_spp_needs_a_gradient_function_that_takes_it():
         return iteration_gradient(scene, capture, light_ids, st, seed, layout)
 
     with pytest.raises(ValueError, match="image_spp=0"):
-        fit(theta, cap, FitSettings(iterations=1, image_spp=4), gradient=old_gradient)
-    _, log = fit(theta, cap, FitSettings(iterations=1, spp=1, lights_per_iteration=1), gradient=old_gradient)
+        fit(theta, cap, FitSettings(iterations=1, image_spp=4, loss_block=1), gradient=old_gradient)
+    _, log = fit(theta, cap, FitSettings(iterations=1, spp=1, lights_per_iteration=1, image_spp=0, loss_block=1),
+                 gradient=old_gradient)
     assert len(log) == 1

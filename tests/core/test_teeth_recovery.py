@@ -1,6 +1,6 @@
 """Acceptance: parameter recovery from a synthetic capture (2 teeth, 3 cameras at 96 x 64,
 54 lights) from a perturbed start: sigma_t and albedo within 10 %, dentin coefficients within 0.05
-(``FIT_PRESETS["acceptance"]`` with a 128-spp capture, about 55 minutes on 2 cores; measured by `bench teeth`
+(``FitSettings()`` with a 128-spp capture, about 55 minutes on 2 cores; measured by `bench teeth`
 on 2 cores: sigma_t 8.1 %, albedo 5.5 %, c 0.043)."""
 
 from __future__ import annotations

@@ -114,21 +114,6 @@ def test_fit_on_dask_is_deterministic_and_matches_local_decomposition(problem, c
     assert a.to_dict() == b.to_dict()
 
 
-def test_anchored_fit_on_dask_matches_local_and_in_process_loss(problem, client):
-    """With the image control variate the per-camera tasks get their slice of the anchor image (and,
-    with the box-filtered loss, form their own tiles); the Dask fit equals the local decomposition exactly."""
-    from material_structures.core.teeth.optimise import FitSettings, fit
-
-    scene, capture = problem
-    fs = FitSettings(iterations=3, spp=1, max_depth=4, lights_per_iteration=2, seed=1, anchor_spp=2, anchor_every=2,
-                     loss_block=4)
-    a, log_a = fit(scene, capture, fs, gradient=DaskGradient(client, capture))
-    b, log_b = fit(scene, capture, fs, gradient=local_gradient(capture))
-    assert [e["loss"] for e in log_a] == [e["loss"] for e in log_b]
-    assert a.to_dict() == b.to_dict()
-    assert all(np.isfinite(e["loss"]) for e in log_a)
-
-
 def test_image_spp_reaches_the_dask_tasks(problem, client):
     """``FitSettings.image_spp`` (pass A's samples) on Dask equals the local decomposition exactly and
     changes the fit (the setting is not dropped on the way to the tasks)."""

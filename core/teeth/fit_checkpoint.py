@@ -1,0 +1,117 @@
+"""The fit's saved state: written every ``checkpoint_every`` iterations (to a temporary name, then
+renamed, so an interrupted write never leaves half a file), read back by ``fit(..., resume=True)``; a
+resumed fit continues to the same result as an uninterrupted one (its random numbers come from
+(seed, phase, iteration), and the optimisers' moments, the Gauss-Newton matrix and the averaged
+iterates are part of the state)."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field, fields
+
+
+@dataclass
+class FitState:
+    phase: str
+    iteration: int
+    scene: dict
+    y: list
+    adam_m: list | None
+    adam_v: list | None
+    adam_n: int
+    best_loss: float
+    best_scene: dict
+    log: list = field(default_factory=list)
+    # optimiser "gauss-newton": the Gauss-Newton matrix in use (over its variables), its momentum and guard
+    gn_hmat: list | None = None
+    precond_iteration: int = -1
+    gn_m: list | None = None
+    gn_n: int = 0
+    gn_guard: dict | None = None
+    # average_tail: the sum and count of the averaged iterates so far (optimiser domain)
+    avg_sum: list | None = None
+    avg_count: int = 0
+    identity: dict | None = None  # what the fit was made for (optimise.fit_identity)
+
+
+def save_json(path: str, obj) -> None:
+    """``obj`` as JSON at ``path``, written to ``path.tmp`` and renamed."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w") as f:
+        json.dump(obj, f)
+    os.replace(tmp, path)
+
+
+def load_state(path: str) -> FitState:
+    """The checkpoint at ``path``; a checkpoint of an earlier version is refused (start the fit again)."""
+    try:
+        with open(path) as f:
+            d = json.load(f)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path!r} is not a fit checkpoint ({e})") from None
+    names = {f.name for f in fields(FitState)}
+    if not isinstance(d, dict) or set(d) - names or "precond" in d or d.get("identity") is None:
+        raise ValueError(f"{path!r} is a checkpoint of an earlier version of the fit; start the fit again")
+    try:
+        return FitState(**d)
+    except TypeError as e:
+        raise ValueError(f"{path!r} is not a complete fit checkpoint ({e})") from None
+
+
+def check_identity(path: str, saved: dict, now: dict) -> None:
+    """Refuse to resume the checkpoint at ``path`` (made for ``saved``) under ``now``, naming what differs."""
+    differ = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
+    if differ:
+        what = {"capture": "the capture", "teeth": "the teeth", "layout": "the parameter layout",
+                "free": "the free parameters", "seed": "the seed", "held_out_lights": "the held-out lights"}
+        raise ValueError(f"{path!r} was made for another fit ({', '.join(what.get(k, k) for k in differ)} "
+                         "differ); resume with the fit's own capture and settings, or start a new fit")
+
+
+class FolderLock:
+    """``FOLDER/.fit.lock`` holding this process's id while a fit writes to FOLDER: a second fit into the
+    same folder is refused with the first one's id; a lock whose process has died is taken over."""
+
+    def __init__(self, folder: str):
+        self.path = os.path.join(folder, ".fit.lock")
+        self.held = False
+
+    def __enter__(self) -> FolderLock:
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                try:
+                    with open(self.path) as f:
+                        pid = int(f.read().strip() or 0)
+                except (OSError, ValueError):
+                    pid = 0
+                if pid and _alive(pid):
+                    raise ValueError(f"another fit (process {pid}) is writing to {os.path.dirname(self.path)!r}; "
+                                     "wait for it, stop it, or choose another output folder") from None
+                os.remove(self.path)  # stale: its process is gone
+                continue
+            with os.fdopen(fd, "w") as f:
+                f.write(str(os.getpid()))
+            self.held = True
+            return self
+        raise ValueError(f"cannot lock {os.path.dirname(self.path)!r} for the fit")
+
+    def __exit__(self, *exc) -> None:
+        if self.held:
+            try:
+                os.remove(self.path)
+            except OSError:
+                pass
+            self.held = False
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

@@ -1,0 +1,61 @@
+"""One stochastic loss and gradient of the fit: two independently seeded rendering passes (thesis
+Sec. 5.6, "two independently seeded rendering passes").
+
+Pass A renders the image C_A of the iteration's lights (forward only, ``image_spp`` samples) and forms
+the adjoint d rho / d C = 2 (C_A - C_ref) / M (``fit_loss.l2_loss``); pass B traces the gradient of
+sum(adjoint x C) with an independent seed (``spp`` samples) and its image C_B. The loss estimate is
+mean((C_A - C_ref)(C_B - C_ref)) (``fit_loss.paired_loss``), free of the Monte Carlo variance bias.
+
+``pass_pair`` is the estimator for any set of cameras; the fit calls it through ``iteration_gradient``
+(all cameras), ``scaleout.teeth`` once per camera on Dask workers (with the camera's share of the
+global normaliser), so both run the same code.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .capture import Capture
+from .compiled_scene import CompiledScene
+from .fit_loss import l2_loss, paired_loss
+from .param_vector import ParamLayout
+from .path_tracer import RenderSettings, render
+from .scene import TeethScene
+
+
+def pass_pair(scene: TeethScene, capture: Capture, cameras: list[int], light_ids, st: RenderSettings, seed_a: int,
+              seed_b: int, layout: ParamLayout, loss_block: int = 1, image_spp: int = 0,
+              share: float = 1.0) -> tuple[float, np.ndarray, dict]:
+    """Loss estimate, physical gradient and statistics of ``cameras`` (indices into the capture) for
+    ``light_ids``; ``share`` scales loss and adjoint (a camera's share of a loss over more cameras)."""
+    if image_spp < 0:
+        raise ValueError(f"image_spp must be >= 0 (0 = st.spp), got {image_spp}")
+    cams = [capture.cameras[c] for c in cameras]
+    masks = capture.masks[cameras]
+    pixels = [np.flatnonzero(m.ravel()) for m in masks]
+    cs = CompiledScene(scene, layout=layout)
+    ref = capture.images[np.ix_(cameras, np.asarray(light_ids))].astype(np.float64)
+    sa = replace(st, spp=image_spp or st.spp, seed=seed_a, jitter=True)
+    t0 = time.perf_counter()
+    ra = render(scene, cams, capture.lights, sa, pixels=pixels, light_ids=light_ids, compiled=cs)
+    seconds_a = time.perf_counter() - t0
+    loss_a, adj = l2_loss(ra.images, ref, masks, loss_block)
+    sb = replace(st, seed=seed_b, jitter=True)
+    rb = render(scene, cams, capture.lights, sb, pixels=pixels, light_ids=light_ids, adjoint=adj * share,
+                compiled=cs)
+    loss = paired_loss(ra.images, rb.images, ref, masks, loss_block) * share
+    stats = {"path_vertices": ra.stats["path_vertices"] + rb.stats["path_vertices"],
+             "render_seconds": seconds_a, "gradient_seconds": rb.stats["seconds"],
+             "loss_single_pass": loss_a * share}
+    return loss, rb.grad, stats
+
+
+def iteration_gradient(scene: TeethScene, capture: Capture, light_ids: np.ndarray, st: RenderSettings,
+                       seed: int, layout: ParamLayout, loss_block: int = 1,
+                       image_spp: int = 0) -> tuple[float, np.ndarray, dict]:
+    """The fit's loss + gradient of one iteration over every camera (seeds 2 seed and 2 seed + 1)."""
+    return pass_pair(scene, capture, list(range(len(capture.cameras))), light_ids, st, 2 * seed, 2 * seed + 1,
+                     layout, loss_block, image_spp)

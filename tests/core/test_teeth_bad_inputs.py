@@ -1,0 +1,156 @@
+"""Bad teeth inputs give a one-line error naming the problem (exit 2 from the CLI) and change nothing:
+malformed or incomplete captures, masks that select nothing, a checkpoint of another fit, a second fit
+into a folder a fit is writing to, an output path that is a file."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from material_structures.cli import main
+from material_structures.core.exr_io import write_exr
+from material_structures.core.teeth.capture import Capture
+from material_structures.core.teeth.fit_checkpoint import FolderLock
+from material_structures.core.teeth.optimise import FitSettings, fit
+from material_structures.core.teeth.scene import load_scene
+
+
+@pytest.fixture(scope="module")
+def capture_dir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cap") / "cap"
+    assert main(["teeth", "synth", str(folder), "--teeth", "1", "--width", "12", "--height", "10", "--lights", "4",
+                 "--cameras", "1", "--spp", "1", "--spp-background", "0", "--resolution", "10"]) == 0
+    return folder
+
+
+def _digest(folder) -> str:
+    h = hashlib.sha1()
+    for root, _, files in sorted(os.walk(folder)):
+        for name in sorted(files):
+            p = os.path.join(root, name)
+            h.update(p.encode())
+            with open(p, "rb") as f:
+                h.update(f.read())
+    return h.hexdigest()
+
+
+def _copy(capture_dir, tmp_path):
+    out = tmp_path / "c"
+    shutil.copytree(capture_dir, out)
+    return out
+
+
+def _edit_json(folder, fn) -> None:
+    path = folder / "capture.json"
+    meta = json.loads(path.read_text())
+    fn(meta)
+    path.write_text(json.dumps(meta))
+
+
+@pytest.mark.parametrize("edit, said", [
+    (lambda m: m.pop("lights"), "non-empty list 'lights'"),
+    (lambda m: m.update(lights=[]), "non-empty list 'lights'"),
+    (lambda m: m["lights"].append(m["lights"][0]), "no image for 1 (camera, light) pairs"),
+    (lambda m: m["images"].pop("0,2"), "no image for 1 (camera, light) pairs"),
+    (lambda m: m["images"].update({"0,9": m["images"]["0,0"]}), "does not exist"),
+    (lambda m: m["images"].update({"zero": m["images"]["0,0"]}), "not 'camera,light'"),
+    (lambda m: m["masks"].clear() or m["masks"].update({"3": "masks/cam0.exr"}), "does not exist"),
+    (lambda m: m["cameras"][0].pop("K"), "malformed"),
+    (lambda m: m["cameras"][0].update(width=0), "non-positive size"),
+    (lambda m: m["lights"][1].update(intensity=[-1, 1, 1]), "light 1"),
+    (lambda m: m["lights"][1].update(position=[float("nan"), 0, 0]), "light 1"),
+    (lambda m: m.update(format="other/1"), "unknown format"),
+])
+def test_malformed_capture_is_refused_by_name(capture_dir, tmp_path, capsys, edit, said):
+    cap = _copy(capture_dir, tmp_path)
+    _edit_json(cap, edit)
+    before = _digest(cap)
+    with pytest.raises(ValueError, match="capture.json"):
+        Capture.load(cap)
+    out = tmp_path / "fit"
+    assert main(["teeth", "fit", str(cap), "--out", str(out), "--no-dask", "--iterations", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
+    assert _digest(cap) == before
+
+
+def test_not_json_negative_pixels_and_wrong_sizes_are_refused(capture_dir, tmp_path):
+    cap = _copy(capture_dir, tmp_path)
+    (cap / "capture.json").write_text("")
+    with pytest.raises(ValueError, match="capture.json: not a JSON file"):
+        Capture.load(cap)
+    cap = _copy(capture_dir, tmp_path / "b")
+    write_exr(str(cap / "images" / "cam0_light1.exr"), np.full((10, 12, 3), -0.5, dtype=np.float32))
+    with pytest.raises(ValueError, match="cam0_light1.exr: has non-finite or negative pixels"):
+        Capture.load(cap)
+    write_exr(str(cap / "images" / "cam0_light1.exr"), np.full((5, 12, 3), 0.5, dtype=np.float32))
+    with pytest.raises(ValueError, match="cam0_light1.exr: image size"):
+        Capture.load(cap)
+
+
+def test_masks_that_select_nothing_are_refused(capture_dir, tmp_path):
+    cap = Capture.load(capture_dir)
+    cap.masks[:] = False
+    with pytest.raises(ValueError, match="masks select no pixel"):
+        fit(load_scene(str(capture_dir / "scene.json")), cap, FitSettings(iterations=1))
+
+
+def test_resume_under_another_capture_or_settings_is_refused(capture_dir, tmp_path):
+    scene = load_scene(str(capture_dir / "scene.json"))
+    cap = Capture.load(capture_dir)
+    out = str(tmp_path / "fit")
+    s = FitSettings(iterations=2, spp=1, image_spp=1, lights_per_iteration=1, max_depth=3)
+    fit(scene, cap, s, out_dir=out)
+    ckpt = os.path.join(out, "checkpoint.json")
+    before = open(ckpt).read()
+    other = Capture.load(capture_dir)
+    other.images = other.images * 1.5
+    with pytest.raises(ValueError, match="another fit .*the capture"):
+        fit(scene, other, FitSettings(**{**s.__dict__, "iterations": 3}), out_dir=out, resume=True)
+    with pytest.raises(ValueError, match="another fit .*the free parameters"):
+        fit(scene, cap, FitSettings(**{**s.__dict__, "iterations": 3, "free": ("*.albedo",)}), out_dir=out,
+            resume=True)
+    with pytest.raises(ValueError, match="another fit .*the seed"):
+        fit(scene, cap, FitSettings(**{**s.__dict__, "iterations": 3, "seed": 9}), out_dir=out, resume=True)
+    assert open(ckpt).read() == before
+    # a checkpoint that is not one: {} or a truncated file
+    for text in ("{}", before[: len(before) // 2]):
+        with open(ckpt, "w") as f:
+            f.write(text)
+        with pytest.raises(ValueError, match="checkpoint"):
+            fit(scene, cap, FitSettings(**{**s.__dict__, "iterations": 3}), out_dir=out, resume=True)
+
+
+def test_a_second_fit_into_a_busy_folder_is_refused(capture_dir, tmp_path):
+    scene = load_scene(str(capture_dir / "scene.json"))
+    cap = Capture.load(capture_dir)
+    out = tmp_path / "fit"
+    out.mkdir()
+    (out / ".fit.lock").write_text("1")  # process 1 (init) is alive: "another fit" holds the folder
+    with pytest.raises(ValueError, match=r"another fit \(process 1\) is writing to"):
+        fit(scene, cap, FitSettings(iterations=1), out_dir=str(out))
+    assert sorted(os.listdir(out)) == [".fit.lock"]
+    (out / ".fit.lock").write_text("999999999")  # a lock whose process is gone is taken over
+    fit(scene, cap, FitSettings(iterations=1, spp=1, image_spp=1, lights_per_iteration=1, max_depth=3),
+        out_dir=str(out))
+    assert not (out / ".fit.lock").exists() and (out / "scene_fit.json").exists()
+    with FolderLock(str(out)):  # held by this process: a second lock, even here, is refused
+        with pytest.raises(ValueError, match="another fit"):
+            FolderLock(str(out)).__enter__()
+    assert not (out / ".fit.lock").exists()
+
+
+def test_output_that_is_a_file_is_a_one_line_error(capture_dir, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("keep me")
+    for out in (blocker, blocker / "under"):
+        assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--no-dask", "--iterations", "1",
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and str(blocker) in err and err.count("\n") == 1, err
+    assert blocker.read_text() == "keep me"
