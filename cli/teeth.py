@@ -66,10 +66,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--scheduler", default=None,
                    help="Dask scheduler address (tcp://host:8786): per-view gradient renders become tasks there")
     f.add_argument("--dask-workers", type=int, default=None,
-                   help="processes of the local Dask cluster (default: CPU count)")
-    f.add_argument("--no-dask", action="store_true", help="render in this process instead of on Dask")
+                   help="render on a local Dask cluster of this many processes (on one machine the fit renders "
+                        "faster in its own process, the default)")
     f.add_argument("--workers", type=int, default=FIT_DEFAULTS.workers,
-                   help="with --no-dask where numba is missing: processes that trace each pass")
+                   help="where numba is missing: processes that trace each pass")
     f.add_argument("--no-progress", action="store_true")
     f.set_defaults(func=run_fit)
 
@@ -158,10 +158,13 @@ def run_fit(args: argparse.Namespace) -> int:
     if len(cap.cameras) == 0 or len(cap.lights) == 0:
         raise ValueError("the capture has no cameras or lights")
     fs = fit_settings(args)
-    if args.workers != 1 and not args.no_dask:
-        raise ValueError("--workers is for --no-dask; on Dask, --dask-workers sets the parallelism")
-    if args.no_dask and args.scheduler:
-        raise ValueError("--no-dask and --scheduler exclude each other")
+    on_dask = args.scheduler is not None or args.dask_workers is not None
+    if args.workers != 1 and on_dask:
+        raise ValueError("--workers is for fits in this process; on Dask, the cluster's workers render")
+    if args.scheduler is not None and args.dask_workers is not None:
+        raise ValueError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
+    if args.dask_workers is not None and args.dask_workers < 1:
+        raise ValueError(f"--dask-workers must be >= 1, got {args.dask_workers}")
     if not args.resume:
         if args.init == "literature":
             table, gs = literature_table()
@@ -186,7 +189,7 @@ def run_fit(args: argparse.Namespace) -> int:
     if args.resume and bar is not None:
         with open(os.path.join(args.out, "checkpoint.json")) as f:
             bar.update(len(json.load(f)["log"]))
-    if not args.no_dask:
+    if on_dask:
         from ..scaleout.cluster import dask_client
         from ..scaleout.teeth import DaskGradient
 

@@ -55,13 +55,13 @@ def python_executable() -> str:
 
 def fit_command(capture_dir: str, out_dir: str, iterations: int = FIT_DEFAULTS.iterations, init: str = "literature",
                 extra: list[str] | None = None, workers: int = 1) -> list[str]:
-    """The CLI call (the fit's own settings; the panel sets only the iterations and the start). ``--no-dask``:
-    the fit renders in the one background process (with ``workers`` > 1 in that many processes it forks per
-    render where numba is missing), so that cancelling stops all of it; pass ``extra=["--scheduler", ADDRESS]``
-    to use a Dask cluster instead."""
+    """The CLI call (the fit's own settings; the panel sets only the iterations and the start). The fit renders
+    in the one background process (with ``workers`` > 1 in that many processes it forks per render where numba
+    is missing), so that cancelling stops all of it; pass ``extra=["--scheduler", ADDRESS]`` to use a Dask
+    cluster instead."""
     extra = list(extra or [])
-    if "--scheduler" not in extra:
-        extra[:0] = ["--no-dask"] + (["--workers", str(int(workers))] if workers > 1 else [])
+    if "--scheduler" not in extra and workers > 1:
+        extra[:0] = ["--workers", str(int(workers))]
     return [python_executable(), "-m", "material_structures", "teeth", "fit", capture_dir, "--out", out_dir,
             "--iterations", str(int(iterations)), "--init", init, *extra]
 

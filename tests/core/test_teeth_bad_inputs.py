@@ -73,7 +73,7 @@ def test_malformed_capture_is_refused_by_name(capture_dir, tmp_path, capsys, edi
     with pytest.raises(ValueError, match="capture.json"):
         Capture.load(cap)
     out = tmp_path / "fit"
-    assert main(["teeth", "fit", str(cap), "--out", str(out), "--no-dask", "--iterations", "1", "--no-progress"]) == 2
+    assert main(["teeth", "fit", str(cap), "--out", str(out), "--iterations", "1", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
     assert _digest(cap) == before
@@ -149,7 +149,7 @@ def test_output_that_is_a_file_is_a_one_line_error(capture_dir, tmp_path, capsys
     blocker = tmp_path / "file"
     blocker.write_text("keep me")
     for out in (blocker, blocker / "under"):
-        assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--no-dask", "--iterations", "1",
+        assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--iterations", "1",
                      "--no-progress"]) == 2
         err = capsys.readouterr().err
         assert err.startswith("error: ") and str(blocker) in err and err.count("\n") == 1, err

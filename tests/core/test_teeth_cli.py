@@ -80,7 +80,7 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     table, _ = literature_table()
     fit_dir = tmp_path / "fit"
     assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--iterations", "1", "--no-progress",
-                 "--no-dask", "--free", "*.c"]) == 0
+                 "--free", "*.c"]) == 0
     fitted = load_scene(fit_dir / "scene_fit.json")  # best of 1 iteration = the start (only c is free)
     expected = literature_start(load_scene(cap_dir / "scene.json"), cap)  # scale-invariant, the default
     for t, e in zip(fitted.teeth, expected.teeth, strict=True):
@@ -91,25 +91,30 @@ def test_fit_starts_from_the_literature_search(tmp_path):
 
 
 def test_fit_workers_in_one_process_and_clear_errors(tmp_path, capsys):
-    """``--no-dask --workers 2`` traces each pass in 2 forked processes where numba is missing (the
-    compiled tracer ignores it): the same losses as one process; ``--workers`` without ``--no-dask`` and
-    out-of-range values are one-line errors (exit 2)."""
+    """``--workers 2`` traces each pass in 2 forked processes where numba is missing (the compiled tracer
+    ignores it): the same losses as one process; ``--workers`` with Dask and out-of-range values are
+    one-line errors (exit 2)."""
     cap_dir = tmp_path / "cap"
     assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
                  "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "1",
                  "--resolution", "12"]) == 0
-    common = ["teeth", "fit", str(cap_dir), "--init", "perturbed", "--no-progress", "--iterations", "2", "--no-dask"]
+    common = ["teeth", "fit", str(cap_dir), "--init", "perturbed", "--no-progress", "--iterations", "2"]
     logs = {}
     for name, extra in (("one", []), ("two", ["--workers", "2"])):
         assert main(common + ["--out", str(tmp_path / name), *extra]) == 0
         logs[name] = json.loads((tmp_path / name / "loss.json").read_text())["log"]
     assert [e["loss"] for e in logs["two"]] == pytest.approx([e["loss"] for e in logs["one"]], rel=1e-9)
+    # on a local Dask cluster (one task per camera on its workers)
+    assert main(common + ["--out", str(tmp_path / "dask"), "--dask-workers", "1"]) == 0
+    assert len(json.loads((tmp_path / "dask" / "loss.json").read_text())["log"]) == 2
     capsys.readouterr()
-    assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), "--workers", "2"]) == 2
-    assert "--workers is for --no-dask" in capsys.readouterr().err
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), "--workers", "2", "--dask-workers",
+                 "1"]) == 2
+    assert "--workers is for fits in this process" in capsys.readouterr().err
     for flag, value, said in (("--iterations", "0", "iterations must be >= 1"),
-                              ("--held-out-lights", "-1", "held_out_lights must be >= 0")):
-        assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), "--no-dask", flag, value]) == 2
+                              ("--held-out-lights", "-1", "held_out_lights must be >= 0"),
+                              ("--dask-workers", "0", "--dask-workers must be >= 1")):
+        assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), flag, value]) == 2
         assert said in capsys.readouterr().err
 
 
@@ -139,7 +144,7 @@ def test_fit_cli_defaults_are_fit_settings_and_help_is_short(tmp_path, capsys):
                  "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "1",
                  "--resolution", "12"]) == 0
     assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--init", "perturbed", "--no-progress",
-                 "--no-dask", "--iterations", "2"]) == 0
+                 "--iterations", "2"]) == 0
     ran = json.loads((fit_dir / "loss.json").read_text())
     want = dataclasses.asdict(dataclasses.replace(FitSettings(), iterations=2))
     assert ran["settings"] == json.loads(json.dumps(want))
