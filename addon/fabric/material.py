@@ -16,8 +16,6 @@ user's collection, recorded on it) and removes them as soon as an object no long
 
 from __future__ import annotations
 
-import os
-
 import bpy
 
 from ...render.osl import load_osl_script
@@ -177,18 +175,6 @@ def _build_viewport_look(group) -> None:
             ins[key].default_value = 1.0
             break
     links.new(bsdf.outputs[0], gout.inputs[VIEWPORT_OUTPUT])
-
-
-def load_map_image(path: str, name: str | None = None):
-    """Load a float EXR parameter map as a Non-Color, channel-packed image (values untouched)."""
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"parameter map not found: {path}")
-    image = bpy.data.images.load(path, check_existing=False)
-    if name:
-        image.name = name
-    image.colorspace_settings.name = "Non-Color"
-    image.alpha_mode = "CHANNEL_PACKED"
-    return image
 
 
 def create_fabric_material(

@@ -119,11 +119,6 @@ def world_environment(scene):
     return downsample(rgb) * float(bg.inputs["Strength"].default_value)
 
 
-def world_lamps(scene, slots: int) -> list:
-    """ShaderLamps (distant spheres; radius via ``world_lamp_radii``) standing in for the world."""
-    return [lamp for lamp, _ in world_lamps_with_radii(scene, slots)]
-
-
 def world_lamp_count(scene) -> int:
     """World Lights of ``scene`` (0 = off), clamped to the shader's lamp slots."""
     if scene is None:

@@ -226,14 +226,6 @@ def set_volume(mat, volume) -> None:
     _sync_eevee(mat, volume, node.inputs["mm per Unit"].default_value)
 
 
-def get_volume(mat) -> dict:
-    node = group_node(mat)
-    return {"sigma_t": list(node.inputs["Sigma_t"].default_value),
-            "albedo": list(node.inputs["Albedo"].default_value)[:3],
-            "g1": node.inputs["G1"].default_value, "g2": node.inputs["G2"].default_value,
-            "beta": node.inputs["Beta"].default_value}
-
-
 def set_a_t(mat, a_t) -> None:
     """a_t as a constant colour (1 x 1 texture) or a packed float image on the UV map (H x W)."""
     node = group_node(mat)

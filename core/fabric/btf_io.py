@@ -261,16 +261,6 @@ def save_btf(path: str | os.PathLike, values: np.ndarray, wi: np.ndarray, wo: np
     return path
 
 
-def write_directions(path: str | os.PathLike, wi: np.ndarray, wo: np.ndarray, width: int = 1,
-                     height: int = 1) -> None:
-    """Write a ``btf.json`` listing only directions (images named but absent), for ``fabric eval``."""
-    wi, wo = validate_directions(wi, wo, os.fspath(path))
-    samples = [{"wi": a.tolist(), "wo": b.tolist(), "image": f"{k:04d}.exr"}
-               for k, (a, b) in enumerate(zip(wi, wo, strict=True))]
-    with open(path, "w") as f:
-        json.dump({"width": width, "height": height, "samples": samples}, f)
-
-
 def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Directions ``(wi, wo)`` from a ``btf.json`` (images need not exist) or a ``.npz``."""
     path = os.fspath(path)

@@ -42,14 +42,6 @@ def _tangents(quat: np.ndarray) -> np.ndarray:
     return quat_to_matrix(quat)[..., :, 0]
 
 
-def dominant_direction(quat: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
-    """Principal axis of the tangents ``x`` (sign-free: eigenvector of ``sum w x x^T``)."""
-    x = _tangents(quat).reshape(-1, 3)
-    w = np.ones(x.shape[0]) if weight is None else np.reshape(weight, -1)
-    _, vecs = np.linalg.eigh(np.einsum("n,ni,nj->ij", w, x, x))
-    return vecs[:, 2]
-
-
 def _edges(x: np.ndarray):
     """4-neighbour edges (a, b) of an (H, W) grid with the tangent dot products across them."""
     h, w = x.shape[:2]

@@ -18,10 +18,3 @@ def sggx_ndf(wh: np.ndarray, s: np.ndarray) -> np.ndarray:
     q = np.einsum("...i,...ij,...j->...", wh, sinv, wh)
     return 1.0 / (np.pi * np.sqrt(det) * q * q)
 
-
-def sggx_ndf_local(wh_local: np.ndarray, sigma3: np.ndarray) -> np.ndarray:
-    """Eq. 3.5 with ``w`` already expressed in the fibre basis: ``S = diag(sigma3^2)``."""
-    wl = np.asarray(wh_local, dtype=np.float64)
-    s3 = np.asarray(sigma3, dtype=np.float64)
-    q = np.sum((wl / s3) ** 2, axis=-1)
-    return 1.0 / (np.pi * np.prod(s3, axis=-1) * q * q)

@@ -53,12 +53,6 @@ def sample_visible_normal(wo: np.ndarray, s: np.ndarray, u1: np.ndarray, u2: np.
     return np.einsum("...a,...ai->...i", m_kji, frame)
 
 
-def visible_normal_pdf(m: np.ndarray, wo: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Density of :func:`sample_visible_normal` over the sphere: ``max(0, wo.m) D(m) / sigma(wo)``."""
-    cos = np.sum(np.asarray(m) * np.asarray(wo), axis=-1)
-    return np.maximum(cos, 0.0) * sggx_ndf(m, s) / projected_area(wo, s)
-
-
 def sample_specular(
     wo: np.ndarray, sigma: np.ndarray, quat: np.ndarray, u1: np.ndarray, u2: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -108,13 +108,6 @@ FOOTPRINT_RULES = ("thesis", "chords")
 GAUSS_CUTOFF = 2.5  # the across-scratch integral is truncated at +-2.5 s (tail 2e-4)
 
 
-def footprint_half_width(J: ArrayLike, direction: ArrayLike) -> np.ndarray:
-    """Half extent of the footprint ellipse along unit ``direction`` (its support function |J^T d|)."""
-    J = np.asarray(J, dtype=np.float64)
-    d = np.asarray(direction, dtype=np.float64)
-    return np.linalg.norm(np.einsum("...ji,...j->...i", J, d), axis=-1)
-
-
 def _chord_setup(p0: np.ndarray, p1: np.ndarray, x: np.ndarray, J: np.ndarray, J_inv: np.ndarray):
     """Quadratic |q0 + o e + t dq|^2 = 1 of a segment shifted by o across itself, in footprint space.
 

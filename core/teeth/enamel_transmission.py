@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fresnel import fresnel_dielectric
-
 
 def bilinear_texels(uv: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Flat texel indices ``(N, 4)`` and bilinear weights ``(N, 4)`` for UVs ``(N, 2)``.
@@ -43,12 +41,3 @@ def lookup_a_t(texture: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndar
     vals = np.einsum("nk,nkc->nc", wts, flat[idx])
     return vals, idx, wts
 
-
-def boundary_transmission(a_t: np.ndarray, cos_i: np.ndarray, eta: float) -> np.ndarray:
-    """Transmitted weight a_t (1 - F(cos_i, eta)) of one non-bending crossing (eq. 5.2), ``(N, 3)``."""
-    return np.asarray(a_t) * (1.0 - fresnel_dielectric(cos_i, eta))[..., None]
-
-
-def a_t_score(a_t: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """d log(a_t) / d texel = w_i / a_t per crossing (eq. 5.10): ``(N, 4, 3)``."""
-    return weights[:, :, None] / np.asarray(a_t)[:, None, :]

@@ -28,14 +28,6 @@ def two_lobe(mu: np.ndarray, g1, g2, beta) -> np.ndarray:
     return beta * hg(mu, g1) + (1.0 - beta) * hg(mu, g2)
 
 
-def two_lobe_gradient(mu: np.ndarray, g1, g2, beta) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """f_p and its derivatives (df/dg1, df/dg2, df/dbeta) (eq. 5.11-5.14)."""
-    h1 = hg(mu, g1)
-    h2 = hg(mu, g2)
-    f = beta * h1 + (1.0 - beta) * h2
-    return f, beta * hg_dlog_dg(mu, g1) * h1, (1.0 - beta) * hg_dlog_dg(mu, g2) * h2, h1 - h2
-
-
 def sample_hg_mu(g: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Inverse-CDF sample of mu for f_HG(mu, g)."""
     g = np.asarray(g, dtype=np.float64) * np.ones_like(u)
