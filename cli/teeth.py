@@ -129,6 +129,13 @@ def run_synth(args: argparse.Namespace) -> int:
     return 0
 
 
+PROGRESS_ENV = "MATERIAL_STRUCTURES_PROGRESS"  # "json": progress as JSON lines on stdout, no bars
+
+
+def _event(**fields) -> None:
+    print(json.dumps(fields), flush=True)
+
+
 def fit_settings(args: argparse.Namespace) -> FitSettings:
     """The FitSettings of a ``teeth fit`` command line: FitSettings' defaults, with the flags given."""
     from dataclasses import replace
@@ -165,30 +172,41 @@ def run_fit(args: argparse.Namespace) -> int:
         raise ValueError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
     if args.dask_workers is not None and args.dask_workers < 1:
         raise ValueError(f"--dask-workers must be >= 1, got {args.dask_workers}")
+    as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     if not args.resume:
         if args.init == "literature":
             table, gs = literature_table()
             n_points = len(table) * len(gs)
-            with tqdm(total=n_points, desc="init", unit="point", disable=args.no_progress) as init_bar:
+            if as_json:
+                _event(progress="init", message="searching the literature table for a start")
+            with tqdm(total=n_points, desc="init", unit="point", disable=args.no_progress or as_json) as init_bar:
                 scene = literature_start(scene, cap, progress=init_bar.update)
         elif args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
     total = fs.iterations + fs.textured_iterations
-    bar = None if args.no_progress else tqdm(total=total, desc="fit", unit="it")
+    bar = None if args.no_progress or as_json else tqdm(total=total, desc="fit", unit="it")
+    done = [0]
 
     def progress(entry):
+        done[0] += 1
+        if as_json:
+            _event(progress="fit", iteration=done[0], iterations=total, loss=entry["loss"], phase=entry["phase"])
         if bar is not None:
             bar.update(1)
             bar.set_postfix(loss=f"{entry['loss']:.3e}", best=f"{entry['best_loss']:.3e}", phase=entry["phase"])
 
     def status(text: str) -> None:
+        if as_json:
+            _event(progress="status", message=text)
         if bar is not None:
             bar.set_description_str(f"fit: {text}" if text else "fit")
 
     os.makedirs(args.out, exist_ok=True)
-    if args.resume and bar is not None:
+    if args.resume:
         with open(os.path.join(args.out, "checkpoint.json")) as f:
-            bar.update(len(json.load(f)["log"]))
+            done[0] = len(json.load(f).get("log", []))
+        if bar is not None:
+            bar.update(done[0])
     if on_dask:
         from ..scaleout.cluster import dask_client
         from ..scaleout.teeth import DaskGradient
@@ -202,7 +220,9 @@ def run_fit(args: argparse.Namespace) -> int:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))
     held_out = held_out_light_ids(len(cap.lights), fs.held_out_lights)
-    if not args.no_progress and len(held_out):
+    if as_json:
+        _event(progress="status", message=f"checking the fit on {len(held_out)} held-out lights")
+    elif not args.no_progress and len(held_out):
         print(f"checking the fit on {len(held_out)} held-out lights", flush=True)
     check = held_out_check(best, cap, held_out, os.path.join(args.out, "check.png"), workers=fs.workers)
     report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,

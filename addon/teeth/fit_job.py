@@ -13,6 +13,7 @@ in the .blend): a file saved while a fit ran reopens with no fit running.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -23,8 +24,7 @@ from ...core.teeth.fit_settings import FitSettings
 
 FIT_DEFAULTS = FitSettings()
 
-_PROGRESS = re.compile(r"(\d+)/(\d+)")
-_LOSS = re.compile(r"loss=([0-9.eE+-]+)")
+PROGRESS_ENV = "MATERIAL_STRUCTURES_PROGRESS"  # "json": the fit reports progress as JSON lines (cli/teeth.py)
 
 
 def package_parent() -> str:
@@ -77,6 +77,17 @@ def usable_cores() -> int:
 _JOB: dict[str, FitJob | None] = {"job": None}  # the one background fit of this Blender session
 
 
+def _progress_event(line: str) -> dict | None:
+    """One progress line of the fit (a JSON object with a "progress" key), else None (a log line)."""
+    if not line.startswith("{"):
+        return None
+    try:
+        event = json.loads(line)
+    except ValueError:
+        return None
+    return event if isinstance(event, dict) and "progress" in event else None
+
+
 def current_job() -> FitJob | None:
     """The background fit started last in this Blender session (running or ended), or None."""
     return _JOB["job"]
@@ -107,6 +118,7 @@ class FitJob:
         self.done_iterations = 0
         self.loss: float | None = None
         self.last_line = ""
+        self.message = ""  # what the fit does between iterations (the literature search, a Gauss-Newton matrix)
         self.cancelled = False
         self._lock = threading.Lock()
         self._threads: list[threading.Thread] = []
@@ -119,6 +131,7 @@ class FitJob:
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join([package_parent(), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
         env.setdefault("PYTHONUNBUFFERED", "1")
+        env[PROGRESS_ENV] = "json"
         self._log = open(self.log_path, "w", encoding="utf-8")
         self._log.write("$ " + " ".join(self.cmd) + "\n")
         self._log.flush()
@@ -153,13 +166,15 @@ class FitJob:
             self._log.write(line + "\n")
             self._log.flush()
             self.last_line = line
-            if line.startswith("fit"):
-                m = _PROGRESS.search(line)
-                if m:
-                    self.done_iterations = int(m.group(1))
-                m = _LOSS.search(line)
-                if m:
-                    self.loss = float(m.group(1))
+            event = _progress_event(line)
+            if event is None:
+                return
+            if event.get("progress") == "fit":
+                self.done_iterations = int(event.get("iteration", self.done_iterations))
+                if event.get("loss") is not None:
+                    self.loss = float(event["loss"])
+            elif event.get("progress") in ("status", "init"):
+                self.message = str(event.get("message", ""))
 
     @property
     def progress(self) -> float:
@@ -248,4 +263,5 @@ class FitJob:
 
     def status_text(self) -> str:
         loss = "" if self.loss is None else f", loss {self.loss:.3e}"
-        return f"Teeth fit: iteration {self.done_iterations}/{self.iterations}{loss} (Esc cancels)"
+        doing = f", {self.message}" if self.message else ""
+        return f"Teeth fit: iteration {self.done_iterations}/{self.iterations}{loss}{doing} (Esc cancels)"

@@ -57,7 +57,7 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     for name in ("fit_log.txt", "loss.png", "loss.json", "checkpoint.json"):
         assert os.path.isfile(tmp_path / "fit" / name), name
     log = open(tmp_path / "fit" / "fit_log.txt").read()
-    assert "3/3" in log and "best loss" in log
+    assert '"progress": "fit", "iteration": 3, "iterations": 3' in log and "best loss" in log
     assert fs.progress == pytest.approx(1.0) and not fs.running
 
 

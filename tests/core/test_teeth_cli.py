@@ -152,3 +152,23 @@ def test_fit_cli_defaults_are_fit_settings_and_help_is_short(tmp_path, capsys):
     # 3 lights: none held out (fewer than 4), and the report says so
     report = json.loads((fit_dir / "fit_report.json").read_text())
     assert report["held_out"]["lights"] == [] and not (fit_dir / "check.png").exists()
+
+
+def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
+    """With MATERIAL_STRUCTURES_PROGRESS=json (what the Blender add-on sets) the fit reports each iteration,
+    what it does between iterations and nothing else as JSON lines on stdout: no progress bars to parse."""
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "1", "--spp", "1", "--spp-background", "0",
+                 "--resolution", "10"]) == 0
+    capsys.readouterr()
+    monkeypatch.setenv("MATERIAL_STRUCTURES_PROGRESS", "json")
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "fit"), "--iterations", "2"]) == 0
+    out, err = capsys.readouterr()
+    events = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    fits = [e for e in events if e["progress"] == "fit"]
+    assert [e["iteration"] for e in fits] == [1, 2] and all(e["iterations"] == 2 for e in fits)
+    assert all(np.isfinite(e["loss"]) for e in fits)
+    assert events[0] == {"progress": "init", "message": "searching the literature table for a start"}
+    assert any(e["progress"] == "status" and "held-out" in e["message"] for e in events)
+    assert "it/s" not in err and "|" not in err  # no tqdm bars
