@@ -97,8 +97,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run_synth(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from ..core.teeth.capture import default_rig
     from ..core.teeth.synthetic import make_scene, render_capture, scene_target
 
@@ -114,13 +112,13 @@ def run_synth(args: argparse.Namespace) -> int:
 
         scene = index_matched(scene)
         _, variant = import_mitsuba()
-        with tqdm(total=len(lights), desc="synth (mitsuba)", unit="light") as bar:
+        with _bar(len(lights), "synth (mitsuba)", "light") as bar:
             cap = render_capture_mitsuba(scene, cams, lights, args.spp, args.seed, progress=bar.update,
                                          variant=variant)
         how = (f" rendered by Mitsuba 3 {variant} (volpath, all bounces, {args.spp} spp per pixel) of the "
                "index-matched scene (eta 1, a_t 1, blend spread 1e-5 mm)")
     else:
-        with tqdm(total=2 * len(lights), desc="synth", unit="light-pass") as bar:
+        with _bar(2 * len(lights), "synth", "light-pass") as bar:
             cap = render_capture(scene, cams, lights, args.spp, args.spp_background, args.seed,
                                  progress=bar.update)
         how = ""
@@ -136,6 +134,42 @@ def _event(**fields) -> None:
     print(json.dumps(fields), flush=True)
 
 
+class _NoBar:
+    """Stands in for a tqdm bar where bars are off or tqdm is not installed (a desktop Blender's Python)."""
+
+    def __init__(self, *_, **__) -> None:
+        pass
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+    def update(self, *_) -> None:
+        pass
+
+    def set_postfix(self, **_) -> None:
+        pass
+
+    def set_description_str(self, *_) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _bar(total: int, desc: str, unit: str, disable: bool = False):
+    """A tqdm progress bar on stderr, or a stand-in that shows nothing."""
+    if disable:
+        return _NoBar()
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return _NoBar()
+    return tqdm(total=total, desc=desc, unit=unit)
+
+
 def fit_settings(args: argparse.Namespace) -> FitSettings:
     """The FitSettings of a ``teeth fit`` command line: FitSettings' defaults, with the flags given."""
     from dataclasses import replace
@@ -147,8 +181,6 @@ def fit_settings(args: argparse.Namespace) -> FitSettings:
 
 def run_fit(args: argparse.Namespace) -> int:
     import time
-
-    from tqdm import tqdm
 
     from ..core.teeth.capture import Capture
     from ..core.teeth.fit_checkpoint import save_json
@@ -179,12 +211,12 @@ def run_fit(args: argparse.Namespace) -> int:
             n_points = len(table) * len(gs)
             if as_json:
                 _event(progress="init", message="searching the literature table for a start")
-            with tqdm(total=n_points, desc="init", unit="point", disable=args.no_progress or as_json) as init_bar:
+            with _bar(n_points, "init", "point", disable=args.no_progress or as_json) as init_bar:
                 scene = literature_start(scene, cap, progress=init_bar.update)
         elif args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
     total = fs.iterations + fs.textured_iterations
-    bar = None if args.no_progress or as_json else tqdm(total=total, desc="fit", unit="it")
+    bar = None if args.no_progress or as_json else _bar(total, "fit", "it")
     done = [0]
 
     def progress(entry):

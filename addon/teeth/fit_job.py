@@ -33,18 +33,23 @@ def package_parent() -> str:
     return os.path.dirname(root)
 
 
-FIT_MODULES = ("numpy", "scipy", "tqdm", "matplotlib")
+def _fit_can_run_here() -> bool:
+    """This interpreter can run the fit: numpy, and numba (the compiled tracer) or scipy (the numpy
+    reference tracer's neighbour search); progress bars, plots and images need nothing else."""
+    import importlib.util
+
+    def has(m: str) -> bool:
+        return importlib.util.find_spec(m) is not None
+
+    return has("numpy") and (has("numba") or has("scipy"))
 
 
 def python_executable() -> str:
-    """The interpreter for the fit: ``MS_PYTHON`` if set; else this process's when it has the fit's
-    dependencies (the ``bpy`` module in the project venv); else the checkout's ``.venv`` (a desktop
-    Blender's bundled Python has no scipy); else this process's."""
-    import importlib.util
-
+    """The interpreter for the fit: ``MS_PYTHON`` if set; else this process's when it can run the fit
+    (``_fit_can_run_here``); else the checkout's ``.venv``; else this process's."""
     if os.environ.get("MS_PYTHON"):
         return os.environ["MS_PYTHON"]
-    if all(importlib.util.find_spec(m) is not None for m in FIT_MODULES):
+    if _fit_can_run_here():
         return sys.executable
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     for cand in (os.path.join(root, ".venv", "bin", "python"), os.path.join(root, ".venv", "Scripts", "python.exe")):

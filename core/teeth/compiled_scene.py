@@ -13,7 +13,6 @@ Triangle kinds: 0 = thin dielectric boundary (enamel, gums), 1 = index-matched (
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .distance_derivatives import closest_point_on_triangle, point_distance_vertex_derivative
 from .param_vector import ParamLayout
@@ -37,13 +36,17 @@ class DentinProximity:
         self.ts = verts_s[faces]
         self.te = verts_e[faces]
         self.deltas = deltas  # (3, V, 3)
-        self.tree = cKDTree(self.ts.mean(axis=1))
+        self._tree = None  # built on the first query (the numpy reference tracer's; the compiled one has a BVH)
         self.k = min(k, len(faces))
 
     def query(self, p: np.ndarray, sign: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Returns (q_sampling, q_eval, dq_eval/dc (N, 3))."""
         n = len(p)
-        _, cand = self.tree.query(p, k=self.k)
+        if self._tree is None:
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self.ts.mean(axis=1))
+        _, cand = self._tree.query(p, k=self.k)
         cand = cand.reshape(n, -1)
         pp = np.repeat(p, cand.shape[1], axis=0)
         tri = self.ts[cand.ravel()]

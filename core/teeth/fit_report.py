@@ -16,6 +16,7 @@ import os
 
 import numpy as np
 
+from ..png_io import write_png
 from .capture import Capture
 from .fit_loss import block_counts, block_sums
 from .path_tracer import RenderSettings, render
@@ -27,8 +28,13 @@ DIFFERENCE_GAIN = 4.0
 
 
 def plot_loss(log: list, path: str) -> None:
-    """Loss per iteration (and best loss) as a PNG, like the thesis' Fig. 5.14-5.16."""
-    import matplotlib
+    """Loss per iteration (and best loss) as a PNG, like the thesis' Fig. 5.14-5.16 (matplotlib where it
+    is installed, else a plain raster plot: log-scale loss in blue, best loss in orange)."""
+    try:
+        import matplotlib
+    except ImportError:
+        write_png(path, loss_raster(log))
+        return
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -43,6 +49,31 @@ def plot_loss(log: list, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def loss_raster(log: list, size: tuple[int, int] = (240, 400)) -> np.ndarray:
+    """(H, W, 3) uint8 plot of the loss (blue) and best loss (orange) per iteration on a log scale."""
+    h, w = size
+    img = np.full((h, w, 3), 255, dtype=np.uint8)
+    img[[8, h - 9], 8:w - 8] = 120
+    img[8:h - 8, [8, w - 9]] = 120
+    series = [np.array([e["loss"] for e in log], dtype=np.float64),
+              np.array([e["best_loss"] for e in log], dtype=np.float64)]
+    vals = np.concatenate(series)
+    vals = vals[np.isfinite(vals) & (vals > 0)]
+    if len(log) == 0 or len(vals) == 0:
+        return img
+    lo, hi = np.log10(vals.min()), np.log10(vals.max())
+    hi = hi if hi > lo else lo + 1.0
+    for ys, colour in zip(series, ((31, 119, 180), (255, 127, 14)), strict=True):
+        ok = np.isfinite(ys) & (ys > 0)
+        if not ok.any():
+            continue
+        x = np.interp(np.linspace(0, len(ys) - 1, 4 * (w - 20)), np.arange(len(ys))[ok], np.log10(ys[ok]))
+        col = np.linspace(10, w - 11, len(x)).astype(int)
+        row = (h - 11 - (x - lo) / (hi - lo) * (h - 22)).astype(int)
+        img[row, col] = colour
+    return img
 
 
 def held_out_errors(fitted: np.ndarray, capture: np.ndarray, masks: np.ndarray) -> dict:
@@ -96,13 +127,6 @@ def held_out_check(scene: TeethScene, capture: Capture, light_ids: np.ndarray, i
     ref = capture.images[:, light_ids].astype(np.float64)
     out = {"lights": light_ids.tolist(), "spp": spp, **held_out_errors(res.images, ref, capture.masks)}
     if image_path is not None:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        tmp = f"{image_path}.tmp.png"
-        plt.imsave(tmp, check_image(res.images, ref, capture.masks))
-        os.replace(tmp, image_path)
+        write_png(image_path, check_image(res.images, ref, capture.masks))
         out["image"] = os.path.basename(image_path)
     return out
