@@ -14,8 +14,16 @@ import sys
 SUBCOMMANDS = ("render", "build", "bench", "demo", "library", "fabric", "scratch", "teeth")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """A bad command line is one line on stderr, ``error: PROG: PROBLEM`` (exit 2), without the usage
+    (``--help`` has it). Subcommand parsers are of this class too."""
+
+    def error(self, message: str):
+        self.exit(2, f"error: {self.prog}: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m material_structures",
         description="Material Structures: pile fabric, scratched metal and teeth for Blender/Cycles.",
     )
@@ -38,7 +46,10 @@ def main(argv: list[str] | None = None) -> int:
         if "--" in sys.argv:  # blender -b --python script.py -- ARGS
             argv = sys.argv[sys.argv.index("--") + 1 :]
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a bad command line (2, said on stderr)
+        return int(exc.code or 0)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

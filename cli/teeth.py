@@ -13,6 +13,7 @@ import json
 import os
 
 from ..core.teeth.fit_settings import FitSettings
+from .checks import at_least, positive_float, refuse_output_over_inputs
 
 FIT_DEFAULTS = FitSettings()  # the defaults of ``teeth fit``: the fit's own, no second table
 
@@ -23,14 +24,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     s = tsub.add_parser("synth", help="render a synthetic capture of a known ground truth")
     s.add_argument("out", help="output capture folder (capture.json, images/, masks/, scene.json)")
-    s.add_argument("--teeth", type=int, default=2, help="number of teeth (incisor, canine, premolar, molar)")
-    s.add_argument("--width", type=int, default=96)
-    s.add_argument("--height", type=int, default=64)
-    s.add_argument("--lights", type=int, default=54)
-    s.add_argument("--cameras", type=int, default=3)
-    s.add_argument("--spp", type=int, default=16, help="samples per masked (tooth) pixel")
-    s.add_argument("--spp-background", type=int, default=2, help="samples per other pixel")
-    s.add_argument("--resolution", type=int, default=32, help="tooth mesh resolution")
+    s.add_argument("--teeth", type=at_least(1), default=2, help="number of teeth (incisor, canine, premolar, molar)")
+    s.add_argument("--width", type=at_least(4), default=96)
+    s.add_argument("--height", type=at_least(4), default=64)
+    s.add_argument("--lights", type=at_least(1), default=54)
+    s.add_argument("--cameras", type=at_least(1), default=3)
+    s.add_argument("--spp", type=at_least(1), default=16, help="samples per masked (tooth) pixel")
+    s.add_argument("--spp-background", type=at_least(0), default=2, help="samples per other pixel")
+    s.add_argument("--resolution", type=at_least(4), default=32, help="tooth mesh resolution")
     s.add_argument("--seed", type=int, default=12345)
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
                    help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "
@@ -51,12 +52,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--init", choices=("literature", "scene", "perturbed"), default="literature",
                    help="start point: literature-table search (default, as the thesis), the scene's values, or "
                         "a perturbation of them")
-    f.add_argument("--iterations", type=int, default=FIT_DEFAULTS.iterations,
+    f.add_argument("--iterations", type=at_least(1), default=FIT_DEFAULTS.iterations,
                    help=f"iterations (default {FIT_DEFAULTS.iterations}; fewer: a quicker, rougher fit)")
-    f.add_argument("--textured-iterations", type=int, default=FIT_DEFAULTS.textured_iterations,
+    f.add_argument("--textured-iterations", type=at_least(0), default=FIT_DEFAULTS.textured_iterations,
                    help="then this many iterations with the enamel transmittance as a texture (default "
                         f"{FIT_DEFAULTS.textured_iterations})")
-    f.add_argument("--held-out-lights", type=int, default=FIT_DEFAULTS.held_out_lights,
+    f.add_argument("--held-out-lights", type=at_least(0), default=FIT_DEFAULTS.held_out_lights,
                    help=f"lights left out of the fit to check it by (default {FIT_DEFAULTS.held_out_lights})")
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to fit (default: every material, a_t and the "
@@ -65,10 +66,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--resume", action="store_true", help="continue an interrupted fit from FIT_DIR")
     f.add_argument("--scheduler", default=None,
                    help="Dask scheduler address (tcp://host:8786): per-view gradient renders become tasks there")
-    f.add_argument("--dask-workers", type=int, default=None,
+    f.add_argument("--dask-workers", type=at_least(1), default=None,
                    help="render on a local Dask cluster of this many processes (on one machine the fit renders "
                         "faster in its own process, the default)")
-    f.add_argument("--workers", type=int, default=FIT_DEFAULTS.workers,
+    f.add_argument("--workers", type=at_least(1), default=FIT_DEFAULTS.workers,
                    help="where numba is missing: processes that trace each pass")
     f.add_argument("--no-progress", action="store_true")
     f.set_defaults(func=run_fit)
@@ -77,7 +78,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("scene")
     r.add_argument("capture")
     r.add_argument("--out", required=True)
-    r.add_argument("--spp", type=int, default=16)
+    r.add_argument("--spp", type=at_least(1), default=16)
     r.add_argument("--seed", type=int, default=1)
     r.set_defaults(func=run_render)
 
@@ -86,11 +87,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     v.add_argument("capture", help="capture folder (capture.json, masks; images are not needed)")
     v.add_argument("--scene", default=None, help="scene JSON to evaluate at (default CAPTURE/scene.json)")
     noise = v.add_mutually_exclusive_group(required=True)
-    noise.add_argument("--capture-spp", type=int, help="synthetic capture: its samples per pixel")
-    noise.add_argument("--noise-variance", type=float, help="the photographs' noise variance per pixel value")
-    v.add_argument("--passes", type=int, default=6, help="independent 1-spp Jacobian passes (>= 2)")
-    v.add_argument("--block", type=int, default=8, help="pixel tile size the image changes are pooled over")
-    v.add_argument("--max-depth", type=int, default=None,
+    noise.add_argument("--capture-spp", type=at_least(1), help="synthetic capture: its samples per pixel")
+    noise.add_argument("--noise-variance", type=positive_float,
+                       help="the photographs' noise variance per pixel value")
+    v.add_argument("--passes", type=at_least(2), default=6, help="independent 1-spp Jacobian passes (>= 2)")
+    v.add_argument("--block", type=at_least(1), default=8, help="pixel tile size the image changes are pooled over")
+    v.add_argument("--max-depth", type=at_least(1), default=None,
                    help="stop every path after this many bounces (an experiment: biased dark); default all bounces")
     v.add_argument("--json", default=None, help="also write the table to this JSON file")
     v.set_defaults(func=run_sensitivity)
@@ -202,8 +204,6 @@ def run_fit(args: argparse.Namespace) -> int:
         raise ValueError("--workers is for fits in this process; on Dask, the cluster's workers render")
     if args.scheduler is not None and args.dask_workers is not None:
         raise ValueError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
-    if args.dask_workers is not None and args.dask_workers < 1:
-        raise ValueError(f"--dask-workers must be >= 1, got {args.dask_workers}")
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     if not args.resume:
         if args.init == "literature":
@@ -275,6 +275,7 @@ def run_render(args: argparse.Namespace) -> int:
     from ..core.teeth.path_tracer import RenderSettings, render
     from ..core.teeth.scene import load_scene
 
+    refuse_output_over_inputs(args.out, [args.capture, args.scene])
     scene = load_scene(args.scene)
     cap = Capture.load(args.capture)
     os.makedirs(args.out, exist_ok=True)
@@ -306,7 +307,8 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     for name, c in rows:
         print(f"  {name:32s} {c:12.1f}")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"chi2": dict(rows), "noise_variance": out["noise_variance"], "tiles": out["tiles"],
-                       "block": args.block, "passes": args.passes}, f, indent=1)
+        from ..core.teeth.fit_checkpoint import save_json
+
+        save_json(args.json, {"chi2": dict(rows), "noise_variance": out["noise_variance"], "tiles": out["tiles"],
+                              "block": args.block, "passes": args.passes})
     return 0

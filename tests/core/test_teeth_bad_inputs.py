@@ -154,3 +154,31 @@ def test_output_that_is_a_file_is_a_one_line_error(capture_dir, tmp_path, capsys
         err = capsys.readouterr().err
         assert err.startswith("error: ") and str(blocker) in err and err.count("\n") == 1, err
     assert blocker.read_text() == "keep me"
+
+
+def test_render_refuses_to_write_over_its_inputs(capture_dir, tmp_path, capsys):
+    cap = _copy(capture_dir, tmp_path)
+    before = _digest(cap)
+    for out in (cap / "images", cap, tmp_path):  # the capture's photographs, the capture, a folder holding it
+        assert main(["teeth", "render", str(cap / "scene.json"), str(cap), "--out", str(out), "--spp", "1"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and "would write over the input" in err and err.count("\n") == 1, err
+    assert _digest(cap) == before
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["synth", "OUT", "--cameras", "0"], "argument --cameras: must be >= 1, got 0"),
+    (["synth", "OUT", "--spp", "-3"], "argument --spp: must be >= 1, got -3"),
+    (["synth", "OUT", "--width", "2"], "argument --width: must be >= 4, got 2"),
+    (["render", "S", "C", "--out", "O", "--spp", "0"], "argument --spp: must be >= 1, got 0"),
+    (["sensitivity", "C", "--noise-variance", "nan"], "argument --noise-variance: 'nan' is not a finite number"),
+    (["sensitivity", "C", "--capture-spp", "4", "--block", "0"], "argument --block: must be >= 1, got 0"),
+    (["sensitivity", "C", "--capture-spp", "4", "--passes", "1"], "argument --passes: must be >= 2, got 1"),
+    (["fit", "C", "--out", "O", "--textured-iterations", "-1"], "argument --textured-iterations: must be >= 0"),
+])
+def test_numeric_flags_are_range_checked_at_the_parser(tmp_path, capsys, argv, said):
+    argv = [str(tmp_path / a) if a in ("OUT", "S", "C", "O") else a for a in argv]
+    assert main(["teeth", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
+    assert list(tmp_path.iterdir()) == []  # nothing written

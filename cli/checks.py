@@ -1,0 +1,42 @@
+"""Argument checks shared by the subcommands: numeric ranges at the parser, outputs that would overwrite
+inputs. A failed check is a one-line ``error: ...`` and exit status 2 (``cli.OneLineParser``)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+
+
+def at_least(low: float, kind: type = int):
+    """An argparse ``type`` that parses ``kind`` and refuses values below ``low`` (and NaN / inf)."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a{'n integer' if kind is int else ' number'}") from None
+        if isinstance(value, float) and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low:g}, got {text}")
+        return value
+
+    parse.__name__ = f"{kind.__name__} >= {low:g}"
+    return parse
+
+
+def positive_float(text: str) -> float:
+    value = at_least(0.0, float)(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def refuse_output_over_inputs(out: str, inputs: list[str]) -> None:
+    """Refuse an output path that is one of ``inputs``, lies inside an input folder, or holds an input."""
+    o = os.path.realpath(out)
+    for inp in inputs:
+        i = os.path.realpath(inp)
+        if o == i or o.startswith(i + os.sep) or i.startswith(o + os.sep):
+            raise ValueError(f"--out {out!r} would write over the input {inp!r}; choose another output")
