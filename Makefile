@@ -8,11 +8,12 @@ STAMP := $(VENV)/.material-structures-stamp
 CSTAMP := $(CVENV)/.material-structures-stamp
 PYTEST_JOBS ?=
 
-.PHONY: setup setup-compat test test-all test-compat lint demo library build bench refs clean help
+.PHONY: setup setup-compat test test-fast test-all test-compat lint demo library build bench refs clean help
 
 help:
 	@echo "make demo        set up and render the sample library into out/"
 	@echo "make test        set up and run lint + the default test suite (Blender 5.2 LTS)"
+	@echo "make test-fast   the core tests without the heavy ones (under a minute)"
 	@echo "make test-all    also the slow suites (-m slow)"
 	@echo "make test-compat Blender-side smoke tests on Blender 4.5 LTS (CPython 3.11)"
 	@echo "make library     (re)build the artist asset library in samples/library"
@@ -34,6 +35,9 @@ lint: $(STAMP)
 
 test: $(STAMP) lint
 	$(PY) -m pytest -m "not slow" -q $(PYTEST_JOBS)
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -m "not slow and not blender and not heavy" -q tests/core
 
 test-all: $(STAMP) lint
 	$(PY) -m pytest -q $(PYTEST_JOBS)

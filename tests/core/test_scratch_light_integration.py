@@ -25,6 +25,8 @@ from material_structures.core.scratch.scratch_reference import (
     reference_radiance_quadrature,
 )
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 SIG = 60.0
 
 

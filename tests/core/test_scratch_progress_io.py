@@ -13,6 +13,8 @@ from material_structures.core.scratch import scratch_set as S
 from material_structures.core.scratch.scratch_generators import circular_polish, hairline_brush, uniform_wear
 from material_structures.core.scratch.scratch_io import load_scratch_set, save_scratch_set, save_scratch_set_exr
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 
 def _digest(s) -> str:
     h = hashlib.sha1()

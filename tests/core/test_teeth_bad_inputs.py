@@ -19,6 +19,8 @@ from material_structures.core.teeth.fit_checkpoint import FolderLock
 from material_structures.core.teeth.optimise import FitSettings, fit
 from material_structures.core.teeth.scene import load_scene
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory):

@@ -3,7 +3,11 @@ it runs, reports the fit's result, its best-loss parameters and the start, and s
 
 from __future__ import annotations
 
+import pytest
+
 from material_structures.benchmarks.teeth import RECOVERY_SETTINGS, run_recovery
+
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 
 
 def test_run_recovery_reports_result_best_and_start():

@@ -12,6 +12,8 @@ from material_structures.core.teeth.capture import Capture
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import load_scene
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 
 def test_synth_then_fit_with_resume(tmp_path):
     cap_dir, fit_dir = tmp_path / "cap", tmp_path / "fit"

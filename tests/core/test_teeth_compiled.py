@@ -14,6 +14,8 @@ from material_structures.core.teeth.gradient_check import fd_test_scene
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.synthetic import make_scene
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 numba = pytest.importorskip("numba")
 
 

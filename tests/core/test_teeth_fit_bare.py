@@ -13,6 +13,8 @@ import pytest
 
 from material_structures.cli import main
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 BLOCKED = ("scipy", "tqdm", "matplotlib", "PIL", "trimesh", "dask", "distributed", "embreex")
 RUN = """
 import sys

@@ -14,6 +14,8 @@ from material_structures.core.teeth.distance_derivatives import (
 )
 from material_structures.core.teeth.gradient_check import fd_check
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 
 @pytest.mark.parametrize("reference", [pytest.param(False, id="compiled"), pytest.param(True, id="reference")])
 def test_every_gradient_component_matches_central_differences(reference):

@@ -17,6 +17,8 @@ from material_structures.core.teeth.literature_init import (
 from material_structures.core.teeth.scene import VolumeMaterial
 from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 N_SIGMA, N_ALBEDO = 4, 3  # coarse table: sigma_t 0.3, 1.39, 6.46, 30 / mm; albedo 0.5, 0.978, 0.999
 
 

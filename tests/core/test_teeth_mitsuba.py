@@ -19,6 +19,8 @@ from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import VolumeMaterial
 from material_structures.core.teeth.synthetic import make_scene, scene_target, tooth_masks
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 mi = pytest.importorskip("mitsuba")
 
 

@@ -14,6 +14,8 @@ from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import TeethScene
 from material_structures.core.teeth.synthetic import make_scene, scene_target, tooth_masks
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 pytest.importorskip("mitsuba")
 
 SEEDS = (11, 12, 13)

@@ -16,6 +16,8 @@ from material_structures.core.teeth.path_tracer import RenderSettings, render
 
 from ._teeth_scenes import down_camera, light, slab_scene
 
+pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
+
 
 def _slab():
     """A high-albedo slab (optical depth 4-6) over a Lambertian floor, all pixels on the slab, 2 lights."""
