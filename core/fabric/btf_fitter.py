@@ -74,12 +74,24 @@ def _directions_hash(wi: np.ndarray, wo: np.ndarray) -> str:
     return hashlib.sha1(np.ascontiguousarray(np.concatenate([wi, wo], 1)).tobytes()).hexdigest()
 
 
+def _content_stamp(hdr) -> list:
+    """(path, size, mtime in ns) of every file the BTF's values come from: its .npz, or its folder's
+    btf.json and every image, so rewriting one image in place invalidates the cache."""
+    files = [hdr.source] if not os.path.isdir(hdr.source) else \
+        [os.path.join(hdr.source, "btf.json"), *(hdr.images or [])]
+    stamp = []
+    for f in files:
+        st = os.stat(f)
+        stamp.append([os.path.abspath(f), st.st_size, st.st_mtime_ns])
+    return stamp
+
+
 def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool):
     hdr = read_btf_header(btf_path)
     cache = os.path.join(out_dir, CACHE)
     meta = {
         "source": os.path.abspath(hdr.source),
-        "source_mtime": os.path.getmtime(hdr.source),
+        "files": _content_stamp(hdr),
         "shape": [hdr.count, hdr.height, hdr.width, 3],
         "directions": _directions_hash(hdr.wi, hdr.wo),
         "tile": tile,
@@ -107,8 +119,10 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         op = ndf_operator(hdr.wi, hdr.wo)
         np.savez(os.path.join(cache, "ndf_operator.npz"), A=op.A, directions=op.directions,
                  solid_angle=op.solid_angle, valid=op.valid, resolution=op.resolution)
-        with open(meta_path, "w") as f:
+        tmp_meta = meta_path + f".tmp{os.getpid()}"
+        with open(tmp_meta, "w") as f:
             json.dump(meta, f)
+        os.replace(tmp_meta, meta_path)
     return hdr, cache, values_path
 
 

@@ -319,6 +319,27 @@ def test_fit_resumes_from_tile_checkpoints(tmp_path):
         assert np.allclose(getattr(first, name), getattr(again, name), atol=1e-6)
 
 
+def test_an_image_rewritten_in_place_invalidates_the_cache(tmp_path):
+    """The cache is keyed on every file's size and mtime, not the folder: after one image of the BTF is
+    rewritten (same name, same size), the next fit recomputes every tile and its result follows the new
+    data."""
+    maps = synthetic_maps(8, 8, seed=8)
+    wi, wo = light_view_pairs(12, 12)
+    values = render_btf(maps, wi, wo)
+    save_btf(tmp_path / "btf", values, wi, wo)
+    fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
+    _, again = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
+    assert again["tiles_fitted_this_run"] == 0  # unchanged inputs: the cache is used
+    images = sorted(f for f in os.listdir(tmp_path / "btf") if f.endswith(".exr"))
+    path = tmp_path / "btf" / images[3]
+    st = os.stat(path)
+    write_exr(str(path), values[3] * 0.5)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))  # same second on coarse clocks
+    assert os.stat(path).st_size == st.st_size
+    _, stats = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
+    assert stats["tiles_fitted_this_run"] == 4
+
+
 def test_cli_fit_eval_score(tmp_path, capsys):
     from material_structures.cli import main
 
