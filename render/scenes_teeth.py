@@ -99,7 +99,10 @@ def fit_demo(workdir: str, iterations: int = 30, seed: int = 0):
                                fov_x_deg=2.8)
     cap = render_capture(truth, cams, lights, spp=4, spp_background=1)
     start = perturbed_start(truth, seed=seed, sigma_factor=0.5, kappa_shift=0.4, reset_c=False)
-    settings = FitSettings(iterations=iterations, lr=0.06, lights_per_iteration=4, spp=1, seed=seed,
+    # a 30-iteration illustration on a 24 x 16 capture, not the product fit: plain Adam (the thesis), 1-spp
+    # passes, per-pixel loss, the best-loss result, every light fitted (the settings its reference render has)
+    settings = FitSettings(iterations=iterations, lr=0.06, lr_decay=0.0, lights_per_iteration=4, spp=1, image_spp=0,
+                           loss_block=1, optimiser="adam", average_tail=0.0, held_out_lights=0, seed=seed,
                            free=DEMO_FREE)
     out = os.path.join(workdir, "teeth-fit") if workdir else None
     best, log = fit(start, cap, settings, out_dir=out)
