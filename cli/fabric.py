@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from .checks import refuse_output_over_inputs
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fabric", help="pile fabric: fit a BTF, evaluate parameters, synthetic BTFs")
@@ -79,6 +81,7 @@ def run_fit(args: argparse.Namespace) -> int:
 
     if args.tile < 1:
         raise ValueError("--tile must be >= 1")
+    refuse_output_over_inputs(args.out, [args.btf])
     options = FitOptions(weighting=args.weighting)
     if args.no_dask and args.scheduler:
         raise ValueError("--no-dask and --scheduler exclude each other")
@@ -100,6 +103,7 @@ def run_eval(args: argparse.Namespace) -> int:
     from ..core.fabric.btf_prediction import predict_btf
     from ..core.fabric.parameter_maps import load_params
 
+    refuse_output_over_inputs(args.out, [args.params, args.directions])
     maps = load_params(args.params)
     wi, wo = read_directions(args.directions)
     save_btf(args.out, predict_btf(maps, wi, wo), wi, wo)
@@ -129,6 +133,7 @@ def run_ndf(args: argparse.Namespace) -> int:
     from ..core.fabric.btf_io import iter_btf_blocks, read_btf_header
     from ..core.fabric.ndf_extraction import ndf_operator
 
+    refuse_output_over_inputs(args.out, [args.btf])
     hdr = read_btf_header(args.btf)
     x, y = args.texel
     if not (0 <= x < hdr.width and 0 <= y < hdr.height):

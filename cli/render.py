@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from .checks import refuse_output_over_inputs
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render a library scene or a .blend headlessly (Cycles CPU)")
@@ -18,6 +20,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+MAX_SIDE = 16384  # pixels a side (Cycles' own limit is far above what fits in memory here)
+
+
 def parse_resolution(text: str | None) -> tuple[int, int] | None:
     if not text:
         return None
@@ -27,6 +32,8 @@ def parse_resolution(text: str | None) -> tuple[int, int] | None:
         raise ValueError(f"--resolution must look like 320x240, got {text!r}") from None
     if w < 1 or h < 1:
         raise ValueError("--resolution must be positive")
+    if w > MAX_SIDE or h > MAX_SIDE:
+        raise ValueError(f"--resolution {w}x{h} is larger than {MAX_SIDE} pixels a side")
     return w, h
 
 
@@ -46,6 +53,11 @@ def save_image(path: str, rgba) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    resolution = parse_resolution(args.resolution)
+    if args.blend:
+        refuse_output_over_inputs(args.out, [args.blend])
+    if not args.out.lower().endswith((".exr", ".png")):
+        raise ValueError(f"--out {args.out!r}: give a .exr (linear) or .png (sRGB) file name")
     from ..render.session import prepare_user_resources
 
     prepare_user_resources()
@@ -55,7 +67,6 @@ def run(args: argparse.Namespace) -> int:
         for name in library.available_scenes():
             print(f"{name:20s} {library.SCENES[name].label}")
         return 0
-    resolution = parse_resolution(args.resolution)
     if args.blend:
         rgba = render_blend(args.blend, resolution, args.samples, args.seed)
     elif args.scene:

@@ -16,6 +16,8 @@ import argparse
 import json
 import os
 
+from .checks import refuse_output_over_inputs
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("scratch", help="scratched surfaces: generate, inspect and evaluate scratch sets")
@@ -63,6 +65,8 @@ def run_generate(args: argparse.Namespace) -> int:
 
     from ..core import scratch as sc
 
+    if args.curves:
+        refuse_output_over_inputs(args.out, [args.curves])
     patch = _patch(args.patch_mm)
     kw = dict(seed=args.seed, sigma_um=args.sigma_um, max_footprint_um=args.max_footprint_um)
     if args.kind == "curves":
@@ -117,6 +121,7 @@ def run_eval(args: argparse.Namespace) -> int:
     from ..core.exr_io import write_exr
     from ..core.scratch import SphereLight, load_scratch_set, scratch_radiance
 
+    refuse_output_over_inputs(args.out, [args.path])
     s = load_scratch_set(args.path)
     n = int(args.size)
     if n < 1:

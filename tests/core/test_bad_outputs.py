@@ -1,0 +1,49 @@
+"""Outputs never overwrite inputs, across the CLI: each case is a one-line error (exit 2) and the input is
+byte-identical afterwards."""
+
+from __future__ import annotations
+
+import hashlib
+
+import pytest
+
+from material_structures.cli import main
+
+
+def _sha(path) -> str:
+    return hashlib.sha1(open(path, "rb").read()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("in")
+    assert main(["fabric", "synth", "--out", str(d / "btf"), "--width", "4", "--height", "3", "--lights", "3",
+                 "--views", "3", "--gt-out", str(d / "params")]) == 0
+    assert main(["scratch", "generate", "--kind", "wear", "--count", "20", "--out", str(d / "s.npz")]) == 0
+    (d / "x.blend").write_bytes(b"BLENDER-not-really")
+    return d
+
+
+@pytest.mark.parametrize("argv, victim", [
+    (["fabric", "eval", "{d}/params", "--directions", "{d}/btf", "--out", "{d}/btf"], "btf/btf.json"),
+    (["fabric", "eval", "{d}/params", "--directions", "{d}/btf/btf.json", "--out", "{d}/btf"], "btf/btf.json"),
+    (["fabric", "fit", "{d}/btf", "--out", "{d}/btf", "--no-dask"], "btf/btf.json"),
+    (["fabric", "ndf", "{d}/btf", "--texel", "0", "0", "--out", "{d}/btf/0000.exr"], "btf/0000.exr"),
+    (["scratch", "eval", "{d}/s.npz", "--out", "{d}/s.npz"], "s.npz"),
+    (["render", "--blend", "{d}/x.blend", "--out", "{d}/x.blend"], "x.blend"),
+])
+def test_an_output_over_an_input_is_refused(inputs, capsys, argv, victim):
+    before = _sha(inputs / victim)
+    assert main([a.format(d=inputs) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "would write over the input" in err and err.count("\n") == 1, err
+    assert _sha(inputs / victim) == before
+
+
+def test_render_refuses_other_formats_and_absurd_sizes(tmp_path, capsys):
+    for argv, said in ((["--out", str(tmp_path / "r.jpg")], "give a .exr (linear) or .png"),
+                       (["--resolution", "200000x200000", "--out", str(tmp_path / "r.exr")], "larger than 16384")):
+        assert main(["render", "fabric-velvet", *argv]) == 2
+        err = capsys.readouterr().err
+        assert said in err and err.count("\n") == 1, err
+    assert list(tmp_path.iterdir()) == []
