@@ -14,13 +14,13 @@ import pytest
 
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory):
-    """A tiny synthetic capture (1 tooth, 1 camera, 4 lights, 16 x 12 px) written by the core."""
+    """A tiny synthetic capture (1 tooth, 1 camera, 4 lights, 20 x 15 px, 140 tooth pixels) written by the core."""
     from material_structures.core.teeth.capture import default_rig
     from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
 
     folder = str(tmp_path_factory.mktemp("teeth-capture"))
     scene = make_scene(n_teeth=1, resolution=12)
-    cams, lights = default_rig(target=scene_target(scene), width=16, height=12, n_lights=4, n_cameras=1,
+    cams, lights = default_rig(target=scene_target(scene), width=20, height=15, n_lights=4, n_cameras=1,
                                fov_x_deg=2.6)
     render_capture(scene, cams, lights, spp=2, spp_background=1, max_depth=4).save(folder, scene.to_dict())
     return folder
@@ -87,7 +87,7 @@ def test_fit_button_runs_the_fit_settings_defaults_and_shows_the_check(addon_mod
     assert len(ran["log"]) == 2 and ran["held_out_lights"] == [2]
     assert fs.check_error.startswith("Held-out lights:") and fs.check_image.endswith("check.png")
     img = bpy.data.images[CHECK_IMAGE_NAME]
-    assert tuple(img.size)[1] == 12 and tuple(img.size)[0] > 3 * 16  # capture | fit | difference
+    assert tuple(img.size)[1] == 15 and tuple(img.size)[0] > 3 * 20  # capture | fit | difference
 
 
 def _live_in_group(pgid: int) -> list[int]:
@@ -124,8 +124,8 @@ def _process_report(job) -> str:
 
 def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path):
     """Progress and loss while it runs; cancel stops the fit process and the render workers it forks
-    (the numpy reference tracer, where numba is missing: 2 workers; the default 32-spp pass A on 192 pixels
-    is 2 chunks of paths, so every pass A forks; the compiled tracer runs threads in the fit process)."""
+    (the numpy reference tracer, where numba is missing: 2 workers; the default 32-spp pass A on 140 tooth
+    pixels is 2 chunks of paths, so every pass A forks; the compiled tracer runs threads in the fit process)."""
     from material_structures.addon.teeth.fit_job import FitJob
 
     t0 = time.perf_counter()
