@@ -144,8 +144,8 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
     out_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH",
                                       description="fit folder: log, loss plot, checkpoint, scene_fit.json")
     iterations: bpy.props.IntProperty(name="Iterations", default=FIT_DEFAULTS.iterations, min=1, max=100000,
-                                      description="fit iterations (about 7 s each for a 3-camera capture on 2 "
-                                                  "cores; fewer: a quicker, rougher fit)")
+                                      description="fit iterations (7-20 s each for a 3-camera capture on 2 cores; "
+                                                  "fewer: a quicker, rougher fit)")
     init: bpy.props.EnumProperty(name="Start", items=[("literature", "Literature", "literature-table search"),
                                                        ("scene", "Scene", "the capture's scene.json values"),
                                                        ("perturbed", "Perturbed", "perturbed scene values")],
