@@ -186,7 +186,7 @@ def run_fit(args: argparse.Namespace) -> int:
     import time
 
     from ..core.teeth.capture import Capture
-    from ..core.teeth.fit_checkpoint import save_json
+    from ..core.teeth.fit_checkpoint import load_state, save_json
     from ..core.teeth.fit_report import held_out_check, plot_loss
     from ..core.teeth.literature_init import literature_start, literature_table
     from ..core.teeth.optimise import fit, held_out_light_ids
@@ -236,8 +236,10 @@ def run_fit(args: argparse.Namespace) -> int:
 
     os.makedirs(args.out, exist_ok=True)
     if args.resume:
-        with open(os.path.join(args.out, "checkpoint.json")) as f:
-            done[0] = len(json.load(f).get("log", []))
+        ckpt = os.path.join(args.out, "checkpoint.json")
+        if not os.path.isfile(ckpt):
+            raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r}")
+        done[0] = len(load_state(ckpt).log)  # a malformed or foreign checkpoint is a one-line error here
         if bar is not None:
             bar.update(done[0])
     if on_dask:

@@ -184,3 +184,15 @@ def test_numeric_flags_are_range_checked_at_the_parser(tmp_path, capsys, argv, s
     err = capsys.readouterr().err
     assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_resume_from_a_missing_or_broken_checkpoint_is_one_line(capture_dir, tmp_path, capsys):
+    out = tmp_path / "fit"
+    argv = ["teeth", "fit", str(capture_dir), "--out", str(out), "--resume", "--no-progress"]
+    assert main(argv) == 2
+    assert "no checkpoint to resume from" in capsys.readouterr().err
+    out.mkdir()
+    (out / "checkpoint.json").write_text("{not json")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "checkpoint.json" in err and "not a fit checkpoint" in err and err.count("\n") == 1, err
