@@ -205,6 +205,12 @@ def run_fit(args: argparse.Namespace) -> int:
         raise ValueError("--workers is for fits in this process; on Dask, the cluster's workers render")
     if args.scheduler is not None and args.dask_workers is not None:
         raise ValueError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
+    resumed = 0  # iterations done before, when resuming
+    if args.resume:
+        ckpt = os.path.join(args.out, "checkpoint.json")
+        if not os.path.isfile(ckpt):
+            raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r}")
+        resumed = len(load_state(ckpt).log)  # a malformed or foreign checkpoint is a one-line error here
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     if not args.resume:
         if args.init == "literature":
@@ -234,14 +240,10 @@ def run_fit(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.set_description_str(f"fit: {text}" if text else "fit")
 
+    done[0] = resumed
+    if bar is not None and resumed:
+        bar.update(resumed)
     os.makedirs(args.out, exist_ok=True)
-    if args.resume:
-        ckpt = os.path.join(args.out, "checkpoint.json")
-        if not os.path.isfile(ckpt):
-            raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r}")
-        done[0] = len(load_state(ckpt).log)  # a malformed or foreign checkpoint is a one-line error here
-        if bar is not None:
-            bar.update(done[0])
     if on_dask:
         from ..scaleout.cluster import dask_client
         from ..scaleout.teeth import DaskGradient

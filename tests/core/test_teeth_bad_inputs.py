@@ -188,9 +188,10 @@ def test_numeric_flags_are_range_checked_at_the_parser(tmp_path, capsys, argv, s
 
 def test_resume_from_a_missing_or_broken_checkpoint_is_one_line(capture_dir, tmp_path, capsys):
     out = tmp_path / "fit"
-    argv = ["teeth", "fit", str(capture_dir), "--out", str(out), "--resume", "--no-progress"]
+    argv = ["teeth", "fit", str(capture_dir), "--out", str(out), "--resume"]  # with progress bars: none drawn
     assert main(argv) == 2
     assert "no checkpoint to resume from" in capsys.readouterr().err
+    assert not out.exists()  # nothing created
     out.mkdir()
     (out / "checkpoint.json").write_text("{not json")
     assert main(argv) == 2
