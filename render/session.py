@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
 import glob
 import os
+import shutil
 import sys
 import tempfile
 
@@ -14,12 +16,13 @@ def prepare_user_resources() -> str:
     """Point Blender's user resources at a temp dir (call before the first ``import bpy``).
 
     Keeps headless runs from reading or writing the user's real preferences and extensions.
-    An existing ``BLENDER_USER_RESOURCES`` is respected.
+    An existing ``BLENDER_USER_RESOURCES`` is respected; a temp dir made here is removed at exit.
     """
     path = os.environ.get("BLENDER_USER_RESOURCES")
     if not path:
         path = tempfile.mkdtemp(prefix="ms-blender-user-")
         os.environ["BLENDER_USER_RESOURCES"] = path
+        atexit.register(shutil.rmtree, path, True)
     return path
 
 

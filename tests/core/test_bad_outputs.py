@@ -47,3 +47,15 @@ def test_render_refuses_other_formats_and_absurd_sizes(tmp_path, capsys):
         err = capsys.readouterr().err
         assert said in err and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_blender_backed_commands_leave_no_temp_dirs(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"} | {"TMPDIR": str(tmp_path)}
+    r = subprocess.run([sys.executable, "-m", "material_structures", "render", "--list"], env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith("ms-blender-user-")] == []
