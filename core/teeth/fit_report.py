@@ -98,7 +98,8 @@ def _tone(x: np.ndarray, white: float) -> np.ndarray:
 
 
 def check_image(fitted: np.ndarray, capture: np.ndarray, masks: np.ndarray) -> np.ndarray:
-    """(rows, 3 panels) sRGB-ish uint8 image: per light and camera, capture | fit | gain x |difference|."""
+    """(rows, 3 panels) sRGB-ish uint8 image: per light and camera, capture | fit | gain x |difference| on
+    the tooth pixels (the fit is rendered there only)."""
     rows = []
     for li in range(fitted.shape[1]):
         for ci in range(fitted.shape[0]):
@@ -107,8 +108,8 @@ def check_image(fitted: np.ndarray, capture: np.ndarray, masks: np.ndarray) -> n
             white = float(np.percentile(cap[tooth], 99)) if tooth.any() else float(cap.max())
             white = max(white, 1e-12)
             gap = np.full((cap.shape[0], 2, 3), 255, dtype=np.uint8)
-            rows.append(np.concatenate([_tone(cap, white), gap, _tone(fit_, white), gap,
-                                        _tone(DIFFERENCE_GAIN * np.abs(fit_ - cap), white)], axis=1))
+            diff = DIFFERENCE_GAIN * np.abs(fit_ - cap) * tooth[:, :, None]  # the fit renders tooth pixels only
+            rows.append(np.concatenate([_tone(cap, white), gap, _tone(fit_, white), gap, _tone(diff, white)], axis=1))
             rows.append(np.full((2, rows[-1].shape[1], 3), 255, dtype=np.uint8))
     return np.concatenate(rows[:-1], axis=0) if rows else np.zeros((1, 1, 3), dtype=np.uint8)
 
