@@ -185,8 +185,9 @@ def fit_settings(args: argparse.Namespace) -> FitSettings:
 def run_fit(args: argparse.Namespace) -> int:
     import time
 
+    from ..core.json_io import save_json
     from ..core.teeth.capture import Capture
-    from ..core.teeth.fit_checkpoint import load_state, save_json
+    from ..core.teeth.fit_checkpoint import load_state
     from ..core.teeth.fit_report import held_out_check, plot_loss
     from ..core.teeth.literature_init import literature_start, literature_table
     from ..core.teeth.optimise import fit, held_out_light_ids
@@ -312,7 +313,7 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     for name, c in rows:
         print(f"  {name:32s} {c:12.1f}")
     if args.json:
-        from ..core.teeth.fit_checkpoint import save_json
+        from ..core.json_io import save_json
 
         save_json(args.json, {"chi2": dict(rows), "noise_variance": out["noise_variance"], "tiles": out["tiles"],
                               "block": args.block, "passes": args.passes})

@@ -24,6 +24,7 @@ from dataclasses import asdict
 import numpy as np
 
 from ..forked_map import fork_warning_silenced
+from ..json_io import save_json
 from .btf_io import iter_btf_blocks, read_btf_header
 from .levenberg_marquardt import Samples
 from .ndf_extraction import NdfOperator, ndf_operator
@@ -119,10 +120,7 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         op = ndf_operator(hdr.wi, hdr.wo)
         np.savez(os.path.join(cache, "ndf_operator.npz"), A=op.A, directions=op.directions,
                  solid_angle=op.solid_angle, valid=op.valid, resolution=op.resolution)
-        tmp_meta = meta_path + f".tmp{os.getpid()}"
-        with open(tmp_meta, "w") as f:
-            json.dump(meta, f)
-        os.replace(tmp_meta, meta_path)
+        save_json(meta_path, meta)
     return hdr, cache, values_path
 
 

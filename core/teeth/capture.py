@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exr_io import read_exr, write_exr
+from ..json_io import save_json
 
 FORMAT = "material_structures.teeth.capture/1"
 
@@ -125,14 +126,6 @@ def default_rig(target=(0.0, 0.0, 5.0), width: int = 96, height: int = 64, n_lig
     return cams, lights
 
 
-def _write_json(path: str, obj, indent: int | None = None) -> None:
-    """``obj`` as JSON at ``path``, written under a temporary name and renamed when complete."""
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as f:
-        json.dump(obj, f, indent=indent)
-    os.replace(tmp, path)
-
-
 @dataclass
 class Capture:
     """Cameras, lights, images (n_cam, n_light, H, W, 3) and masks (n_cam, H, W) bool."""
@@ -158,9 +151,9 @@ class Capture:
                     write_exr(os.path.join(folder, rel), self.images[c, li])
         meta = {"format": FORMAT, "units": "mm", "cameras": [c.to_dict() for c in self.cameras],
                 "lights": [li.to_dict() for li in self.lights], "images": images, "masks": masks}
-        _write_json(os.path.join(folder, "capture.json"), meta, indent=1)
+        save_json(os.path.join(folder, "capture.json"), meta, indent=1)
         if scene_dict is not None:
-            _write_json(os.path.join(folder, "scene.json"), scene_dict)
+            save_json(os.path.join(folder, "scene.json"), scene_dict)
 
     @classmethod
     def load(cls, folder: str | os.PathLike) -> Capture:

@@ -35,14 +35,6 @@ class FitState:
     identity: dict | None = None  # what the fit was made for (optimise.fit_identity)
 
 
-def save_json(path: str, obj) -> None:
-    """``obj`` as JSON at ``path``, written to ``path.tmp`` and renamed."""
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as f:
-        json.dump(obj, f)
-    os.replace(tmp, path)
-
-
 def load_state(path: str) -> FitState:
     """The checkpoint at ``path``; a checkpoint of an earlier version is refused (start the fit again)."""
     try:

@@ -20,9 +20,10 @@ from dataclasses import asdict
 
 import numpy as np
 
+from ..json_io import save_json
 from .adam import Adam
 from .capture import Capture
-from .fit_checkpoint import FitState, FolderLock, check_identity, load_state, save_json
+from .fit_checkpoint import FitState, FolderLock, check_identity, load_state
 from .fit_gradient import iteration_gradient
 from .fit_loss import block_sums, l2_loss, paired_loss
 from .fit_report import plot_loss
