@@ -271,6 +271,42 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
         tcur = t
 
 
+@njit(cache=True, inline="always")
+def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, tau_cum, stack):
+    """The free flight of a path in a medium, walked lazily: the crossings of index-matched surfaces along
+    o + t d up to the distance where the hero channel's optical depth reaches ``tau_star`` (a scattering
+    vertex there) or the first other surface before it. Each ray cast reaches only as far as the optical
+    depth left in the current piece, so a short flight costs a short traversal; the crossings, the vertex
+    and the surface found are those of ``_walk`` followed by the free-flight search of ``_trace_path``
+    (the same numbers up to rounding). Fills tri_x, t_x, meds and tau_cum (optical depth before the last
+    piece); returns (k crossings, surface or -1, its distance, scatter, ray casts)."""
+    normal_s, kind, inside, outside = geo[2], geo[3], geo[4], geo[5]
+    nodes = geo[11:15]
+    k = 0
+    tcur = 0.0
+    tmin = RAY_EPS
+    meds[0] = med0
+    for c in range(3):
+        tau_cum[c] = 0.0
+    casts = 0
+    while True:
+        sig = sigma_s[meds[k], hero]
+        t_sc = tcur + (tau_star - tau_cum[hero]) / max(sig, 1e-300) if sig > 0.0 else np.inf
+        tri, t = first_hit(nodes, o, d, tmin, t_sc, stack)
+        casts += 1
+        if tri < 0:
+            return k, -1, np.inf, t_sc < np.inf, casts
+        if kind[tri] != KIND_INDEX_MATCHED:
+            return k, tri, t, False, casts
+        if k >= MAX_CROSSINGS:  # degenerate geometry: give up on this ray
+            return k, -1, np.inf, False, casts
+        for c in range(3):
+            tau_cum[c] += (t - tcur) * sigma_s[meds[k], c]
+        k = _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds)
+        tcur = t
+        tmin = t + RAY_EPS
+
+
 @njit(cache=True, _nrt=False)
 def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
     """Crossing distances on the evaluation geometry, ordered and within [0, upper]; which were clipped
@@ -549,28 +585,20 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
     for b in range(depth_cap):
         levels = b + 1
         u0, u1, u2, u3, u4, u5 = _rand(rs), _rand(rs), _rand(rs), _rand(rs), _rand(rs), _rand(rs)
-        k, end_tri, end_t, _, nc = _walk(geo, o, d, m, False, np.inf, tri_x, t_x, meds, stack, buf_tri, buf_t)
-        casts += nc
         in_medium = m != MED_AIR
-        end_f = end_t if end_t < np.inf else 0.0
         # ---- free flight on the sampling scene (hero channel, balance heuristic over channels)
         tau_star = -np.log1p(-u0)
-        for c in range(3):
-            tau_cum[c] = 0.0
+        if in_medium:  # tau_cum: the optical depth before piece kstar
+            k, end_tri, end_t, scatter, nc = _walk_to_flight(geo, o, d, m, sigma_s, hero, tau_star, tri_x, t_x,
+                                                             meds, tau_cum, stack)
+        else:
+            k, end_tri, end_t, _, nc = _walk(geo, o, d, m, False, np.inf, tri_x, t_x, meds, stack, buf_tri, buf_t)
+            scatter = False
+            for c in range(3):
+                tau_cum[c] = 0.0
+        casts += nc
+        end_f = end_t if end_t < np.inf else 0.0
         kstar = k
-        scatter = False
-        prev = 0.0
-        for j in range(k + 1):
-            bnd = t_x[j] if j < k else end_f
-            ln = bnd - prev
-            if in_medium and end_tri >= 0 and tau_cum[hero] + ln * sigma_s[meds[j], hero] > tau_star:
-                kstar = j
-                scatter = True
-                break
-            if j < k:  # tau_cum: the optical depth before piece kstar
-                for c in range(3):
-                    tau_cum[c] += ln * sigma_s[meds[j], c]
-            prev = bnd
         tb_k = 0.0 if kstar == 0 else t_x[kstar - 1]
         mk = meds[min(kstar, k)]
         for c in range(3):

@@ -1,0 +1,292 @@
+"""Fabric operators: new material, import fitted maps, save maps, sync lamps, add the node group, and the
+brushing tool.
+
+The brushing tool is a modal viewport operator with an EXEC path that replays recorded strokes: drag with
+the left mouse button over a fabric-mapped mesh to paint; Ctrl+Z inside the tool (or the "Undo Stroke"
+button) takes back the last stroke; Esc / right click leaves the tool. Every finished stroke and every undo
+packs the changed maps into the .blend, so saving is safe at any time (a save in the middle of a stroke packs
+through the save handler). Headless: pass the stroke as properties and call EXEC.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from ...core.fabric.parameter_maps import save_params
+from ..common import (
+    AddGroupNode,
+    MeshUVLookup,
+    assign_material,
+    require_uv_mesh,
+    stroke_property,
+    stroke_space_property,
+    stroke_uvs,
+)
+from .brushing import BrushSettings, load_brush_states, open_session, session_for
+from .maps import images_to_maps, maps_to_images
+from .material import (
+    GROUP_NAME,
+    MARKER,
+    create_fabric_material,
+    ensure_fabric_group,
+    fabric_material,
+    import_fit_material,
+    material_map_images,
+    sync_fabric_lamps,
+)
+from .presets import PRESET_ITEMS, preset_maps
+
+
+class MS_OT_fabric_new_material(bpy.types.Operator):
+    """Give the active mesh a new pile-fabric material from a preset, with its own parameter maps to brush"""
+
+    bl_idname = "material_structures.fabric_new_material"
+    bl_label = "New Fabric Material"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default="VELVET")
+
+    def execute(self, context):
+        obj = context.active_object
+        if not require_uv_mesh(self, obj):
+            return {"CANCELLED"}
+        name = f"Fabric {self.preset.title()}"
+        images = maps_to_images(preset_maps(self.preset), name, btf_frame=False)  # preset bases: mesh frame
+        mat = create_fabric_material(name, maps=images, scene=context.scene)
+        assign_material(obj, mat)
+        sync_fabric_lamps(context.scene)
+        return {"FINISHED"}
+
+
+class MS_OT_fabric_import_maps(bpy.types.Operator):
+    """Create a fabric material from a fit's output folder (kd/ks/sigma/basis EXR maps + params.json)"""
+
+    bl_idname = "material_structures.fabric_import_maps"
+    bl_label = "Import Fitted Fabric Maps"
+    bl_options = {"REGISTER", "UNDO"}
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH")
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        obj = context.active_object
+        if not require_uv_mesh(self, obj):
+            return {"CANCELLED"}
+        try:
+            mat = import_fit_material(bpy.path.abspath(self.directory), context.scene)
+        except (OSError, ValueError) as exc:
+            self.report({"ERROR"}, f"Cannot import fabric maps: {exc}")
+            return {"CANCELLED"}
+        assign_material(obj, mat)
+        sync_fabric_lamps(context.scene)
+        self.report({"INFO"}, f"Fabric maps imported ({mat.name})")
+        return {"FINISHED"}
+
+
+class MS_OT_fabric_save_maps(bpy.types.Operator):
+    """Write the active fabric material's (painted) maps to a folder as EXR + params.json"""
+
+    bl_idname = "material_structures.fabric_save_maps"
+    bl_label = "Save Fabric Maps"
+    bl_options = {"REGISTER"}
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH")
+
+    @classmethod
+    def poll(cls, context):
+        mat = getattr(context, "material", None) or getattr(context.active_object, "active_material", None)
+        return mat is not None and mat.get(MARKER) and len(material_map_images(mat)) == 4
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        mat = getattr(context, "material", None) or context.active_object.active_material
+        try:
+            maps = images_to_maps(material_map_images(mat))
+            save_params(bpy.path.abspath(self.directory), maps, {"source": "Blender: " + mat.name})
+        except (OSError, ValueError) as exc:
+            self.report({"ERROR"}, f"Cannot save maps: {exc}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Saved {mat.name} maps to {self.directory}")
+        return {"FINISHED"}
+
+
+class MS_OT_fabric_sync_lamps(bpy.types.Operator):
+    """Copy the scene's lamps into the fabric shaders now (normally automatic)"""
+
+    bl_idname = "material_structures.fabric_sync_lamps"
+    bl_label = "Sync Lamps"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        n = sync_fabric_lamps(context.scene)
+        self.report({"INFO"}, f"{n} lamp(s) evaluated exactly by the fabric shader")
+        return {"FINISHED"}
+
+
+class MS_OT_fabric_add_group_node(AddGroupNode, bpy.types.Operator):
+    """Add the SGGX Fabric node group to the edited material"""
+
+    bl_idname = "material_structures.fabric_add_group_node"
+    bl_label = GROUP_NAME
+    marker = MARKER
+
+    def group(self, context):
+        return ensure_fabric_group(context.scene)
+
+
+def brush_settings(scene) -> BrushSettings:
+    """The scene's brush settings (``Scene.material_structures.fabric_brush``) as the session takes them."""
+    s = scene.material_structures.fabric_brush
+    states = None
+    if s.mode == "DATA_DRIVEN":
+        if not s.states_dir:
+            raise ValueError("choose the folder of the 8 brushing states for the data-driven mode")
+        states = load_brush_states(bpy.path.abspath(s.states_dir))
+    return BrushSettings(
+        mode=s.mode,
+        radius=s.radius,
+        strength=s.strength,
+        fibre_length=s.fibre_length,
+        kd=tuple(s.kd) if s.recolor_diffuse else None,
+        ks=tuple(s.ks) if s.recolor_specular else None,
+        smooth_factor=s.smooth_factor,
+        anisotropy_factor=s.anisotropy_factor,
+        states=states,
+    )
+
+
+class MS_OT_fabric_brush(bpy.types.Operator):
+    """Paint fibre direction, colour, smoothness or anisotropy on the active fabric's maps"""
+
+    bl_idname = "material_structures.fabric_brush"
+    bl_label = "Brush Fabric"
+    bl_options = {"REGISTER"}
+
+    stroke: stroke_property()
+    stroke_space: stroke_space_property()
+
+    @classmethod
+    def poll(cls, context):
+        mat = fabric_material(context.active_object)
+        return mat is not None and len(material_map_images(mat)) == 4
+
+    def _prepare(self, context):
+        mat = fabric_material(context.active_object)
+        self.session = session_for(mat)
+        self.settings = brush_settings(context.scene)
+        self.use_pressure = context.scene.material_structures.fabric_brush.use_pressure
+
+    def execute(self, context):
+        """Replay ``stroke`` (headless-friendly; one undoable stroke)."""
+        try:
+            self._prepare(context)
+            obj = context.active_object
+            points = stroke_uvs(self.stroke, self.stroke_space, obj, context.evaluated_depsgraph_get())
+        except (ValueError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        session = self.session
+        session.begin_stroke()
+        changed = False
+        for (uv0, _), (uv1, p1) in zip(points[:-1], points[1:], strict=True):
+            changed |= session.segment(uv0, uv1, self.settings, p1 if self.use_pressure else 1.0)
+        session.end_stroke()
+        if not changed:
+            self.report({"ERROR"}, "The stroke changed no texel (it misses the map, or strength is 0)")
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    # -- interactive ------------------------------------------------------------------------
+    def invoke(self, context, event):
+        if len(self.stroke) >= 2:
+            return self.execute(context)
+        if context.area is None or context.area.type != "VIEW_3D":
+            self.report({"ERROR"}, "The fabric brush works in the 3D viewport")
+            return {"CANCELLED"}
+        try:
+            self._prepare(context)
+            self.lookup = MeshUVLookup(context.active_object, context.evaluated_depsgraph_get())
+        except (ValueError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.painting = False
+        self.last_uv = None
+        context.window_manager.modal_handler_add(self)
+        self._header(context)
+        return {"RUNNING_MODAL"}
+
+    def _header(self, context):
+        s = self.settings
+        context.area.header_text_set(
+            f"Fabric brush: {s.mode.title()}  radius {s.radius:.3f}  strength {s.strength:.2f}  |  "
+            "LMB paint, Ctrl+Z undo stroke, Esc/RMB done"
+        )
+
+    def _uv_under_mouse(self, context, event):
+        return self.lookup.under_mouse(context, event)
+
+    def modal(self, context, event):
+        if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
+            return self._finish(context)
+        if event.type == "Z" and event.ctrl and event.value == "PRESS":
+            if self.session.undo_stroke():
+                self.report({"INFO"}, "Stroke undone")
+            return {"RUNNING_MODAL"}
+        if event.type == "LEFTMOUSE":
+            if event.value == "PRESS":
+                self.painting = True
+                self.session.begin_stroke()
+                self.last_uv = self._uv_under_mouse(context, event)
+            elif event.value == "RELEASE":
+                self.painting = False
+                self.session.end_stroke()
+            return {"RUNNING_MODAL"}
+        if event.type in {"MOUSEMOVE", "INBETWEEN_MOUSEMOVE"} and self.painting:
+            uv = self._uv_under_mouse(context, event)
+            if uv is not None and self.last_uv is not None:
+                pressure = event.pressure if self.use_pressure and event.pressure > 0 else 1.0
+                if self.session.segment(self.last_uv, uv, self.settings, pressure):
+                    self.session.flush()
+                    context.area.tag_redraw()
+            self.last_uv = uv
+            return {"RUNNING_MODAL"}
+        return {"PASS_THROUGH"}
+
+    def _finish(self, context):
+        self.session.end_stroke()
+        context.area.header_text_set(None)
+        return {"FINISHED"}
+
+
+class MS_OT_fabric_brush_undo(bpy.types.Operator):
+    """Take back the last brush stroke on the active fabric's maps"""
+
+    bl_idname = "material_structures.fabric_brush_undo"
+    bl_label = "Undo Stroke"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        session = open_session(fabric_material(context.active_object))
+        return session is not None and bool(session.undo_stack)
+
+    def execute(self, context):
+        open_session(fabric_material(context.active_object)).undo_stroke()
+        return {"FINISHED"}
+
+
+CLASSES: list[type] = [
+    MS_OT_fabric_new_material,
+    MS_OT_fabric_import_maps,
+    MS_OT_fabric_save_maps,
+    MS_OT_fabric_sync_lamps,
+    MS_OT_fabric_add_group_node,
+    MS_OT_fabric_brush,
+    MS_OT_fabric_brush_undo,
+]

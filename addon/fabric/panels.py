@@ -1,0 +1,82 @@
+"""Fabric panels: the material properties of SGGX fabric materials (multipliers, maps, lamps) and the
+sidebar's "Pile Fabric" (new material, import, the brush)."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..common import MaterialPanel, SidebarPanel, draw_group_inputs
+from .material import GROUP_NAME, MARKER, fabric_group_node, material_map_images
+
+MULTIPLIERS = (("Tint", "Tint"), ("SigmaScale", "Roughness Scale"), ("Anisotropy", "Anisotropy"),
+               ("FastPreview", "Fast Preview (closures only)"))
+
+
+class MATERIAL_PT_material_structures_fabric(MaterialPanel, bpy.types.Panel):
+    bl_label = "SGGX Fabric"
+    bl_idname = "MATERIAL_PT_material_structures_fabric"
+    marker = MARKER
+
+    def draw(self, context):
+        layout = self.layout
+        mat = context.material
+        node = fabric_group_node(mat)
+        if node is None:
+            layout.label(text=f"No '{GROUP_NAME}' node in this material", icon="ERROR")
+            return
+        draw_group_inputs(layout, node, MULTIPLIERS, linked="from a map")
+        images = material_map_images(mat)
+        box = layout.box()
+        box.label(text="Parameter maps" if images else "Constant parameters (no maps)")
+        for key, image in sorted(images.items()):
+            row = box.row()
+            row.label(text=key)
+            row.label(text=f"{image.name} ({image.size[0]} x {image.size[1]})")
+        if not images:
+            for name in ("Kd", "Ks", "SigmaX", "SigmaY"):
+                box.prop(node.inputs[name], "default_value", text=name)
+        row = layout.row()
+        row.operator("material_structures.fabric_sync_lamps", icon="LIGHT")
+        row.operator("material_structures.fabric_save_maps", icon="FILE_TICK")
+        layout.operator("material_structures.fabric_import_maps", icon="IMPORT")
+
+
+class VIEW3D_PT_material_structures_fabric(SidebarPanel, bpy.types.Panel):
+    bl_label = "Pile Fabric"
+    bl_idname = "VIEW3D_PT_material_structures_fabric"
+    bl_parent_id = "VIEW3D_PT_material_structures"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator_menu_enum("material_structures.fabric_new_material", "preset", icon="MATERIAL")
+        layout.operator("material_structures.fabric_import_maps", icon="IMPORT")
+        layout.operator("material_structures.fabric_sync_lamps", icon="LIGHT")
+        brush = context.scene.material_structures.fabric_brush
+        box = layout.box()
+        box.label(text="Brush", icon="BRUSH_DATA")
+        box.prop(brush, "mode")
+        col = box.column(align=True)
+        col.prop(brush, "radius")
+        col.prop(brush, "strength")
+        col.prop(brush, "use_pressure")
+        if brush.mode == "COMB":
+            box.prop(brush, "fibre_length")
+        elif brush.mode == "RECOLOR":
+            row = box.row()
+            row.prop(brush, "recolor_diffuse")
+            row.prop(brush, "kd", text="")
+            row = box.row()
+            row.prop(brush, "recolor_specular")
+            row.prop(brush, "ks", text="")
+        elif brush.mode == "SMOOTH":
+            box.prop(brush, "smooth_factor")
+        elif brush.mode == "ANISOTROPY":
+            box.prop(brush, "anisotropy_factor")
+        else:
+            box.prop(brush, "states_dir")
+        row = box.row()
+        row.operator("material_structures.fabric_brush", icon="BRUSH_DATA")
+        row.operator("material_structures.fabric_brush_undo", icon="LOOP_BACK")
+
+
+CLASSES: list[type] = [MATERIAL_PT_material_structures_fabric, VIEW3D_PT_material_structures_fabric]

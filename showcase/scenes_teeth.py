@@ -1,0 +1,185 @@
+"""Teeth showcase scenes (thesis chapter 5): a smile (a row of teeth on gums before an oral-cavity proxy)
+and a fitting demo (a synthetic capture fitted by the core; start, fit and ground truth side by side).
+
+Both are built as core ``TeethScene`` models and brought into Blender by ``addon.teeth.scene_build``
+(one Blender unit = one millimetre here), rendered by Cycles with the Enamel/Dentin/Gingiva materials.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import bpy
+import numpy as np
+
+from .. import addon
+from ..addon.teeth.materials import group_node, new_teeth_material
+from ..addon.teeth.scene_build import add_camera, add_point_light, build_teeth_scene, configure_teeth_cycles
+from ..core.teeth.capture import Camera, PointLight, default_rig
+from ..core.teeth.optimise import FitSettings, fit, plot_loss
+from ..core.teeth.scene import Gums, OralCavity, TeethScene, Tooth, VolumeMaterial
+from ..core.teeth.synthetic import (
+    GROUND_TRUTH,
+    box_mesh,
+    cavity_proxy,
+    make_scene,
+    perturbed_start,
+    render_capture,
+    scene_target,
+)
+from ..core.teeth.tooth_mesh import make_tooth
+from .registry import LibraryMaterial, LibraryScene, register_material, register_scene
+
+SMILE = ("premolar", "canine", "incisor", "incisor", "canine", "premolar")
+
+
+def _pose(deg: float, x: float, y: float, z: float = 0.0) -> np.ndarray:
+    r = math.radians(deg)
+    m = np.eye(4)
+    m[:2, :2] = [[math.cos(r), -math.sin(r)], [math.sin(r), math.cos(r)]]
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def smile_scene(resolution: int = 28):
+    """Six upper front teeth on an arch (mouth facing +y, z up), gum ridge, cavity proxy."""
+    teeth = []
+    widths = [8.5 if k == "incisor" else 7.5 if k == "canine" else 7.0 for k in SMILE]
+    s = -0.5 * (sum(widths) + 0.2 * (len(SMILE) - 1))
+    cs = [(0.15, 0.0, 0.2), (-0.1, 0.1, 0.0), (0.25, -0.1, 0.3), (0.25, -0.1, 0.3), (-0.1, 0.1, 0.0),
+          (0.15, 0.0, 0.2)]
+    for i, (kind, w) in enumerate(zip(SMILE, widths, strict=True)):
+        x = s + 0.5 * w
+        s += w + 0.2
+        y = -0.018 * x * x  # the arch curves back
+        ang = math.degrees(math.atan(-0.036 * x))
+        geo = make_tooth(kind, resolution=resolution)
+        # incisal edges down: an upper jaw seen from the front
+        flip = np.diag([-1.0, 1.0, -1.0, 1.0])  # 180 degrees about y (keeps the winding)
+        geo = geo.transformed(_pose(ang, x, y, 0.0) @ flip)
+        teeth.append(Tooth(f"{kind}{i}", geo.enamel, geo.dentin, GROUND_TRUTH["enamel"], GROUND_TRUTH["dentin"],
+                           np.full((1, 1, 3), 0.95), np.asarray(cs[i]), kind=kind))
+    lo = np.min([t.enamel_mesh.vertices.min(axis=0) for t in teeth], axis=0)
+    hi = np.max([t.enamel_mesh.vertices.max(axis=0) for t in teeth], axis=0)
+    gums = Gums(box_mesh((lo[0] - 2.0, lo[1] - 1.0, 1.6), (hi[0] + 2.0, hi[1] - 0.5, 7.0)), GROUND_TRUTH["gums"],
+                np.full((1, 1, 3), 0.9))
+    cavity = OralCavity(cavity_proxy(x_half=30.0, y_back=-22.0, y_front=1.0, z_lo=-16.0, z_hi=10.0),
+                        GROUND_TRUTH["cavity_albedo"])
+    return TeethScene(teeth, gums, cavity)
+
+
+def _light_and_camera(scene, target, width, height, span, lights):
+    dist = 160.0
+    fov = 2.0 * math.degrees(math.atan(0.5 * span / dist))
+    cam = Camera.look_at(target + np.array([0.0, dist, 0.15 * dist]), target, (0, 0, 1), fov, width, height)
+    add_camera(scene, cam, mm_per_unit=1.0)
+    for k, (pos, inten) in enumerate(lights):
+        add_point_light(scene, PointLight(target + np.asarray(pos), np.full(3, inten)), 1.0, f"Teeth Light {k}")
+    return cam
+
+
+def build_smile(scene, workdir: str) -> None:
+    _ensure_registered()
+    ts = smile_scene()
+    build_teeth_scene(ts, scene.collection, mm_per_unit=1.0, smooth=True)
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    _light_and_camera(scene, scene_target(ts) + np.array([0.0, 0.0, 2.0]), w, h, 52.0,
+                      [((70.0, 160.0, 60.0), 6.0e4), ((-90.0, 120.0, -20.0), 2.0e4)])
+    configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)
+
+
+DEMO_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.dentin.albedo")
+
+
+def fit_demo(workdir: str, iterations: int = 30, seed: int = 0):
+    """Synthetic capture of one incisor, a start with perturbed enamel and dentin materials, a core fit of
+    those materials (sigma_t, albedo). The dentin shape starts at the truth's and stays: a 24 x 16 pixel
+    capture barely constrains the blend-shape coefficients, and freed they wander. Returns (truth, start,
+    fit, log)."""
+    truth = make_scene(n_teeth=1, resolution=20)
+    cams, lights = default_rig(target=scene_target(truth), width=24, height=16, n_lights=9, n_cameras=2,
+                               fov_x_deg=2.8)
+    cap = render_capture(truth, cams, lights, spp=4, spp_background=1)
+    start = perturbed_start(truth, seed=seed, sigma_factor=0.5, kappa_shift=0.4, reset_c=False)
+    # a 30-iteration illustration on a 24 x 16 capture, not the product fit: plain Adam (the thesis), 1-spp
+    # passes, per-pixel loss, the best-loss result, every light fitted (the settings its reference render has)
+    settings = FitSettings(iterations=iterations, lr=0.06, lr_decay=0.0, lights_per_iteration=4, spp=1, image_spp=0,
+                           loss_block=1, optimiser="adam", average_tail=0.0, held_out_lights=0, seed=seed,
+                           free=DEMO_FREE)
+    out = os.path.join(workdir, "teeth-fit") if workdir else None
+    best, log = fit(start, cap, settings, out_dir=out)
+    if out:
+        plot_loss(log, os.path.join(out, "loss.png"))
+    return truth, start, best, log
+
+
+def build_fit_demo(scene, workdir: str) -> None:
+    """Left: start (perturbed), middle: fitted, right: ground truth; same lamps and camera."""
+    _ensure_registered()
+    truth, start, best, _ = fit_demo(workdir)
+    for k, (label, ts) in enumerate((("start", start), ("fit", best), ("truth", truth))):
+        ts = ts.copy()
+        ts.gums, ts.cavity = None, None
+        objs = build_teeth_scene(ts, scene.collection, mm_per_unit=1.0, prefix=f"{label} ", smooth=True)
+        for enamel, _ in objs["teeth"]:
+            enamel.location.x = (k - 1) * 11.0
+    target = np.array([0.0, 0.0, 5.0])
+    _light_and_camera(scene, target, scene.render.resolution_x, scene.render.resolution_y, 36.0,
+                      [((50.0, 150.0, 60.0), 5.0e4)])
+    configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)
+
+
+def _ensure_registered() -> None:
+    """The builders use ``Object.ms_tooth``: register the add-on's classes when running headless."""
+    if not hasattr(bpy.types.Object, "ms_tooth"):
+        addon.register()
+
+
+register_scene(LibraryScene("teeth-smile", "Smile: enamel, dentin, gums", build_smile, (160, 96), 32,
+                            ("teeth",)))
+register_scene(LibraryScene("teeth-fit-demo", "Teeth fit: start | fit | truth", build_fit_demo, (192, 64), 32,
+                            ("teeth",)))
+
+
+# -- library materials: three dentin shades (the shade of a tooth is mostly its dentin) ------------
+SHADES = {
+    "Dentin Shade A1 (light)": ([2.2, 2.6, 3.2], [0.95, 0.90, 0.80]),
+    "Dentin Shade A3 (yellowish)": ([2.4, 2.9, 3.8], [0.93, 0.82, 0.62]),
+    "Dentin Shade C2 (greyish)": ([2.6, 2.8, 3.1], [0.86, 0.83, 0.76]),
+}
+
+
+def _shade_material(name: str):
+    def build(scene, workdir: str = ""):
+        _ensure_registered()
+        sigma_t, albedo = SHADES[name]
+        # 1 Blender unit = 1 m for artists' scenes (mm per Unit = 1000)
+        return new_teeth_material("Dentin", name, scene=scene, volume=VolumeMaterial(np.array(sigma_t),
+                                  np.array(albedo), 0.5, -0.1, 0.8), mm_per_unit=1000.0)
+
+    return build
+
+
+def shade_preview(scene, material) -> None:
+    """An incisor (generic enamel) whose dentin wears ``material``, on a dark stage (mm units)."""
+    geo = make_tooth("incisor", resolution=24)
+    tooth = Tooth("shade", geo.enamel, geo.dentin, GROUND_TRUTH["enamel"], GROUND_TRUTH["dentin"],
+                  np.full((1, 1, 3), 0.95), np.array([0.2, 0.0, 0.2]), kind="incisor")
+    ts = TeethScene([tooth], None, None)
+    objs = build_teeth_scene(ts, scene.collection, mm_per_unit=1.0, smooth=True)
+    group_node(material).inputs["mm per Unit"].default_value = 1.0  # the preview stage is in mm
+    objs["teeth"][0][1].data.materials[0] = material
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    _light_and_camera(scene, scene_target(ts), w, h, 16.0, [((60.0, 150.0, 60.0), 5.0e4)])
+    configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)
+
+
+def _register_shades() -> None:
+    for name in SHADES:
+        register_material(LibraryMaterial(name, name.replace("Dentin Shade ", "Shade "), "Teeth/Dentin Shades",
+                                          _shade_material(name), "Dentin volume (two-lobe HG) of a tooth shade; "
+                                          "pair with the Enamel group", preview=shade_preview))
+
+
+_register_shades()
