@@ -19,11 +19,58 @@ def at_least(low: float, kind: type = int):
         if isinstance(value, float) and not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
         if value < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low:g}, got {text}")
+            raise argparse.ArgumentTypeError(f"must be >= {low:{'d' if kind is int else 'g'}}, got {text}")
         return value
 
     parse.__name__ = f"{kind.__name__} >= {low:g}"
     return parse
+
+
+def between(low: float, high: float, kind: type = float):
+    """An argparse ``type`` that parses ``kind`` and refuses values outside [low, high] (and NaN / inf)."""
+
+    def parse(text: str):
+        value = at_least(low, kind)(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be <= {high:{'d' if kind is int else 'g'}}, got {text}")
+        return value
+
+    parse.__name__ = f"{kind.__name__} in [{low:g}, {high:g}]"
+    return parse
+
+
+def finite_float(text: str) -> float:
+    """An argparse ``type``: any finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux: MemAvailable), None where unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(nbytes: float, what: str) -> None:
+    """Refuse work whose arrays need more than the memory available, before allocating them."""
+    avail = available_memory()
+    if avail is not None and nbytes > avail:
+        raise ValueError(f"{what} needs about {nbytes / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB is "
+                         "available")
 
 
 def positive_float(text: str) -> float:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .checks import refuse_output_over_inputs
+from .checks import at_least, between, finite_float, refuse_output_over_inputs
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -24,8 +24,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("btf", help="BTF folder (btf.json + EXRs), btf.json, or .npz")
     f.add_argument("--out", required=True,
                    help="parameter folder to write (kd/ks/sigma/basis.exr, params.json)")
-    f.add_argument("--tile", type=int, default=20, help="tile edge in texels (default 20)")
-    f.add_argument("--workers", type=int, default=None, help="parallel processes (default: CPU count)")
+    f.add_argument("--tile", type=at_least(1), default=20, help="tile edge in texels (default 20)")
+    f.add_argument("--workers", type=at_least(1), default=None, help="parallel processes (default: CPU count)")
     f.add_argument("--weighting", choices=("radiance", "brdf"), default="radiance",
                    help="residuals in f_r cos(theta_i) (default) or in f_r (eq. 3.17 as printed)")
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -44,16 +44,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     s = fsub.add_parser("synth", help="synthetic BTF of a known spatially varying model")
     s.add_argument("--out", required=True, help="BTF folder, or a path ending in .npz")
-    s.add_argument("--width", type=int, default=32)
-    s.add_argument("--height", type=int, default=32)
-    s.add_argument("--lights", type=int, default=16)
-    s.add_argument("--views", type=int, default=16)
-    s.add_argument("--theta-max", type=float, default=75.0, help="largest light/view zenith angle (deg)")
-    s.add_argument("--rotation", type=float, default=0.0, help="azimuth offset of the direction sets (rad)")
-    s.add_argument("--noise", type=float, default=0.0, help="Gaussian noise level (0.05 = 5 %%)")
+    s.add_argument("--width", type=at_least(1), default=32)
+    s.add_argument("--height", type=at_least(1), default=32)
+    s.add_argument("--lights", type=at_least(1), default=16)
+    s.add_argument("--views", type=at_least(1), default=16)
+    s.add_argument("--theta-max", type=between(1.0, 89.0), default=75.0, help="largest light/view zenith angle (deg)")
+    s.add_argument("--rotation", type=finite_float, default=0.0, help="azimuth offset of the direction sets (rad)")
+    s.add_argument("--noise", type=between(0.0, 1.0), default=0.0, help="Gaussian noise level (0.05 = 5 %%)")
     s.add_argument("--noise-kind", choices=("relative", "peak"), default="relative",
                    help="multiplicative noise, or additive noise scaled by each texel's peak value")
-    s.add_argument("--max-tilt", type=float, default=30.0, help="largest fibre tilt (deg)")
+    s.add_argument("--max-tilt", type=between(0.0, 89.0), default=30.0, help="largest fibre tilt (deg)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--gt-out", default=None, help="also write the ground-truth parameter folder here")
     s.set_defaults(func=run_synth)
@@ -61,7 +61,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     n = fsub.add_parser("ndf", help="write one texel's extracted NDF (eq. 3.11) as a parabolic map EXR (eq. 3.12)")
     n.add_argument("btf", help="BTF folder, btf.json or .npz")
     n.add_argument("--texel", type=int, nargs=2, metavar=("X", "Y"), default=(0, 0))
-    n.add_argument("--resolution", type=int, default=64)
+    n.add_argument("--resolution", type=between(4, 4096, int), default=64)
     n.add_argument("--out", required=True, help="output .exr")
     n.set_defaults(func=run_ndf)
 

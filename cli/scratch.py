@@ -16,7 +16,11 @@ import argparse
 import json
 import os
 
-from .checks import refuse_output_over_inputs
+from .checks import at_least, between, check_memory, finite_float, refuse_output_over_inputs
+
+MAX_SCRATCHES = 2**24  # the grid index addresses at most 2^24 entries, each scratch has at least one
+SCRATCH_BYTES = 4096  # memory per scratch while a set is generated and indexed (2.4 KB measured, rounded up)
+PIXEL_BYTES = 256  # memory per pixel of ``scratch eval`` (about 120 bytes measured, rounded up)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -25,12 +29,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     g = ss.add_parser("generate", help="generate a scratch set (.npz or EXR-table folder)")
     g.add_argument("--kind", choices=("wear", "polish", "hairline", "curves"), default="wear")
-    g.add_argument("--count", type=int, default=1000, help="number of scratches (not for curves)")
-    g.add_argument("--patch-mm", type=float, nargs="+", default=[20.0], help="patch size in mm (1 or 2 values)")
+    g.add_argument("--count", type=between(1, MAX_SCRATCHES, int), default=1000,
+                   help="number of scratches (not for curves)")
+    g.add_argument("--patch-mm", type=between(1e-3, 1e4), nargs="+", default=[20.0],
+                   help="patch size in mm (1 or 2 values)")
     g.add_argument("--curves", default=None, help="JSON file: list of curves, each a list of [u, v] points")
-    g.add_argument("--angle-deg", type=float, default=0.0, help="hairline brushing direction")
-    g.add_argument("--sigma-um", type=float, default=60.0, help="coherence radius the index is built for")
-    g.add_argument("--max-footprint-um", type=float, default=500.0, help="largest pixel footprint to index for")
+    g.add_argument("--angle-deg", type=finite_float, default=0.0, help="hairline brushing direction")
+    g.add_argument("--sigma-um", type=between(0.1, 1e4), default=60.0, help="coherence radius the index is built for")
+    g.add_argument("--max-footprint-um", type=between(0.1, 1e5), default=500.0,
+                   help="largest pixel footprint to index for")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--out", required=True, help="output .npz file or EXR-table folder")
     g.set_defaults(func=run_generate)
@@ -41,14 +48,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     e = ss.add_parser("eval", help="evaluate the scratch radiance over the patch into an EXR image")
     e.add_argument("path")
-    e.add_argument("--size", type=int, default=256, help="image width = height in pixels")
-    e.add_argument("--view-deg", type=float, default=30.0, help="viewing angle from the normal (in x-z plane)")
-    e.add_argument("--light", type=float, nargs=4, default=[-0.5, 0.2, 1.0, 0.05], metavar=("X", "Y", "Z", "R"),
+    e.add_argument("--size", type=between(1, 16384, int), default=256, help="image width = height in pixels")
+    e.add_argument("--view-deg", type=between(0.0, 89.9), default=30.0,
+                   help="viewing angle from the normal (in x-z plane)")
+    e.add_argument("--light", type=finite_float, nargs=4, default=[-0.5, 0.2, 1.0, 0.05], metavar=("X", "Y", "Z", "R"),
                    help="sphere light centre (relative, local frame) and radius, same unit")
     e.add_argument("--spectral", choices=("rgb", "16"), default="rgb", help="3 wavelengths or 16 bands")
     e.add_argument("--si", choices=("series", "thesis", "exact"), default="series")
     e.add_argument("--footprint-rule", choices=("chords", "thesis"), default="chords")
-    e.add_argument("--workers", type=int, default=1)
+    e.add_argument("--workers", type=at_least(1), default=1)
     e.add_argument("--out", required=True, help="output EXR (channels R, G, B, A = rho_P)")
     e.set_defaults(func=run_eval)
 
@@ -68,6 +76,8 @@ def run_generate(args: argparse.Namespace) -> int:
     if args.curves:
         refuse_output_over_inputs(args.out, [args.curves])
     patch = _patch(args.patch_mm)
+    if args.kind != "curves":
+        check_memory(args.count * SCRATCH_BYTES, f"a set of {args.count} scratches")
     kw = dict(seed=args.seed, sigma_um=args.sigma_um, max_footprint_um=args.max_footprint_um)
     if args.kind == "curves":
         if not args.curves:
@@ -124,8 +134,9 @@ def run_eval(args: argparse.Namespace) -> int:
     refuse_output_over_inputs(args.out, [args.path])
     s = load_scratch_set(args.path)
     n = int(args.size)
-    if n < 1:
-        raise ValueError("--size must be >= 1")
+    check_memory(n * n * PIXEL_BYTES, f"a {n} x {n} image")
+    if args.light[3] <= 0.0:
+        raise ValueError(f"--light: the radius R must be > 0, got {args.light[3]:g}")
     px = s.patch_size_um / n
     u = (np.arange(n) + 0.5) * px[0]
     v = (np.arange(n) + 0.5) * px[1]

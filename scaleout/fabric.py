@@ -50,8 +50,9 @@ def fit_btf_dask(
 
     btf_path, out_dir = os.path.abspath(os.fspath(btf_path)), os.path.abspath(os.fspath(out_dir))
     options = options or FitOptions()
+    checked = btf_fitter.check_btf(btf_path)
     os.makedirs(out_dir, exist_ok=True)
-    hdr, cache, values_path = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress)
+    hdr, cache, values_path = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress, checked)
     tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
     todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
     init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))

@@ -27,7 +27,7 @@ from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
 from .btf_io import iter_btf_blocks, read_btf_header
 from .levenberg_marquardt import Samples
-from .ndf_extraction import NdfOperator, ndf_operator
+from .ndf_extraction import NdfOperator, check_ndf_coverage, ndf_operator
 from .parameter_maps import FabricMaps, make_maps, save_params
 from .postprocess import postprocess_basis
 from .tile_fit import FitOptions, fit_tile
@@ -87,8 +87,17 @@ def _content_stamp(hdr) -> list:
     return stamp
 
 
-def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool):
+def check_btf(btf_path: str) -> tuple:
+    """Read a BTF's header and refuse it, before anything is written, where its directions cannot be
+    fitted (``check_ndf_coverage``): (header, NDF operator)."""
     hdr = read_btf_header(btf_path)
+    op = ndf_operator(hdr.wi, hdr.wo)
+    check_ndf_coverage(op, hdr.source, hdr.count)
+    return hdr, op
+
+
+def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool, checked=None):
+    hdr, op = checked or check_btf(btf_path)
     cache = os.path.join(out_dir, CACHE)
     meta = {
         "source": os.path.abspath(hdr.source),
@@ -117,7 +126,6 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         mm.flush()
         del mm
         os.replace(tmp, values_path)
-        op = ndf_operator(hdr.wi, hdr.wo)
         np.savez(os.path.join(cache, "ndf_operator.npz"), A=op.A, directions=op.directions,
                  solid_angle=op.solid_angle, valid=op.valid, resolution=op.resolution)
         save_json(meta_path, meta)
@@ -136,9 +144,10 @@ def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int =
     btf_path, out_dir = os.fspath(btf_path), os.fspath(out_dir)
     options = options or FitOptions()
     workers = workers or os.cpu_count() or 1
-    os.makedirs(out_dir, exist_ok=True)
     t_start = time.perf_counter()
-    hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress)
+    checked = check_btf(btf_path)
+    os.makedirs(out_dir, exist_ok=True)
+    hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress, checked)
     t_loaded = time.perf_counter()
     tiles = _tiles(hdr.height, hdr.width, tile)
     todo = [t for t in tiles if not os.path.isfile(_tile_path(cache, t))]

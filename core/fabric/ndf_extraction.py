@@ -101,3 +101,17 @@ def ndf_operator(wi: np.ndarray, wo: np.ndarray, resolution: int = 24, strata: i
     sa = parabolic_solid_angle(xy) / resolution**2
     return NdfOperator(A=A, directions=h, solid_angle=np.where(inside, sa, 0.0), valid=valid,
                        resolution=resolution)
+
+
+MIN_NDF_CELLS = 3  # the initial basis (eq. 3.13-3.16) needs a peak and a spread around it
+
+
+def check_ndf_coverage(op: NdfOperator, source: str, pairs: int) -> None:
+    """Refuse a BTF whose light/view pairs cover too few half vectors for the NDF of eq. 3.11: the
+    fit's initial basis (eq. 3.13-3.16) is undefined there. One line naming the file and the counts."""
+    n_valid = int(op.valid.sum())
+    if n_valid < MIN_NDF_CELLS:
+        cells = int((op.solid_angle > 0).sum())
+        raise ValueError(f"{source}: its {pairs} light/view pairs cover {n_valid} of the {cells} half-vector cells "
+                         f"of the fibre distribution, the fit needs at least {MIN_NDF_CELLS}: measure more "
+                         "directions (e.g. 8 lights x 8 views or more)")
