@@ -1,13 +1,12 @@
-"""Per-feature PropertyGroups, attached to Blender datablocks (saved, undone and linked with them)."""
+"""The scene's Material Structures settings (``Scene.material_structures``): one pointer or setting per
+feature, each defined in its feature folder. Saved, undone and linked with the scene."""
 
 from __future__ import annotations
 
 import bpy
 
-from .fabric.properties import CLASSES as FABRIC_CLASSES
 from .fabric.properties import MS_FabricBrushSettings
-from .scratch import world as scratch_world
-from .teeth import properties as teeth_properties
+from .scratch.properties import world_lamps_property
 
 
 class MS_SceneSettings(bpy.types.PropertyGroup):
@@ -21,24 +20,16 @@ class MS_SceneSettings(bpy.types.PropertyGroup):
     )
     fabric_brush: bpy.props.PointerProperty(type=MS_FabricBrushSettings)
     # Scratched metal: the K brightest regions of the world as lamps of the scratch term (addon/scratch/world.py).
-    # Stored in the scene's ID property "ms_scratch_world_lamps", where files and scripts from before set it.
-    scratch_world_lamps: bpy.props.IntProperty(
-        name="World Lights", min=0, max=scratch_world.MAX_WORLD_LAMPS, default=0,
-        description="Brightest regions of the world's environment image given to the scratch term as distant "
-        "sphere lamps, in free lamp slots (0: the scratches see no world light; an approximation)",
-        get=scratch_world.get_world_lamps, set=scratch_world.set_world_lamps, update=scratch_world.update_world_lamps,
-    )
+    scratch_world_lamps: world_lamps_property()
 
 
-# Feature property groups first: MS_SceneSettings points at them.
-CLASSES: list[type] = [*FABRIC_CLASSES, *teeth_properties.CLASSES, MS_SceneSettings]
+# The feature property groups it points at are registered before it (addon/__init__.py).
+CLASSES: list[type] = [MS_SceneSettings]
 
 
 def register_pointers() -> None:
     bpy.types.Scene.material_structures = bpy.props.PointerProperty(type=MS_SceneSettings)
-    teeth_properties.register_pointers()
 
 
 def unregister_pointers() -> None:
-    teeth_properties.unregister_pointers()
     del bpy.types.Scene.material_structures

@@ -22,8 +22,8 @@ def run(args: argparse.Namespace) -> int:
     prepare_user_resources()
     from tqdm import tqdm
 
-    from ..render import library
-    from ..render.contact_sheet import contact_sheet
+    from ..showcase import library
+    from ..showcase.contact_sheet import contact_sheet
     from .render import save_image
 
     # Every library material on the standard preview stage, then the showcase scenes.

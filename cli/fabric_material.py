@@ -21,9 +21,9 @@ def run_material(args: argparse.Namespace) -> int:
     prepare_user_resources()
     import bpy
 
-    from ..addon.operators.fabric import import_fit_material
+    from ..addon.fabric.material import import_fit_material
     from ..render import configure_cycles, dark_world, render_to_array, reset_scene
-    from ..render.library import build_preview_scene
+    from ..showcase.library import build_preview_scene
 
     params_dir = os.path.abspath(args.params_dir)
     scene = reset_scene()

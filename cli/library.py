@@ -22,13 +22,13 @@ def run(args: argparse.Namespace) -> int:
     from ..render.session import prepare_user_resources
 
     prepare_user_resources()
-    from ..render.library import MATERIALS, available_materials
+    from ..showcase.library import MATERIALS, available_materials
 
     if args.action == "list":
         for name in available_materials():
             print(f"{MATERIALS[name].catalog:28s} {name}")
         return 0
-    from ..render.asset_library import build_asset_library
+    from ..showcase.asset_library import build_asset_library
 
     print(build_asset_library(args.out, args.preview_size, args.samples))
     return 0

@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from ..render.session import prepare_user_resources
 
     prepare_user_resources()
-    from ..render import library
+    from ..showcase import library
 
     if args.list:
         for name in library.available_scenes():

@@ -11,24 +11,32 @@ Every module-build quirk from the platform notes is handled here, once:
 * the empty ``Render Result``: render to a 32-bit EXR and read it back: :func:`render_to_array`
 * texture ``t`` orientation differs between 5.x and 4.5: :func:`osl_flip_t`
 
-Import this package only where ``bpy`` is available.
+Plus generic scene pieces (lamps, cameras aimed at a point, a textured plane, the position pass of the
+verification renders). The harness knows no material feature: it never imports ``addon`` or
+``showcase`` (``tests/core/test_structure.py``). Import this package only where ``bpy`` is available.
 """
 
 from .osl import OslScriptError, link_uv, load_osl_script
-from .output import render_to_array
+from .output import render_positions, render_to_array
 from .scene import (
+    add_lamp,
     add_orthographic_camera,
     add_textured_plane,
     configure_cycles,
     dark_world,
     ensure_node_tree,
+    look_from,
+    material_output,
     new_material,
+    point_along,
     reset_scene,
+    view_direction,
 )
 from .session import blender_version, ensure_bundled_paths, osl_flip_t, osl_shader_path
 
 __all__ = [
     "OslScriptError",
+    "add_lamp",
     "add_orthographic_camera",
     "add_textured_plane",
     "blender_version",
@@ -38,9 +46,14 @@ __all__ = [
     "ensure_node_tree",
     "link_uv",
     "load_osl_script",
+    "look_from",
+    "material_output",
     "new_material",
     "osl_flip_t",
     "osl_shader_path",
+    "point_along",
+    "render_positions",
     "render_to_array",
     "reset_scene",
+    "view_direction",
 ]

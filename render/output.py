@@ -8,6 +8,7 @@ import tempfile
 import numpy as np
 
 from ..core.exr_io import read_exr
+from .scene import material_output, new_material
 
 
 def render_to_array(scene=None, path: str | None = None, channels: str = "RGBA") -> np.ndarray:
@@ -35,3 +36,17 @@ def render_to_array(scene=None, path: str | None = None, channels: str = "RGBA")
     finally:
         if cleanup and os.path.exists(path):
             os.remove(path)
+
+
+def render_positions(scene, obj) -> np.ndarray:
+    """``obj`` re-rendered with emission = its shading position (world space), film transparent:
+    (H, W, 4), alpha = coverage. The points a verification evaluates its reference at."""
+    mat = new_material("Position")
+    tree = mat.node_tree
+    geo = tree.nodes.new("ShaderNodeNewGeometry")
+    em = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(geo.outputs["Position"], em.inputs["Color"])
+    tree.links.new(em.outputs[0], material_output(mat).inputs["Surface"])
+    obj.data.materials[0] = mat
+    scene.render.film_transparent = True
+    return render_to_array(scene)

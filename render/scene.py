@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+
+import numpy as np
 
 
 def reset_scene():
@@ -129,4 +132,68 @@ def add_orthographic_camera(
     obj.rotation_euler = rotation
     scene.collection.objects.link(obj)
     scene.camera = obj
+    return obj
+
+
+def point_along(obj, direction) -> None:
+    """Turn ``obj`` (a camera or lamp: it looks down its -Z, +Y up) to look along ``direction``."""
+    from mathutils import Vector
+
+    obj.rotation_euler = Vector(tuple(direction)).to_track_quat("-Z", "Y").to_euler()
+
+
+def view_direction(theta_deg: float, phi_deg: float) -> np.ndarray:
+    """Unit vector at polar angle ``theta`` from +Z and azimuth ``phi`` from +X (degrees)."""
+    th, ph = math.radians(theta_deg), math.radians(phi_deg)
+    return np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
+
+
+def look_from(cam, direction, distance: float = 5.0) -> None:
+    """Place ``cam`` ``distance`` units from the origin along ``direction``, looking at the origin."""
+    d = np.asarray(direction, dtype=np.float64)
+    cam.location = tuple(distance * d)
+    point_along(cam, -d)
+
+
+def add_lamp(
+    scene,
+    kind: str = "POINT",
+    location: Sequence[float] = (0.0, 0.0, 0.0),
+    power: float = 10.0,
+    name: str = "MS Lamp",
+    radius: float = 0.0,
+    size: float | Sequence[float] | None = None,
+    shape: str | None = None,
+    target: Sequence[float] | None = None,
+    color: Sequence[float] | None = None,
+):
+    """A lamp object of Blender light type ``kind`` (POINT, SUN, SPOT, AREA) at ``location``.
+
+    ``radius``: the point/spot lamp's radius, or the sun's angular diameter (radians; 0 = a hard sun).
+    ``size``, ``shape``: an area lamp's size (one number, or x and y) and shape. ``target``: a point the
+    lamp faces (its -Z turned toward it). ``power``: Blender's power (W), or a sun's strength.
+    """
+    import bpy
+    from mathutils import Vector
+
+    light = bpy.data.lights.new(name, kind)
+    light.energy = power
+    if color is not None:
+        light.color = tuple(color)
+    if kind == "SUN":
+        light.angle = radius
+    elif kind == "AREA":
+        if shape is not None:
+            light.shape = shape
+        if isinstance(size, Sequence):
+            light.size, light.size_y = size
+        elif size is not None:
+            light.size = size
+    else:
+        light.shadow_soft_size = radius
+    obj = bpy.data.objects.new(name, light)
+    obj.location = tuple(location)
+    if target is not None:
+        point_along(obj, Vector(tuple(target)) - Vector(tuple(location)))
+    scene.collection.objects.link(obj)
     return obj

@@ -10,13 +10,15 @@ costs a few milliseconds plus the upload. Every stroke records the windows it ov
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ...core.fabric import brushing as core_brush
-from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps
+from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps, load_params
 from .maps import btf_quat_to_mesh
+from .material import material_map_images
 
 MODES = ("COMB", "RECOLOR", "SMOOTH", "ANISOTROPY", "DATA_DRIVEN")
 MAX_UNDO = 32
@@ -175,13 +177,43 @@ class BrushSession:
         self._unpacked.clear()
 
 
+_SESSIONS: dict[str, BrushSession] = {}  # material name -> its brush session, for this Blender session
+
+
+def session_for(mat) -> BrushSession:
+    """The brush session of ``mat`` (rebuilt when its images changed)."""
+    images = material_map_images(mat)
+    session = _SESSIONS.get(mat.name)
+    if session is not None:
+        same = all(session.images.get(k) == images.get(k) for k in session.images) and all(
+            tuple(images[k].size) == (session.width, session.height) for k in images
+        )
+        if same:
+            return session
+    session = BrushSession(images)
+    _SESSIONS[mat.name] = session
+    return session
+
+
+def open_session(mat) -> BrushSession | None:
+    """The session of ``mat`` if one was opened (None otherwise)."""
+    return _SESSIONS.get(mat.name) if mat is not None else None
+
+
+def drop_sessions() -> None:
+    _SESSIONS.clear()
+
+
+def pack_sessions() -> None:
+    """Upload and pack whatever the brush sessions changed and have not packed yet."""
+    for session in _SESSIONS.values():
+        session.flush()
+        session.pack()
+
+
 def load_brush_states(folder: str) -> core_brush.BrushStates:
     """The data-driven mode's 8 states from ``folder/state_0`` ... ``folder/state_7`` (fit folders,
     brushed toward k * 45 degrees)."""
-    import os
-
-    from ...core.fabric.parameter_maps import load_params
-
     states = []
     for k in range(8):
         path = os.path.join(folder, f"state_{k}")

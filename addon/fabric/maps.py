@@ -9,10 +9,10 @@ eq. 3.9 is invariant when the basis becomes F M F: quaternion (w, x, y, z) -> (w
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
 
 from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps, load_params, make_maps
+from ..common import array_to_image, image_to_array
 
 IMAGE_PREFIX = "SGGX"
 
@@ -26,40 +26,6 @@ def btf_quat_to_mesh(quat: np.ndarray) -> np.ndarray:
 
 
 mesh_quat_to_btf = btf_quat_to_mesh  # the reflection is its own inverse
-
-
-def array_to_image(array: np.ndarray, name: str, pack: bool = True, replace: bool = True):
-    """A float, Non-Color, channel-packed image holding ``array`` (H, W, C<=4), row 0 = top.
-
-    ``replace``: overwrite the image called ``name`` if there is one; else always a new image (Blender
-    makes its name unique), so no other material's image changes."""
-    a = np.asarray(array, dtype=np.float32)
-    if a.ndim != 3 or not 1 <= a.shape[2] <= 4:
-        raise ValueError(f"{name}: expected an (H, W, C<=4) map, got shape {a.shape}")
-    h, w, c = a.shape
-    rgba = np.zeros((h, w, 4), dtype=np.float32)
-    rgba[..., 3] = 1.0
-    rgba[..., :c] = a
-    image = bpy.data.images.get(name) if replace else None
-    if image is None or tuple(image.size) != (w, h) or not image.is_float:
-        if image is not None:
-            bpy.data.images.remove(image)
-        image = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
-    image.colorspace_settings.name = "Non-Color"
-    image.alpha_mode = "CHANNEL_PACKED"
-    image.pixels.foreach_set(rgba[::-1].ravel())
-    image.update()
-    if pack:
-        image.pack()
-    return image
-
-
-def image_to_array(image, channels: int) -> np.ndarray:
-    """Inverse of :func:`array_to_image`: (H, W, channels) float32, row 0 = top."""
-    w, h = image.size
-    buf = np.empty(w * h * 4, dtype=np.float32)
-    image.pixels.foreach_get(buf)
-    return buf.reshape(h, w, 4)[::-1, :, :channels].copy()
 
 
 def maps_to_images(maps: FabricMaps, prefix: str, btf_frame: bool = True) -> dict:

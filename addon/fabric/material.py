@@ -16,10 +16,14 @@ user's collection, recorded on it) and removes them as soon as an object no long
 
 from __future__ import annotations
 
+import os
+
 import bpy
 
-from ...render.osl import load_osl_script
+from ...render import load_osl_script
+from ..common import add_eevee_fallback, group_material, group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
+from .maps import load_fit_folder, maps_to_images
 
 GROUP_NAME = "SGGX Fabric"
 VIEWPORT_OUTPUT = "Viewport"
@@ -194,36 +198,16 @@ def create_fabric_material(
     """
     scene = scene or bpy.context.scene
     group = ensure_fabric_group(scene)
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:  # 4.5
-        mat.use_nodes = True
-    mat[MARKER] = 1
-    tree = mat.node_tree
-    for node in list(tree.nodes):
-        tree.nodes.remove(node)
-    gnode = tree.nodes.new("ShaderNodeGroup")
-    gnode.node_tree = group
-    gnode.name = gnode.label = GROUP_NAME
+    mat, gnode, out_cycles = group_material(name, group, MARKER, label=GROUP_NAME)
     gnode.inputs["Kd"].default_value = (*kd[:3], 1.0)
     gnode.inputs["Ks"].default_value = (*ks[:3], 1.0)
     gnode.inputs["SigmaX"].default_value, gnode.inputs["SigmaY"].default_value = sigma[:2]
     gnode.inputs["QuatWXY"].default_value = tuple(quat[:3])
     gnode.inputs["QuatZ"].default_value = quat[3]
-    out_cycles = tree.nodes.new("ShaderNodeOutputMaterial")
-    out_cycles.target = "CYCLES"
-    tree.links.new(gnode.outputs["Shader"], out_cycles.inputs["Surface"])
-    out_cycles.location = (400, 100)
-
     # EEVEE / Material Preview: the group's viewport look, from the same inputs and maps.
-    out_eevee = tree.nodes.new("ShaderNodeOutputMaterial")
-    out_eevee.target = "EEVEE"
-    tree.links.new(gnode.outputs[VIEWPORT_OUTPUT], out_eevee.inputs["Surface"])
-    out_eevee.location = (400, -200)
-    out_cycles.is_active_output = True
-
+    add_eevee_fallback(mat, out_cycles, gnode.outputs[VIEWPORT_OUTPUT], location=(400, -200))
     if maps:
-        _link_maps(tree, gnode, maps)
-    mat.cycles.emission_sampling = "NONE"
+        _link_maps(mat.node_tree, gnode, maps)
     return mat
 
 
@@ -257,6 +241,36 @@ def _link_maps(tree, gnode, maps: dict) -> None:
             raise ValueError(f"unknown fabric map {key!r}")
 
 
+def import_fit_material(params_dir: str, scene=None):
+    """Material from a fit folder; images are packed into the .blend."""
+    maps = load_fit_folder(params_dir)
+    name = os.path.basename(os.path.normpath(params_dir)) or "fit"
+    images = maps_to_images(maps, f"SGGX {name}")
+    mat = create_fabric_material(f"Fabric {name}", maps=images, scene=scene)
+    mat["material_structures_source"] = params_dir
+    return mat
+
+
+def fabric_group_node(mat):
+    """The SGGX Fabric group node of a material (None if it has none)."""
+    return group_node(mat, MARKER)
+
+
+def material_map_images(mat) -> dict:
+    """The map images (kd/ks/sigma/basis) a fabric material reads, by key."""
+    out = {}
+    for node in mat.node_tree.nodes:
+        if node.type == "TEX_IMAGE" and node.name.startswith("map_") and node.image is not None:
+            out[node.name[4:]] = node.image
+    return out
+
+
+def fabric_material(obj):
+    """The active material of a mesh object when it is a fabric material, else None."""
+    mat = obj.active_material if obj is not None and obj.type == "MESH" else None
+    return mat if mat is not None and mat.get(MARKER) else None
+
+
 def fabric_script_nodes():
     """Every SGGX script node in the file (inside the group, or placed directly in materials)."""
     trees = [g for g in bpy.data.node_groups if g.get(MARKER)]
@@ -269,11 +283,11 @@ def fabric_script_nodes():
 
 def _exact_path_on(mat) -> bool:
     """Whether a fabric material evaluates lamps itself (FastPreview off on its group node)."""
-    for node in mat.node_tree.nodes:
-        if node.type == "GROUP" and node.node_tree is not None and node.node_tree.get(MARKER):
-            sock = node.inputs["FastPreview"]
-            return sock.is_linked or not sock.default_value
-    return True
+    node = fabric_group_node(mat)
+    if node is None:
+        return True
+    sock = node.inputs["FastPreview"]
+    return sock.is_linked or not sock.default_value
 
 
 def fabric_objects(scene, exact_only: bool = False):

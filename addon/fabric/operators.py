@@ -15,7 +15,9 @@ import bpy
 from ...core.fabric.parameter_maps import save_params
 from ..common import (
     AddGroupNode,
+    FileBrowser,
     MeshUVLookup,
+    SyncLamps,
     assign_material,
     require_uv_mesh,
     stroke_property,
@@ -58,7 +60,7 @@ class MS_OT_fabric_new_material(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_fabric_import_maps(bpy.types.Operator):
+class MS_OT_fabric_import_maps(FileBrowser, bpy.types.Operator):
     """Create a fabric material from a fit's output folder (kd/ks/sigma/basis EXR maps + params.json)"""
 
     bl_idname = "material_structures.fabric_import_maps"
@@ -66,10 +68,6 @@ class MS_OT_fabric_import_maps(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH")
-
-    def invoke(self, context, event):
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
 
     def execute(self, context):
         obj = context.active_object
@@ -86,7 +84,7 @@ class MS_OT_fabric_import_maps(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_fabric_save_maps(bpy.types.Operator):
+class MS_OT_fabric_save_maps(FileBrowser, bpy.types.Operator):
     """Write the active fabric material's (painted) maps to a folder as EXR + params.json"""
 
     bl_idname = "material_structures.fabric_save_maps"
@@ -100,10 +98,6 @@ class MS_OT_fabric_save_maps(bpy.types.Operator):
         mat = getattr(context, "material", None) or getattr(context.active_object, "active_material", None)
         return mat is not None and mat.get(MARKER) and len(material_map_images(mat)) == 4
 
-    def invoke(self, context, event):
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
-
     def execute(self, context):
         mat = getattr(context, "material", None) or context.active_object.active_material
         try:
@@ -116,17 +110,13 @@ class MS_OT_fabric_save_maps(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_fabric_sync_lamps(bpy.types.Operator):
+class MS_OT_fabric_sync_lamps(SyncLamps, bpy.types.Operator):
     """Copy the scene's lamps into the fabric shaders now (normally automatic)"""
 
     bl_idname = "material_structures.fabric_sync_lamps"
     bl_label = "Sync Lamps"
-    bl_options = {"REGISTER", "UNDO"}
-
-    def execute(self, context):
-        n = sync_fabric_lamps(context.scene)
-        self.report({"INFO"}, f"{n} lamp(s) evaluated exactly by the fabric shader")
-        return {"FINISHED"}
+    sync = staticmethod(sync_fabric_lamps)
+    evaluated_by = "exactly by the fabric shader"
 
 
 class MS_OT_fabric_add_group_node(AddGroupNode, bpy.types.Operator):

@@ -1,4 +1,4 @@
-"""Property groups of the fabric brush (scene-level settings and recorded stroke points)."""
+"""The fabric brush settings (``Scene.material_structures.fabric_brush``)."""
 
 from __future__ import annotations
 
@@ -34,10 +34,4 @@ class MS_FabricBrushSettings(bpy.types.PropertyGroup):
     )
 
 
-class MS_StrokePoint(bpy.types.PropertyGroup):
-    location: bpy.props.FloatVectorProperty(name="Location", size=3, description="World-space point (3D strokes)")
-    uv: bpy.props.FloatVectorProperty(name="UV", size=2, description="UV point (UV strokes)")
-    pressure: bpy.props.FloatProperty(name="Pressure", default=1.0, min=0.0, max=1.0)
-
-
-CLASSES: list[type] = [MS_FabricBrushSettings, MS_StrokePoint]
+CLASSES: list[type] = [MS_FabricBrushSettings]

@@ -8,50 +8,26 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
 
 from ...core.fabric import sggx_brdf
 from ...render import (
+    add_lamp,
     add_orthographic_camera,
     add_textured_plane,
     configure_cycles,
     dark_world,
-    new_material,
+    look_from,
+    render_positions,
     render_to_array,
     reset_scene,
+    view_direction,
 )
-from ...render.scene import material_output
-from .material import create_fabric_material, sync_fabric_lamps
+from .maps import maps_to_images
+from .material import create_fabric_material, fabric_group_node, sync_fabric_lamps
 from .presets import tilted_quat
 
 __all__ = ["render_maps_vs_core", "render_patch_vs_core", "tilted_quat"]
-
-
-def _direction(theta_deg: float, phi_deg: float) -> np.ndarray:
-    th, ph = math.radians(theta_deg), math.radians(phi_deg)
-    return np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
-
-
-def _look_from(cam, wo) -> None:
-    """Place an orthographic camera 5 units away along ``wo``, looking at the origin."""
-    from mathutils import Vector
-
-    cam.location = tuple(5.0 * wo)
-    cam.rotation_euler = Vector(tuple(-wo)).to_track_quat("-Z", "Y").to_euler()
-
-
-def _position_pass(scene, plane) -> np.ndarray:
-    """The plane re-rendered with emission = shading position; alpha = coverage. (H, W, 4)."""
-    pos_mat = new_material("Position")
-    tree = pos_mat.node_tree
-    geo = tree.nodes.new("ShaderNodeNewGeometry")
-    em = tree.nodes.new("ShaderNodeEmission")
-    tree.links.new(geo.outputs["Position"], em.inputs["Color"])
-    tree.links.new(em.outputs[0], material_output(pos_mat).inputs["Surface"])
-    plane.data.materials[0] = pos_mat
-    scene.render.film_transparent = True
-    return render_to_array(scene)
 
 
 def render_patch_vs_core(
@@ -78,32 +54,19 @@ def render_patch_vs_core(
     configure_cycles(scene, resolution=resolution, samples=samples, seed=seed)
     dark_world(scene)
     mat = create_fabric_material("Patch", kd=kd, ks=ks, sigma=sigma, quat=quat, scene=scene)
-    group_node = next(n for n in mat.node_tree.nodes if n.type == "GROUP")
-    group_node.inputs["FastPreview"].default_value = 1 if fast_preview else 0
+    fabric_group_node(mat).inputs["FastPreview"].default_value = 1 if fast_preview else 0
     plane = add_textured_plane(scene, 1.0, mat)
-    wo = _direction(*view)
-    _look_from(add_orthographic_camera(scene, ortho_scale=0.7), wo)
-    light = bpy.data.lights.new("Lamp", lamp_type)
-    light.energy = lamp_power
-    if lamp_type == "SUN":
-        light.angle = 0.0
-    elif lamp_type == "AREA":
-        light.shape = area_shape
-        light.size, light.size_y = area_size
-    else:
-        light.shadow_soft_size = 0.0
-    lamp = bpy.data.objects.new("Lamp", light)
-    lamp.location = lamp_position
-    if lamp_type in {"SUN", "AREA"}:  # facing the patch centre
-        from mathutils import Vector
-
-        lamp.rotation_euler = Vector(tuple(-np.asarray(lamp_position))).to_track_quat("-Z", "Y").to_euler()
-    scene.collection.objects.link(lamp)
+    wo = view_direction(*view)
+    look_from(add_orthographic_camera(scene, ortho_scale=0.7), wo)
+    facing = (0.0, 0.0, 0.0) if lamp_type in {"SUN", "AREA"} else None  # facing the patch centre
+    lamp = add_lamp(scene, lamp_type, lamp_position, lamp_power, "Lamp", size=area_size, shape=area_shape,
+                    target=facing)
+    light = lamp.data
     if not fast_preview:
         sync_fabric_lamps(scene)
     rgb = render_to_array(scene)[..., :3]
 
-    pos_rgba = _position_pass(scene, plane)  # shading positions of the same pixels
+    pos_rgba = render_positions(scene, plane)  # shading positions of the same pixels
     mask = pos_rgba[..., 3] > 0.999
     pos = pos_rgba[..., :3].astype(np.float64)
     wo_px = np.broadcast_to(wo, pos.shape)
@@ -159,26 +122,19 @@ def render_maps_vs_core(
 
     Returns ``(rendered_rgb, reference_rgb, mask)``.
     """
-    from .maps import maps_to_images
-
     scene = reset_scene()
     configure_cycles(scene, resolution=resolution, samples=1, seed=0)
     dark_world(scene)
     images = maps_to_images(maps, "Verify")
     mat = create_fabric_material("Mapped", maps=images, scene=scene)
     plane = add_textured_plane(scene, 1.0, mat)
-    wo = _direction(*view)
-    _look_from(add_orthographic_camera(scene, ortho_scale=0.7), wo)
-    light = bpy.data.lights.new("Lamp", "POINT")
-    light.energy = lamp_power
-    light.shadow_soft_size = 0.0
-    lamp = bpy.data.objects.new("Lamp", light)
-    lamp.location = lamp_position
-    scene.collection.objects.link(lamp)
+    wo = view_direction(*view)
+    look_from(add_orthographic_camera(scene, ortho_scale=0.7), wo)
+    add_lamp(scene, "POINT", lamp_position, lamp_power, "Lamp")
     sync_fabric_lamps(scene)
     rgb = render_to_array(scene)[..., :3]
 
-    pos_rgba = _position_pass(scene, plane)
+    pos_rgba = render_positions(scene, plane)
     pos = pos_rgba[..., :3].astype(np.float64)
     h, w = maps.shape
     u, v = pos[..., 0] + 0.5, pos[..., 1] + 0.5

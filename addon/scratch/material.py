@@ -19,10 +19,13 @@ lamps (one-sided) have radiance P/(pi A), disks/ellipses as equal-area 16-gons.
 
 from __future__ import annotations
 
+import os
+
 import bpy
 
-from ...render.osl import load_osl_script
-from ...render.session import osl_flip_t
+from ...render import load_osl_script, osl_flip_t
+from ..common import add_eevee_fallback, group_material
+from ..common import group_node as _group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .tables import (
     IMAGES_PROP,
@@ -34,6 +37,7 @@ from .tables import (
     load_group_set,
     store_scratch_set,
 )
+from .world import world_lamps_with_radii
 
 SHADER = "ms_scratch_metal"
 SCRIPT_NODE = "Scratch Shader"
@@ -226,8 +230,6 @@ def scratch_groups():
 
 def ensure_tables_extracted() -> int:
     """Re-extract every scratch set whose cache folder is missing (after loading a file); count."""
-    import os
-
     n = 0
     for g in scratch_groups():
         node = script_node(g)
@@ -270,46 +272,27 @@ def create_scratched_metal(
     :func:`new_scratch_group`), with an EEVEE/viewport fallback (Principled metal)."""
     scene = scene or bpy.context.scene
     group = new_scratch_group(scratch_set, set_name or name, scene)
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:  # 4.5
-        mat.use_nodes = True
-    mat[MARKER] = 1
-    tree = mat.node_tree
-    for node in list(tree.nodes):
-        tree.nodes.remove(node)
-    gnode = tree.nodes.new("ShaderNodeGroup")
-    gnode.node_tree = group
-    gnode.name = gnode.label = GROUP_PREFIX
+    mat, gnode, out_cycles = group_material(name, group, MARKER, label=GROUP_PREFIX)
     gnode.inputs["BaseColor"].default_value = (*base_color[:3], 1.0)
     gnode.inputs["Roughness"].default_value = roughness
     gnode.inputs["Intensity"].default_value = intensity
     gnode.inputs["Spectral"].default_value = 1 if spectral else 0
     gnode.inputs["Tiling"].default_value = tiling
     gnode.inputs["Coherence"].default_value = float(scratch_set.sigma_um)
-    out_cycles = tree.nodes.new("ShaderNodeOutputMaterial")
-    out_cycles.target = "CYCLES"
-    tree.links.new(gnode.outputs["Shader"], out_cycles.inputs["Surface"])
-    out_cycles.location = (400, 100)
-    bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    # EEVEE / viewport: a Principled metal of the same colour
+    bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
     bsdf.inputs["Base Color"].default_value = (*base_color[:3], 1.0)
     bsdf.inputs["Metallic"].default_value = 1.0
     bsdf.inputs["Roughness"].default_value = max(roughness, 0.15)
-    out_eevee = tree.nodes.new("ShaderNodeOutputMaterial")
-    out_eevee.target = "EEVEE"
-    tree.links.new(bsdf.outputs[0], out_eevee.inputs["Surface"])
-    bsdf.location, out_eevee.location = (0, -400), (400, -400)
-    out_cycles.is_active_output = True
-    mat.cycles.emission_sampling = "NONE"
+    bsdf.location = (0, -400)
+    add_eevee_fallback(mat, out_cycles, bsdf.outputs[0], location=(400, -400))
     sync_scratch_lamps(scene)
     return mat
 
 
 def group_node(mat):
     """The scratched-metal group node of a material (None if it has none)."""
-    if mat is None or mat.node_tree is None:
-        return None
-    return next((n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree is not None
-                 and n.node_tree.get(MARKER)), None)
+    return _group_node(mat, MARKER)
 
 
 def scratch_script_nodes():
@@ -335,8 +318,6 @@ def sync_scratch_lamps(scene, update_matrices: bool = True) -> int:
         for layer in scene.view_layers:
             layer.update()
     triples = scene_scratch_lamps(scene)
-    from .world import world_lamps_with_radii
-
     lamps = [lamp for _, lamp, _ in triples]
     radii = [r for _, _, r in triples]
     for extra, r in world_lamps_with_radii(scene, max(0, 4 - len(lamps))):

@@ -14,9 +14,18 @@ from collections.abc import Callable
 import bpy
 
 from ...core.scratch.scratch_io import EXR_FILES, load_scratch_set, save_kind, save_scratch_set
-from ..fabric.mesh_uv import MeshUVLookup
-from ..fabric.properties import MS_StrokePoint
-from ..scratch.editing import (
+from ..common import (
+    FileBrowser,
+    MeshUVLookup,
+    SyncLamps,
+    assign_material,
+    end_modal_progress,
+    require_uv_mesh,
+    stroke_property,
+    stroke_space_property,
+    stroke_uvs,
+)
+from .editing import (
     FINE_WEAR_SIGMA_UM,
     PATTERNS,
     curves_set,
@@ -25,14 +34,13 @@ from ..scratch.editing import (
     merge_sets,
     object_scratch_material,
 )
-from ..scratch.material import (
+from .material import (
     create_scratched_metal,
     material_scratch_group,
     sync_scratch_lamps,
     unique_set_name,
     update_scratch_group,
 )
-from .fabric import assign_material, require_uv_mesh
 
 PATTERN_ITEMS = [(k, k.title(), v) for k, v in PATTERNS.items()]
 MODAL_MIN_COUNT = 2000  # fewer scratches take about a second or less: generated at once, no Esc needed
@@ -189,13 +197,8 @@ class MS_OT_scratch_generate(bpy.types.Operator):
                 f"Generating {self.count} scratches: {100 * fraction:.0f} %  (Esc cancels)")
 
     def _end(self, context) -> None:
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
+        end_modal_progress(context, self._timer)
+        self._timer = None
 
     def modal(self, context, event):
         job = self._job
@@ -227,13 +230,8 @@ class MS_OT_scratch_draw(bpy.types.Operator):
     bl_label = "Draw Scratches"
     bl_options = {"REGISTER", "UNDO"}
 
-    stroke: bpy.props.CollectionProperty(type=MS_StrokePoint, options={"SKIP_SAVE"})
-    stroke_space: bpy.props.EnumProperty(
-        name="Stroke Space",
-        items=[("UV", "UV", "Stroke points are UV coordinates"), ("WORLD", "World", "3D points on the surface")],
-        default="UV",
-        options={"SKIP_SAVE"},
-    )
+    stroke: stroke_property()
+    stroke_space: stroke_space_property()
     width_um: bpy.props.FloatVectorProperty(name="Width (um)", size=2, default=(2.0, 4.0), min=0.05, max=100.0)
     depth_um: bpy.props.FloatVectorProperty(name="Depth (um)", size=2, default=(1.0, 3.0), min=0.0, max=100.0)
     seed: bpy.props.IntProperty(name="Seed", default=0, min=0)
@@ -253,19 +251,9 @@ class MS_OT_scratch_draw(bpy.types.Operator):
         return {"FINISHED"}
 
     def _stroke_uvs(self, context, obj):
-        if len(self.stroke) < 2:
-            raise ValueError("a scratch stroke needs at least 2 points")
-        if self.stroke_space == "UV":
-            return [tuple(p.uv) for p in self.stroke]
-        lookup = MeshUVLookup(obj, context.evaluated_depsgraph_get())
         # recorded points lie on the surface: one farther than 1 % of the object's size missed it
-        lo = [min(v[i] for v in lookup.verts) for i in range(3)]
-        hi = [max(v[i] for v in lookup.verts) for i in range(3)]
-        tol = max(1e-6, 0.01 * sum((b - a) ** 2 for a, b in zip(lo, hi, strict=True)) ** 0.5)
-        out = [uv for uv in (lookup.nearest(p.location, tol) for p in self.stroke) if uv is not None]
-        if len(out) < 2:
-            raise ValueError(f"the stroke does not touch the mesh of '{obj.name}': no scratch drawn")
-        return out
+        points = stroke_uvs(self.stroke, self.stroke_space, obj, context.evaluated_depsgraph_get(), tolerance=0.01)
+        return [uv for uv, _ in points]
 
     def _add_curves(self, context, obj, curves):
         mat = object_scratch_material(obj)
@@ -350,7 +338,7 @@ def import_source(path: str) -> str:
     return folder if is_exr_table_folder(folder) else path
 
 
-class MS_OT_scratch_import(bpy.types.Operator):
+class MS_OT_scratch_import(FileBrowser, bpy.types.Operator):
     """Import a scratch set onto the active object: a .npz file, or an EXR-table folder (pick the folder or
     any table inside it)"""
 
@@ -360,10 +348,6 @@ class MS_OT_scratch_import(bpy.types.Operator):
 
     filepath: bpy.props.StringProperty(name="File or Folder", subtype="FILE_PATH")
     set_name: bpy.props.StringProperty(name="Set Name", default="")
-
-    def invoke(self, context, event):
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
 
     def execute(self, context):
         obj = context.active_object
@@ -381,7 +365,7 @@ class MS_OT_scratch_import(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_scratch_export(bpy.types.Operator):
+class MS_OT_scratch_export(FileBrowser, bpy.types.Operator):
     """Export the active object's scratch set: a path ending .npz writes one file, a path without an
     extension a folder of EXR tables; any other extension is refused"""
 
@@ -398,8 +382,7 @@ class MS_OT_scratch_export(bpy.types.Operator):
     def invoke(self, context, event):
         if not self.filepath:
             self.filepath = "scratches.npz"
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
+        return super().invoke(context, event)
 
     def execute(self, context):
         found = material_set(object_scratch_material(context.active_object))
@@ -421,17 +404,13 @@ class MS_OT_scratch_export(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_scratch_sync_lamps(bpy.types.Operator):
+class MS_OT_scratch_sync_lamps(SyncLamps, bpy.types.Operator):
     """Copy the scene's lamps into the scratched-metal shaders now (normally automatic)"""
 
     bl_idname = "material_structures.scratch_sync_lamps"
     bl_label = "Sync Scratch Lamps"
-    bl_options = {"REGISTER", "UNDO"}
-
-    def execute(self, context):
-        n = sync_scratch_lamps(context.scene)
-        self.report({"INFO"}, f"{n} lamp(s) evaluated by the scratch term")
-        return {"FINISHED"}
+    sync = staticmethod(sync_scratch_lamps)
+    evaluated_by = "by the scratch term"
 
 
 CLASSES: list[type] = [

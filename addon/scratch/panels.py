@@ -1,28 +1,29 @@
-"""Material properties panel of scratched-metal materials: set info, shader controls, tools."""
+"""Scratched-metal panels: the material properties of scratched-metal materials (set info, shader controls,
+tools) and the sidebar's "Scratches"."""
 
 from __future__ import annotations
 
 import bpy
 
-from ..scratch.material import MARKER, group_node
-from ..scratch.tables import PROP
+from ..common import MaterialPanel, SidebarPanel, draw_group_inputs
+from .material import MARKER, group_node
+from .tables import PROP
 
 CONTROLS = (("BaseColor", "Base Color"), ("EdgeTint", "Edge Tint"), ("Roughness", "Roughness"),
             ("Intensity", "Scratch Intensity"), ("Coherence", "Coherence Length (um)"),
             ("Spectral", "Spectral (16 bands)"), ("Tiling", "Tiling"))
 
 
-class MATERIAL_PT_material_structures_scratch(bpy.types.Panel):
+def draw_import_export(layout) -> None:
+    row = layout.row()
+    row.operator("material_structures.scratch_import", icon="IMPORT")
+    row.operator("material_structures.scratch_export", icon="EXPORT")
+
+
+class MATERIAL_PT_material_structures_scratch(MaterialPanel, bpy.types.Panel):
     bl_label = "Scratched Metal"
     bl_idname = "MATERIAL_PT_material_structures_scratch"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
-    bl_context = "material"
-
-    @classmethod
-    def poll(cls, context):
-        mat = getattr(context, "material", None)
-        return mat is not None and bool(mat.get(MARKER))
+    marker = MARKER
 
     def draw(self, context):
         layout = self.layout
@@ -36,37 +37,24 @@ class MATERIAL_PT_material_structures_scratch(bpy.types.Panel):
             box.label(text=f"Set '{meta['name']}': {meta['n_segments']} segments")
             px, py = meta["patch_size_um"]
             box.label(text=f"Patch {px / 1000:.2f} x {py / 1000:.2f} mm, indexed for sigma {meta['sigma_um']:g} um")
-        col = layout.column()
-        for name, label in CONTROLS:
-            sock = node.inputs[name]
-            if sock.is_linked:
-                col.label(text=f"{label}: linked")
-            else:
-                col.prop(sock, "default_value", text=label)
+        draw_group_inputs(layout, node, CONTROLS)
         layout.prop(context.scene.material_structures, "scratch_world_lamps", text="World Lights")
         row = layout.row()
         row.operator("material_structures.scratch_generate", icon="MOD_NOISE")
         row.operator("material_structures.scratch_draw", icon="GREASEPENCIL")
-        row = layout.row()
-        row.operator("material_structures.scratch_import", icon="IMPORT")
-        row.operator("material_structures.scratch_export", icon="EXPORT")
+        draw_import_export(layout)
         layout.operator("material_structures.scratch_sync_lamps", icon="LIGHT")
 
 
-class VIEW3D_PT_material_structures_scratch(bpy.types.Panel):
+class VIEW3D_PT_material_structures_scratch(SidebarPanel, bpy.types.Panel):
     bl_label = "Scratches"
     bl_idname = "VIEW3D_PT_material_structures_scratch"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Material Structures"
 
     def draw(self, context):
         layout = self.layout
         layout.operator("material_structures.scratch_generate", icon="MOD_NOISE")
         layout.operator("material_structures.scratch_draw", icon="GREASEPENCIL")
-        row = layout.row()
-        row.operator("material_structures.scratch_import", icon="IMPORT")
-        row.operator("material_structures.scratch_export", icon="EXPORT")
+        draw_import_export(layout)
 
 
 CLASSES: list[type] = [MATERIAL_PT_material_structures_scratch, VIEW3D_PT_material_structures_scratch]

@@ -31,7 +31,7 @@ import numpy as np
 
 from ...core.scratch.scratch_io import TABLE_WIDTH, save_scratch_set_exr
 from ...core.scratch.scratch_set import ScratchSet, validate_scratch_set
-from ..fabric.maps import array_to_image, image_to_array
+from ..common import array_to_image, image_to_array
 
 IMAGE_PREFIX = "MS Scratch"
 TABLES = {"segments": 4, "params": 4, "grid": 2, "cells": 1}

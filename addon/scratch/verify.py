@@ -16,14 +16,23 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
 
+from ... import render
 from ...core.scratch import scratch_io
 from ...core.scratch.light_integration import DirectionalLight, PointLight, PolygonLight, SphereLight
 from ...core.scratch.scratch_radiance import scratch_radiance
-from ...render import add_orthographic_camera, add_textured_plane, configure_cycles, dark_world, reset_scene
-from ..fabric.verify import _direction, _look_from, _position_pass
+from ...render import (
+    add_orthographic_camera,
+    add_textured_plane,
+    configure_cycles,
+    dark_world,
+    look_from,
+    render_positions,
+    render_to_array,
+    reset_scene,
+    view_direction,
+)
 from .material import create_scratched_metal, group_node, script_node, sync_scratch_lamps
 
 
@@ -47,23 +56,11 @@ def test_scratch_set(n: int = 60, patch_um: float = 2000.0, seed: int = 3, sigma
 
 
 def add_lamp(scene, kind: str, location, power: float, radius: float = 0.0, size=(0.3, 0.2), shape="RECTANGLE"):
-    from mathutils import Vector
-
-    light = bpy.data.lights.new(f"Lamp {kind}", kind)
-    light.energy = power
-    if kind == "SUN":
-        light.angle = 0.0
-    elif kind == "AREA":
-        light.shape = shape
-        light.size, light.size_y = size
-    else:
-        light.shadow_soft_size = radius
-    obj = bpy.data.objects.new(f"Lamp {kind}", light)
-    obj.location = location
-    if kind in {"SUN", "AREA"}:
-        obj.rotation_euler = Vector(tuple(-np.asarray(location, float))).to_track_quat("-Z", "Y").to_euler()
-    scene.collection.objects.link(obj)
-    return obj
+    """A lamp "Lamp <kind>" of the plate test: point/spot of ``radius``, hard sun, area lamp of ``size``;
+    suns and area lamps face the plate's centre."""
+    facing = (0.0, 0.0, 0.0) if kind in {"SUN", "AREA"} else None
+    return render.add_lamp(scene, kind, location, power, f"Lamp {kind}", radius=0.0 if kind == "SUN" else radius,
+                           size=size, shape=shape, target=facing)
 
 
 def core_light(obj, pos: np.ndarray):
@@ -120,8 +117,8 @@ def render_plate_vs_core(
     g.inputs["Debug"].default_value = debug
     g.inputs["FootprintScale"].default_value = footprint_scale
     plane = add_textured_plane(scene, 1.0, mat)
-    wo = _direction(*view)
-    _look_from(add_orthographic_camera(scene, ortho_scale=ortho_scale), wo)
+    wo = view_direction(*view)
+    look_from(add_orthographic_camera(scene, ortho_scale=ortho_scale), wo)
     objs = []
     for kind, loc, power, extra in lamps:
         if kind == "AREA":
@@ -133,7 +130,7 @@ def render_plate_vs_core(
     shader_footprint = footprint_pass(scene, g)
     folder = script_node(g.node_tree).inputs["TableDir"].default_value
 
-    pos_rgba = _position_pass(scene, plane)
+    pos_rgba = render_positions(scene, plane)
     mask = pos_rgba[..., 3] > 0.999
     pos = pos_rgba[..., :3].astype(np.float64)
     h, w = mask.shape
@@ -169,8 +166,6 @@ def footprint_pass(scene, gnode) -> np.ndarray:
 
 
 def render_to_rgb(scene) -> np.ndarray:
-    from ...render import render_to_array
-
     return render_to_array(scene)[..., :3].astype(np.float64)
 
 

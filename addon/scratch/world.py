@@ -25,6 +25,8 @@ import math
 
 import numpy as np
 
+from ..lamp_sync import ShaderLamp
+
 WORLD_LAMPS_PROP = "ms_scratch_world_lamps"  # scene ID property holding World Lights (K)
 MAX_WORLD_LAMPS = 4  # the shader's lamp slots
 MAP_W, MAP_H = 64, 32
@@ -130,25 +132,9 @@ def world_lamp_count(scene) -> int:
     return max(0, min(MAX_WORLD_LAMPS, k))
 
 
-def get_world_lamps(settings) -> int:
-    """Getter of ``MS_SceneSettings.scratch_world_lamps`` (``settings.id_data`` is the scene)."""
-    return world_lamp_count(settings.id_data)
-
-
-def set_world_lamps(settings, value: int) -> None:
-    settings.id_data[WORLD_LAMPS_PROP] = max(0, min(MAX_WORLD_LAMPS, int(value)))
-
-
-def update_world_lamps(settings, context) -> None:
-    """A changed World Lights reaches the shaders at once (render_pre syncs again anyway)."""
-    from .material import sync_scratch_lamps
-
-    sync_scratch_lamps(settings.id_data)
-
-
 def world_lamps_with_radii(scene, slots: int) -> list:
-    from ..lamp_sync import ShaderLamp
-
+    """(ShaderLamp, radius) of the K brightest world regions as distant sphere lamps (K = World Lights,
+    at most ``slots``); [] when World Lights is 0 or the world has no environment image."""
     k = min(world_lamp_count(scene), slots)
     if k <= 0:
         return []
@@ -170,7 +156,7 @@ def world_approximation_error(env: np.ndarray, k: int, scratch_set, points_um, w
 
     Points are on a plate facing +z (local frame = world frame); ``env`` (h, w, 3) radiance map.
     """
-    from ...core.scratch.light_integration import PolygonLight, SphereLight
+    from ...core.scratch.light_integration import PolygonLight, SphereLight  # measurement only: not at start-up
     from ...core.scratch.scratch_radiance import scratch_radiance
 
     h, w = env.shape[:2]

@@ -18,7 +18,9 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...render.osl import load_osl_script
+from ...render import load_osl_script, material_output, new_material
+from ..common import add_eevee_fallback, group_material
+from ..common import group_node as _group_node
 
 MARKER = "material_structures_teeth"
 SCRIPT_NODE = "Enamel Boundary"
@@ -146,26 +148,11 @@ def new_teeth_material(kind: str, name: str | None = None, scene=None, volume=No
                        mm_per_unit: float = 1000.0) -> bpy.types.Material:
     """A material on the ``kind`` group; ``volume`` is a core ``VolumeMaterial`` (defaults otherwise)."""
     group = ensure_group(kind, scene)
-    mat = bpy.data.materials.new(name or kind)
-    if mat.node_tree is None:  # 4.5
-        mat.use_nodes = True
-    mat[MARKER] = kind
-    mat.cycles.emission_sampling = "NONE"
-    tree = mat.node_tree
-    for node in list(tree.nodes):
-        tree.nodes.remove(node)
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    out.location = (400, 0)
-    node = tree.nodes.new("ShaderNodeGroup")
-    node.node_tree = group
-    node.name = node.label = kind
-    if kind in SURFACE_GROUPS:
-        tree.links.new(node.outputs["Surface"], out.inputs["Surface"])
-    tree.links.new(node.outputs["Volume"], out.inputs["Volume"])
+    surface = "Surface" if kind in SURFACE_GROUPS else None
+    mat, node, out = group_material(name or kind, group, MARKER, kind, label=kind, surface=surface, volume="Volume")
     node.inputs["mm per Unit"].default_value = mm_per_unit
-    if kind in SURFACE_GROUPS:
-        out.target = "CYCLES"
-        _add_eevee_output(mat, kind)
+    if surface:
+        _add_eevee_output(mat, out, kind)
     mat.diffuse_color = (*[min(1.0, x) for x in DEFAULTS[kind]["albedo"]], 1.0)  # solid-view colour
     if volume is not None:
         set_volume(mat, volume)
@@ -174,22 +161,18 @@ def new_teeth_material(kind: str, name: str | None = None, scene=None, volume=No
     return mat
 
 
-def _add_eevee_output(mat, kind: str) -> None:
+def _add_eevee_output(mat, cycles_output, kind: str) -> None:
     """EEVEE/viewport stand-in (the OSL boundary and the volumes are Cycles-only): a Principled BSDF with
     random-walk subsurface scattering, radius = 1 / sigma_t, colour = albedo; kept in sync by set_volume."""
-    tree = mat.node_tree
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    out.target = "EEVEE"
-    out.name = out.label = "EEVEE Output"
-    p = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    p = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
     p.name = p.label = "EEVEE Stand-in"
     p.inputs["Roughness"].default_value = 0.08
     p.inputs["IOR"].default_value = DEFAULTS[kind]["eta"]
     weight = p.inputs.get("Subsurface Weight") or p.inputs.get("Subsurface")
     if weight is not None:
         weight.default_value = 1.0
-    tree.links.new(p.outputs[0], out.inputs["Surface"])
-    p.location, out.location = (100, -350), (400, -350)
+    p.location = (100, -350)
+    add_eevee_fallback(mat, cycles_output, p.outputs[0], location=(400, -350), name="EEVEE Output")
 
 
 def _sync_eevee(mat, volume, mm_per_unit: float) -> None:
@@ -206,10 +189,8 @@ def _sync_eevee(mat, volume, mm_per_unit: float) -> None:
 
 
 def group_node(mat):
-    if mat is None or mat.node_tree is None:
-        return None
-    return next((n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree is not None
-                 and n.node_tree.get(MARKER)), None)
+    """The Enamel/Dentin/Gingiva group node of a material (None if it has none)."""
+    return _group_node(mat, MARKER)
 
 
 def set_volume(mat, volume) -> None:
@@ -258,18 +239,11 @@ def set_a_t(mat, a_t) -> None:
 
 def new_cavity_material(albedo, name: str = "Oral Cavity") -> bpy.types.Material:
     """Opaque Lambertian proxy of the oral-cavity walls (Sec. 5.5.3)."""
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
+    mat = new_material(name)
     mat[MARKER] = "Cavity"
-    tree = mat.node_tree
-    for node in list(tree.nodes):
-        tree.nodes.remove(node)
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    bsdf = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
     bsdf.inputs["Color"].default_value = (*(float(x) for x in albedo), 1.0)
     bsdf.inputs["Roughness"].default_value = 0.0
-    tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
-    out.location = (300, 0)
+    mat.node_tree.links.new(bsdf.outputs["BSDF"], material_output(mat).inputs["Surface"])
     mat.diffuse_color = (*(float(x) for x in albedo), 1.0)
     return mat

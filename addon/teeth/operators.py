@@ -6,9 +6,19 @@ import os
 
 import bpy
 
-from ..teeth.fit_job import _JOB, job_running  # _JOB: the one background fit of this Blender session
-from ..teeth.materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
-from ..teeth.properties import CHECK_IMAGE_NAME, owner
+from ..common import AddGroupNode, FileBrowser, end_modal_progress
+from .fit_job import _JOB, FitJob, job_running, set_current_job, usable_cores  # _JOB: this session's one fit
+from .geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
+from .materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
+from .properties import CHECK_IMAGE_NAME, owner
+from .scene_build import (
+    apply_fit,
+    build_teeth_scene,
+    capture_tooth_names,
+    fill_tooth_map,
+    fit_targets,
+    no_mapping_message,
+)
 
 TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar", "Premolar", ""),
                ("molar", "Molar", "")]
@@ -17,8 +27,6 @@ TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar"
 def _mm_per_unit(scene) -> float:
     """Millimetres per Blender unit from the scene's unit scale (metres by default: 1000)."""
     return 1000.0 * float(scene.unit_settings.scale_length or 1.0)
-
-
 
 
 def show_fit_check(fs, out_dir: str) -> None:
@@ -47,6 +55,7 @@ def show_fit_check(fs, out_dir: str) -> None:
             img.reload()
         img.preview_ensure()
 
+
 class MS_OT_teeth_add_tooth(bpy.types.Operator):
     """Add a tooth: enamel shell + dentin core with the buccal/proximal/occlusal dentin modes as shape keys"""
 
@@ -64,7 +73,6 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
 
     def execute(self, context):
         from ...core.teeth.tooth_mesh import make_tooth
-        from ..teeth.geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
 
         scene = context.scene
         mm = _mm_per_unit(scene)
@@ -145,30 +153,15 @@ class MS_OT_teeth_apply_fitted(bpy.types.Operator):
 
 
 def _group_op(kind: str):
-    class _Op(bpy.types.Operator):
+    class _Op(AddGroupNode, bpy.types.Operator):
         __doc__ = f"Add the {kind} node group (thesis Sec. 5.5) to the edited material"
         bl_idname = f"material_structures.teeth_add_{kind.lower()}_node"
         bl_label = kind
-        bl_options = {"REGISTER", "UNDO"}
+        marker = MARKER
+        marker_value = kind
 
-        @classmethod
-        def poll(cls, context):
-            space = context.space_data
-            return space is not None and space.type == "NODE_EDITOR" and space.edit_tree is not None
-
-        def execute(self, context):
-            tree = context.space_data.edit_tree
-            group = ensure_group(kind, context.scene)
-            for node in tree.nodes:
-                node.select = False
-            node = tree.nodes.new("ShaderNodeGroup")
-            node.node_tree = group
-            node.label = kind
-            node.select = True
-            tree.nodes.active = node
-            if context.space_data.id is not None and hasattr(context.space_data.id, "keys"):
-                context.space_data.id[MARKER] = kind
-            return {"FINISHED"}
+        def group(self, context):
+            return ensure_group(kind, context.scene)
 
     _Op.__name__ = f"MS_OT_teeth_add_{kind.lower()}_node"
     return _Op
@@ -181,7 +174,6 @@ def apply_fit_file(context, path: str) -> tuple[list[str], list[str]]:
     """Apply a fitted scene file to the teeth mapped under Fit to capture (by name where a capture tooth is not
     in the mapping). Returns (``"capture tooth -> object"`` for each tooth applied, the file's tooth names)."""
     from ...core.teeth.scene import load_scene
-    from ..teeth.scene_build import apply_fit, fit_targets
 
     ts = load_scene(path)
     names = [t.name for t in ts.teeth]
@@ -199,8 +191,6 @@ class MS_OT_teeth_read_capture_teeth(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        from ..teeth.scene_build import capture_tooth_names, fill_tooth_map
-
         capture = bpy.path.abspath(context.scene.ms_teeth_fit.capture_dir)
         try:
             names = capture_tooth_names(capture)
@@ -212,7 +202,7 @@ class MS_OT_teeth_read_capture_teeth(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_teeth_apply_fit_file(bpy.types.Operator):
+class MS_OT_teeth_apply_fit_file(FileBrowser, bpy.types.Operator):
     """Write a fitted scene (scene_fit.json) into the teeth materials and dentin shape keys of the teeth chosen
     under Fit to capture (a tooth not listed there: the tooth of the same name)"""
 
@@ -223,16 +213,10 @@ class MS_OT_teeth_apply_fit_file(bpy.types.Operator):
     filepath: bpy.props.StringProperty(subtype="FILE_PATH")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
-    def invoke(self, context, event):
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
-
     def execute(self, context):
         if not os.path.isfile(self.filepath):
             self.report({"ERROR"}, f"file not found: {self.filepath}")
             return {"CANCELLED"}
-        from ..teeth.scene_build import no_mapping_message
-
         try:
             done, names = apply_fit_file(context, self.filepath)
         except (ValueError, KeyError, OSError) as exc:
@@ -264,9 +248,6 @@ class MS_OT_teeth_fit(bpy.types.Operator):
         return True
 
     def _start(self, context):
-        from ..teeth.fit_job import FitJob, set_current_job, usable_cores
-        from ..teeth.scene_build import capture_tooth_names, fill_tooth_map, fit_targets, no_mapping_message
-
         fs = context.scene.ms_teeth_fit
         capture = bpy.path.abspath(fs.capture_dir)
         out = bpy.path.abspath(fs.out_dir) if fs.out_dir else os.path.join(capture, "fit")
@@ -299,8 +280,6 @@ class MS_OT_teeth_fit(bpy.types.Operator):
     def _finish(self, context, job, state):
         fs = context.scene.ms_teeth_fit
         if state == "FINISHED":
-            from ..teeth.scene_build import no_mapping_message
-
             try:
                 done, names = apply_fit_file(context, job.result_path)
             except (ValueError, KeyError, OSError) as exc:
@@ -341,13 +320,8 @@ class MS_OT_teeth_fit(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def _cleanup(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
+        end_modal_progress(context, self._timer)
+        self._timer = None
 
     def modal(self, context, event):
         job = getattr(self, "_job", None) or _JOB["job"]
@@ -384,7 +358,7 @@ class MS_OT_teeth_fit_cancel(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_teeth_import_scene(bpy.types.Operator):
+class MS_OT_teeth_import_scene(FileBrowser, bpy.types.Operator):
     """Import a core teeth scene (scene.json / scene_fit.json): teeth pairs, gums and oral-cavity proxy"""
 
     bl_idname = "material_structures.teeth_import_scene"
@@ -394,13 +368,8 @@ class MS_OT_teeth_import_scene(bpy.types.Operator):
     filepath: bpy.props.StringProperty(subtype="FILE_PATH")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
-    def invoke(self, context, event):
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
-
     def execute(self, context):
         from ...core.teeth.scene import load_scene
-        from ..teeth.scene_build import build_teeth_scene
 
         try:
             ts = load_scene(self.filepath)

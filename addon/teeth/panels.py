@@ -5,15 +5,13 @@ from __future__ import annotations
 
 import bpy
 
-from ..teeth.properties import CHECK_IMAGE_NAME, owner
+from ..common import SidebarPanel
+from .properties import CHECK_IMAGE_NAME, owner
 
 
-class VIEW3D_PT_material_structures_teeth(bpy.types.Panel):
+class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
     bl_label = "Teeth"
     bl_idname = "VIEW3D_PT_material_structures_teeth"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Material Structures"
 
     def draw(self, context):
         layout = self.layout

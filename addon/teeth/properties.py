@@ -14,6 +14,8 @@ import bpy
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
 from ...core.teeth.fit_settings import FitSettings
 from ...core.teeth.param_vector import RANGES
+from .fit_job import current_job, job_running
+from .scene_build import capture_tooth_names, fill_tooth_map
 
 C_MIN, C_MAX = RANGES["c"]
 ROLE_ITEMS = [("NONE", "None", ""), ("ENAMEL", "Enamel", "enamel shell of a tooth"),
@@ -85,21 +87,15 @@ CHECK_IMAGE_NAME = "Teeth Fit Check"  # the Image datablock showing the last fit
 
 
 def _get_running(_self) -> bool:
-    from .fit_job import job_running
-
     return job_running()
 
 
 def _get_progress(_self) -> float:
-    from .fit_job import current_job
-
     job = current_job()
     return 0.0 if job is None else float(job.progress)
 
 
 def _get_status(self) -> str:
-    from .fit_job import current_job
-
     job = current_job()
     if job is not None and job.is_alive():
         return job.status_text()
@@ -124,8 +120,6 @@ class MS_TeethFitToothMap(bpy.types.PropertyGroup):
 
 def _capture_dir_changed(self, _context) -> None:
     """Setting the capture folder reads its teeth into the mapping (left as it was when there are none)."""
-    from .scene_build import capture_tooth_names, fill_tooth_map
-
     try:
         names = capture_tooth_names(bpy.path.abspath(self.capture_dir))
     except (OSError, ValueError, KeyError, TypeError):

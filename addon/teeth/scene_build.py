@@ -15,6 +15,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
+from ...render import add_lamp, configure_cycles
 from .geometry import build_tooth_pair, make_mesh
 from .materials import new_cavity_material, new_teeth_material, set_a_t, set_volume
 
@@ -92,15 +93,10 @@ def add_point_light(scene, light, mm_per_unit: float = 1000.0, name: str = "Teet
     """A point lamp matching a core ``PointLight`` (RGB intensity -> colour x power, radius 0)."""
     inten = np.asarray(light.intensity, dtype=np.float64)
     peak = float(inten.max())
-    data = bpy.data.lights.new(name, "POINT")
-    data.energy = 4.0 * math.pi * peak / mm_per_unit**2
-    data.color = tuple(float(x) for x in inten / max(peak, 1e-30))
-    data.shadow_soft_size = 0.0
-    if hasattr(data, "use_soft_falloff"):
-        data.use_soft_falloff = False
-    obj = bpy.data.objects.new(name, data)
-    obj.location = tuple(float(x) for x in np.asarray(light.position) / mm_per_unit)
-    scene.collection.objects.link(obj)
+    obj = add_lamp(scene, "POINT", tuple(float(x) for x in np.asarray(light.position) / mm_per_unit),
+                   4.0 * math.pi * peak / mm_per_unit**2, name, color=tuple(float(x) for x in inten / max(peak, 1e-30)))
+    if hasattr(obj.data, "use_soft_falloff"):
+        obj.data.use_soft_falloff = False
     return obj
 
 
@@ -215,8 +211,6 @@ def configure_teeth_cycles(scene, samples: int, seed: int = 0, bounces: int = 25
     """Cycles settings under which the Cycles render and the core path tracer estimate the same integral:
     CPU + OSL, box pixel filter of width 1 (the core's), no clamping, no light culling, no caustic
     filtering, bounce limits high enough that truncation is negligible, denoising off."""
-    from ...render import configure_cycles
-
     configure_cycles(scene, (scene.render.resolution_x, scene.render.resolution_y), samples, seed)
     cyc = scene.cycles
     cyc.pixel_filter_type = "BOX"

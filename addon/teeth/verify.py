@@ -17,6 +17,9 @@ import time
 
 import numpy as np
 
+from ...render import dark_world, render_to_array, reset_scene
+from .scene_build import add_camera, add_point_light, build_teeth_scene, configure_teeth_cycles
+
 BLUR = 8
 
 
@@ -61,9 +64,6 @@ def render_core(ts, cam, light, spp: int, seed: int = 1, max_depth: int = 64) ->
 
 
 def render_cycles(ts, cam, light, spp: int, seed: int = 0, bounces: int = 256) -> np.ndarray:
-    from ...render import dark_world, render_to_array, reset_scene
-    from .scene_build import add_camera, add_point_light, build_teeth_scene, configure_teeth_cycles
-
     scene = reset_scene()
     dark_world(scene)
     build_teeth_scene(ts, scene.collection, mm_per_unit=1.0)

@@ -12,7 +12,7 @@ pytest.importorskip("PIL")
 
 @pytest.fixture(scope="module")
 def built_library(tmp_path_factory, addon_module):
-    from material_structures.render.asset_library import build_asset_library
+    from material_structures.showcase.asset_library import build_asset_library
 
     folder = str(tmp_path_factory.mktemp("library"))
     path = build_asset_library(folder, preview_size=24, samples=1, progress=False)
@@ -20,8 +20,8 @@ def built_library(tmp_path_factory, addon_module):
 
 
 def test_library_holds_every_material_as_an_asset(built_library):
-    from material_structures.render.asset_library import catalog_uuid
-    from material_structures.render.library import MATERIALS, available_materials
+    from material_structures.showcase.asset_library import catalog_uuid
+    from material_structures.showcase.library import MATERIALS, available_materials
 
     folder, path = built_library
     names = available_materials()
@@ -45,13 +45,13 @@ def test_library_holds_every_material_as_an_asset(built_library):
 
 
 def test_register_operator_adds_the_library(built_library, monkeypatch):
-    from material_structures.addon.operators import asset_library as op_module
+    from material_structures.addon import operators as op_module
 
     folder, _ = built_library
     module = next(
         m
         for n, m in __import__("sys").modules.items()
-        if n.endswith("addon.operators.asset_library") and m is not op_module and hasattr(m, "LIBRARY_DIR")
+        if n.endswith("addon.operators") and m is not op_module and hasattr(m, "LIBRARY_DIR")
     )
     monkeypatch.setattr(module, "LIBRARY_DIR", folder)
     assert bpy.ops.material_structures.register_asset_library() == {"FINISHED"}
@@ -65,7 +65,7 @@ def test_rebuilding_leaves_no_backup_and_the_zip_ships_none(built_library):
     """``make library`` twice must not leave a ``.blend1`` backup for ``make build`` to ship."""
     import tomllib
 
-    from material_structures.render.asset_library import build_asset_library
+    from material_structures.showcase.asset_library import build_asset_library
 
     folder, path = built_library
     assert build_asset_library(folder, preview_size=24, samples=1, progress=False) == path

@@ -15,7 +15,7 @@ UVS = [(0.2, 0.3), (0.35, 0.4), (0.5, 0.45), (0.7, 0.4)]
 READ_MAPS = """
 import numpy as np
 from material_structures.addon.fabric.maps import images_to_maps
-from material_structures.addon.operators.fabric import material_map_images
+from material_structures.addon.fabric.material import material_map_images
 RESULT = {}
 for obj in bpy.data.objects:
     if obj.active_material is not None:
@@ -52,7 +52,7 @@ def _stroke(uvs=UVS, pressure=1.0):
 
 def _maps(obj):
     from material_structures.addon.fabric.maps import images_to_maps
-    from material_structures.addon.operators.fabric import material_map_images
+    from material_structures.addon.fabric.material import material_map_images
 
     return images_to_maps(material_map_images(obj.active_material))
 
@@ -101,7 +101,7 @@ def test_save_in_the_middle_of_a_stroke_keeps_the_painted_texels(addon_module, t
     assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
     from importlib import import_module
 
-    brush_mod = import_module(f"{addon_module}.addon.operators.fabric_brush")
+    brush_mod = import_module(f"{addon_module}.addon.fabric.brushing")
     session = brush_mod.session_for(a.active_material)
     session.begin_stroke()
     assert session.segment((0.2, 0.3), (0.7, 0.4), BrushSettings(mode="COMB", radius=0.08))
@@ -225,7 +225,7 @@ def test_viewport_look_follows_the_painted_maps(addon_module, tmp_path):
 def test_corduroy_preset_has_wales_like_the_library(addon_module):
     from material_structures import render as R
     from material_structures.core.fabric.preset_maps import CORDUROY_WALES
-    from material_structures.render.scenes_fabric import _preset_maps
+    from material_structures.showcase.scenes_fabric import _preset_maps
 
     scene = R.reset_scene()
     obj = _plane(scene, "Bolster")

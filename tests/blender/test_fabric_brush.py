@@ -25,7 +25,7 @@ def _setup(tmp_path, h=48, w=64, seed=3):
     obj = R.add_textured_plane(scene, 2.0)
     bpy.context.view_layer.objects.active = obj
     assert bpy.ops.material_structures.fabric_import_maps(directory=str(tmp_path / "fit")) == {"FINISHED"}
-    from material_structures.addon.operators.fabric_brush import drop_sessions
+    from material_structures.addon.fabric.brushing import drop_sessions
 
     drop_sessions()
     return scene, obj, maps
@@ -33,7 +33,7 @@ def _setup(tmp_path, h=48, w=64, seed=3):
 
 def _current(obj):
     from material_structures.addon.fabric.maps import images_to_maps
-    from material_structures.addon.operators.fabric import material_map_images
+    from material_structures.addon.fabric.material import material_map_images
 
     return images_to_maps(material_map_images(obj.active_material))
 

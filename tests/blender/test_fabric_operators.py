@@ -51,7 +51,7 @@ def test_new_material_from_preset(addon_module):
     mat = obj.active_material
     assert mat is not None and mat.get("material_structures_fabric")
     from material_structures.addon.fabric.maps import images_to_maps
-    from material_structures.addon.operators.fabric import material_map_images
+    from material_structures.addon.fabric.material import material_map_images
 
     sigma = images_to_maps(material_map_images(mat)).sigma  # the preset's maps (brushable)
     np.testing.assert_allclose(sigma.reshape(-1, 2).mean(axis=0, dtype=np.float64), [2.2, 0.9], rtol=1e-6)
@@ -64,7 +64,7 @@ def test_import_and_save_roundtrip(addon_module, tmp_path):
     _, obj = _scene_with_plane()
     assert bpy.ops.material_structures.fabric_import_maps(directory=str(tmp_path / "fit")) == {"FINISHED"}
     mat = obj.active_material
-    from material_structures.addon.operators.fabric import material_map_images
+    from material_structures.addon.fabric.material import material_map_images
 
     images = material_map_images(mat)
     assert sorted(images) == ["basis", "kd", "ks", "sigma"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 from regression import compare_to_reference
 
-from material_structures.render import library
+from material_structures.showcase import library
 
 RESOLUTION, SAMPLES = (48, 36), 4
 EXACT = {"test-card"}  # emission-only: bit-exact; lit scenes allow float-summation differences

@@ -27,8 +27,9 @@ RESULT = {"engine": engine, "pixels": render_to_array(scene).tolist(),
 def _library_scene(work: str) -> list[str]:
     """One small sphere per library material in a row, a point and an area light, a camera."""
     from material_structures import render as R
-    from material_structures.render import library
-    from material_structures.render.library import MATERIALS, _sync_exact_lamps
+    from material_structures.addon.fabric.material import sync_fabric_lamps
+    from material_structures.showcase import library
+    from material_structures.showcase.library import MATERIALS
 
     scene = R.reset_scene()
     R.configure_cycles(scene, resolution=(160, 24), samples=4)
@@ -55,7 +56,7 @@ def _library_scene(work: str) -> list[str]:
     cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
     scene.collection.objects.link(cam)
     scene.camera = cam
-    _sync_exact_lamps(scene)
+    sync_fabric_lamps(scene)
     return names
 
 

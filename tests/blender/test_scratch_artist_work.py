@@ -200,7 +200,6 @@ def test_file_with_the_old_naming_loads_renders_and_keeps_its_set(scene, tmp_pat
     """A file from before: one group per set *name*, tables found by image name only. It reopens and
     renders as before, and a new set of the same name on another object leaves it alone."""
     from material_structures import render as R
-    from material_structures.addon.fabric.verify import _direction, _look_from
     from material_structures.addon.scratch.material import create_scratched_metal, group_node, sync_scratch_lamps
     from material_structures.addon.scratch.verify import add_lamp, test_scratch_set
 
@@ -216,7 +215,7 @@ def test_file_with_the_old_naming_loads_renders_and_keeps_its_set(scene, tmp_pat
     assert sorted(i.name for i in bpy.data.images if i.name.startswith("MS Scratch plate ")) == [
         f"MS Scratch plate {t}" for t in ("cells", "grid", "params", "segments")]
     R.add_textured_plane(scene, 1.0, mat, name="A")
-    _look_from(R.add_orthographic_camera(scene, ortho_scale=0.9), _direction(25.0, 200.0))
+    R.look_from(R.add_orthographic_camera(scene, ortho_scale=0.9), R.view_direction(25.0, 200.0))
     add_lamp(scene, "POINT", (0.5, 0.3, 1.2), 200.0, radius=0.08)
     sync_scratch_lamps(scene)
     ref = R.render_to_array(scene)[..., :3]
@@ -271,8 +270,8 @@ def _env_world(scene):
 def test_world_lights_is_a_setting_drawn_always_and_read_by_the_shader(scene):
     from types import SimpleNamespace
 
-    from material_structures.addon.panels.scratch import MATERIAL_PT_material_structures_scratch as Panel
     from material_structures.addon.scratch.material import scratch_script_nodes, sync_scratch_lamps
+    from material_structures.addon.scratch.panels import MATERIAL_PT_material_structures_scratch as Panel
 
     if scene.world is None:
         scene.world = bpy.data.worlds.new("World")
@@ -359,7 +358,7 @@ class _Ev:
 
 def _modal_stub(count, seed):
     """The Generate operator's modal methods on a stand-in (INVOKE needs a window; background has none)."""
-    from material_structures.addon.operators.scratch import MS_OT_scratch_generate as Op
+    from material_structures.addon.scratch.operators import MS_OT_scratch_generate as Op
 
     class Stub:
         pattern, patch_mm, angle_deg, fine_wear, replace, set_name = "WEAR", 20.0, 0.0, False, True, "Scratches"
@@ -379,7 +378,7 @@ def _modal_stub(count, seed):
 
 
 def test_generate_10k_headless_modal_progress_and_cancel(scene):
-    from material_structures.addon.operators import scratch as ops
+    from material_structures.addon.scratch import operators as ops
 
     a = _plane(scene, "A")
     t = time.perf_counter()

@@ -153,7 +153,7 @@ def test_draw_modal_with_stand_in_events(plate):
     """modal() directly, with stand-in events and a stubbed ray cast (no window in background mode)."""
     import bpy
 
-    from material_structures.addon.operators.scratch import MS_OT_scratch_draw
+    from material_structures.addon.scratch.operators import MS_OT_scratch_draw
 
     bpy.ops.material_structures.scratch_generate(pattern="WEAR", count=5, seed=2)
     before = _set_of(plate).n_scratches

@@ -103,7 +103,8 @@ def test_showcase_scene_builds_and_shows_scratches(addon_module, tmp_path):
     import bpy
 
     from material_structures.addon.scratch.material import group_node
-    from material_structures.render import library, render_to_array
+    from material_structures.render import render_to_array
+    from material_structures.showcase import library
 
     library.render_library_scene("scratch-plate", str(tmp_path), (48, 36), 1)
     scene = bpy.context.scene

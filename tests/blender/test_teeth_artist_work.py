@@ -176,7 +176,7 @@ RESULT = r
 def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_path):
     import importlib
 
-    ops = importlib.import_module(f"{addon_module}.addon.operators.teeth")  # the registered operators' module
+    ops = importlib.import_module(f"{addon_module}.addon.teeth.operators")  # the registered operators' module
     _import(capture_dir)
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = capture_dir

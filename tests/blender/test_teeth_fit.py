@@ -189,7 +189,7 @@ def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp
     text and the window-manager progress follow the background fit; at the end the result is applied."""
     from types import SimpleNamespace
 
-    from material_structures.addon.operators import teeth as ops
+    from material_structures.addon.teeth import operators as ops
     from material_structures.addon.teeth.fit_job import FitJob
 
     enamel = _import(capture_dir)

@@ -9,7 +9,7 @@ import pytest
 
 
 def test_smile_scene_builds_and_renders(addon_module, tmp_path):
-    from material_structures.render.library import render_library_scene
+    from material_structures.showcase.library import render_library_scene
 
     rgba = render_library_scene("teeth-smile", str(tmp_path), resolution=(40, 24), samples=4)
     roles = [o.ms_tooth.role for o in bpy.context.scene.objects]
@@ -28,7 +28,7 @@ def test_fit_demo_lowers_loss(tmp_path):
     pytest.importorskip("matplotlib")  # the loss plot (not in the 4.5 environment)
     pytest.importorskip("embreex")  # without it the core's numpy ray caster takes minutes
     from material_structures.benchmarks.teeth import recovery_errors
-    from material_structures.render.scenes_teeth import fit_demo
+    from material_structures.showcase.scenes_teeth import fit_demo
 
     truth, start, best, log = fit_demo(str(tmp_path), iterations=30)
     assert min(e["loss"] for e in log) < 0.9 * log[0]["loss"]

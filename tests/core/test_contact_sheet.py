@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from material_structures.render.contact_sheet import TITLE_SIZE, contact_sheet
+from material_structures.showcase.contact_sheet import TITLE_SIZE, contact_sheet
 
 
 def _word_gaps(band: np.ndarray) -> list[int]:

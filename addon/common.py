@@ -1,0 +1,322 @@
+"""What the features of the add-on share: the material skeleton, panel and operator bases, mesh and UV
+checks, stroke points, float images.
+
+A feature (``fabric/``, ``scratch/``, ``teeth/``) imports from here, never from another feature.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from mathutils import Vector
+from mathutils.bvhtree import BVHTree
+from mathutils.geometry import barycentric_transform
+
+from ..render import ensure_node_tree
+
+CATEGORY = "Material Structures"  # the 3D viewport sidebar tab
+
+
+# -- panels -------------------------------------------------------------------------------------------
+class SidebarPanel:
+    """Base of the panels in the 3D viewport's sidebar tab "Material Structures" (mix in before
+    ``bpy.types.Panel``)."""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = CATEGORY
+
+
+class MaterialPanel:
+    """Base of a Material Properties panel shown for the materials a feature made (``marker``: the ID
+    property it sets on them)."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "material"
+    marker = ""
+
+    @classmethod
+    def poll(cls, context):
+        mat = getattr(context, "material", None)
+        return mat is not None and bool(mat.get(cls.marker))
+
+
+def draw_group_inputs(layout, node, controls, linked: str = "linked") -> None:
+    """One row per ``(socket name, label)`` of a group node: its value, or ``linked`` when a link drives it."""
+    col = layout.column()
+    for name, label in controls:
+        sock = node.inputs[name]
+        if sock.is_linked:
+            col.label(text=f"{label}: {linked}")
+        else:
+            col.prop(sock, "default_value", text=label)
+
+
+# -- materials ----------------------------------------------------------------------------------------
+def group_material(name: str, group, marker: str, marker_value=1, label: str | None = None,
+                   surface: str | None = "Shader", volume: str | None = None):
+    """The skeleton of every material the add-on makes: one node of ``group`` (named and labelled
+    ``label``) feeding a material output (its ``surface`` and ``volume`` outputs), the material marked
+    ``mat[marker] = marker_value`` and its emission not sampled as a light (the shaders return the
+    lamps' exact terms through ``emission()``). Returns ``(material, group node, output node)``."""
+    mat = bpy.data.materials.new(name)
+    tree = ensure_node_tree(mat)
+    mat[marker] = marker_value
+    mat.cycles.emission_sampling = "NONE"
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    gnode = tree.nodes.new("ShaderNodeGroup")
+    gnode.node_tree = group
+    gnode.name = gnode.label = label or group.name
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (400, 100)
+    if surface is not None:
+        tree.links.new(gnode.outputs[surface], out.inputs["Surface"])
+    if volume is not None:
+        tree.links.new(gnode.outputs[volume], out.inputs["Volume"])
+    return mat, gnode, out
+
+
+def add_eevee_fallback(mat, cycles_output, shader, location=(400, -350), name: str | None = None):
+    """Make ``cycles_output`` Cycles-only (and keep it active) and give EEVEE / Material Preview an output
+    of its own fed by ``shader`` (the OSL shaders are Cycles-only). Returns the EEVEE output node."""
+    tree = mat.node_tree
+    cycles_output.target = "CYCLES"
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.target = "EEVEE"
+    if name:
+        out.name = out.label = name
+    tree.links.new(shader, out.inputs["Surface"])
+    out.location = location
+    cycles_output.is_active_output = True
+    return out
+
+
+def group_node(mat, marker: str):
+    """The node of ``mat`` whose node group carries the ID property ``marker`` (None if it has none)."""
+    if mat is None or mat.node_tree is None:
+        return None
+    return next((n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree is not None
+                 and n.node_tree.get(marker)), None)
+
+
+def assign_material(obj, mat) -> None:
+    """Put ``mat`` into the object's active material slot (a new slot when it has none)."""
+    if obj.material_slots:
+        obj.material_slots[obj.active_material_index].material = mat
+    else:
+        obj.data.materials.append(mat)
+
+
+class AddGroupNode:
+    """Base of the node editor operators that add one of the add-on's node groups to the edited material
+    (mix in before ``bpy.types.Operator``). Subclasses give :meth:`group` and ``marker``."""
+
+    bl_options = {"REGISTER", "UNDO"}
+    marker = ""  # ID property set on the edited material: its panel shows
+    marker_value = 1
+
+    @classmethod
+    def poll(cls, context):
+        space = context.space_data
+        return space is not None and space.type == "NODE_EDITOR" and space.edit_tree is not None
+
+    def group(self, context):
+        raise NotImplementedError
+
+    def execute(self, context):
+        tree = context.space_data.edit_tree
+        group = self.group(context)
+        for node in tree.nodes:
+            node.select = False
+        node = tree.nodes.new("ShaderNodeGroup")
+        node.node_tree = group
+        node.label = self.bl_label
+        node.select = True
+        tree.nodes.active = node
+        if context.space_data.id is not None and hasattr(context.space_data.id, "keys"):
+            context.space_data.id[self.marker] = self.marker_value
+        return {"FINISHED"}
+
+
+class FileBrowser:
+    """Base of the operators that pick a file or folder (their path property): INVOKE opens the file browser,
+    EXEC does the work (scripts and tests call EXEC with the path)."""
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+
+class SyncLamps:
+    """Base of a feature's "Sync Lamps" operator: copy the scene's lamps into its shaders now (normally the
+    handlers do). Subclasses give ``sync`` (scene -> number of lamps, a staticmethod) and ``evaluated_by``."""
+
+    bl_options = {"REGISTER", "UNDO"}
+    evaluated_by = ""
+
+    def execute(self, context):
+        n = self.sync(context.scene)
+        self.report({"INFO"}, f"{n} lamp(s) evaluated {self.evaluated_by}")
+        return {"FINISHED"}
+
+
+# -- float images ---------------------------------------------------------------------------------------
+def array_to_image(array: np.ndarray, name: str, pack: bool = True, replace: bool = True):
+    """A float, Non-Color, channel-packed image holding ``array`` (H, W, C<=4), row 0 = top.
+
+    ``replace``: overwrite the image called ``name`` if there is one; else always a new image (Blender
+    makes its name unique), so no other material's image changes."""
+    a = np.asarray(array, dtype=np.float32)
+    if a.ndim != 3 or not 1 <= a.shape[2] <= 4:
+        raise ValueError(f"{name}: expected an (H, W, C<=4) map, got shape {a.shape}")
+    h, w, c = a.shape
+    rgba = np.zeros((h, w, 4), dtype=np.float32)
+    rgba[..., 3] = 1.0
+    rgba[..., :c] = a
+    image = bpy.data.images.get(name) if replace else None
+    if image is None or tuple(image.size) != (w, h) or not image.is_float:
+        if image is not None:
+            bpy.data.images.remove(image)
+        image = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.alpha_mode = "CHANNEL_PACKED"
+    image.pixels.foreach_set(rgba[::-1].ravel())
+    image.update()
+    if pack:
+        image.pack()
+    return image
+
+
+def image_to_array(image, channels: int) -> np.ndarray:
+    """Inverse of :func:`array_to_image`: (H, W, channels) float32, row 0 = top."""
+    w, h = image.size
+    buf = np.empty(w * h * 4, dtype=np.float32)
+    image.pixels.foreach_get(buf)
+    return buf.reshape(h, w, 4)[::-1, :, :channels].copy()
+
+
+# -- meshes, UVs and strokes ------------------------------------------------------------------------------
+def require_uv_mesh(op, obj) -> bool:
+    """Whether ``obj`` is a mesh with a UV map (the materials' maps and frames need one); else the
+    operator ``op`` reports why not."""
+    if obj is None or obj.type != "MESH":
+        op.report({"ERROR"}, "Select a mesh object")
+        return False
+    if not obj.data.uv_layers:
+        op.report({"ERROR"}, f"'{obj.name}' has no UV map: the material's maps and frame need one (UV > Unwrap)")
+        return False
+    return True
+
+
+class MeshUVLookup:
+    """World-space BVH over an object's (evaluated) loop triangles with their UVs: from points on the mesh
+    (ray hits, recorded 3D strokes) to UV coordinates."""
+
+    def __init__(self, obj, depsgraph=None):
+        if obj.type != "MESH":
+            raise ValueError(f"'{obj.name}' is not a mesh")
+        source = obj.evaluated_get(depsgraph) if depsgraph is not None else obj
+        mesh = source.to_mesh()
+        try:
+            if not mesh.uv_layers:
+                raise ValueError(f"'{obj.name}' has no UV map")
+            uv_layer = mesh.uv_layers.active or mesh.uv_layers[0]
+            mesh.calc_loop_triangles()
+            mw = obj.matrix_world
+            self.verts = [mw @ v.co for v in mesh.vertices]
+            self.tris = [tuple(t.vertices) for t in mesh.loop_triangles]
+            self.tri_uvs = [
+                tuple(Vector((*uv_layer.data[li].uv, 0.0)) for li in t.loops) for t in mesh.loop_triangles
+            ]
+        finally:
+            source.to_mesh_clear()
+        if not self.tris:
+            raise ValueError(f"'{obj.name}' has no faces")
+        self.bvh = BVHTree.FromPolygons(self.verts, self.tris)
+
+    def _uv(self, location, index):
+        a, b, c = (self.verts[i] for i in self.tris[index])
+        ua, ub, uc = self.tri_uvs[index]
+        uv = barycentric_transform(location, a, b, c, ua, ub, uc)
+        return (uv.x, uv.y)
+
+    def ray_cast(self, origin, direction):
+        """UV of the first hit along the ray, or None."""
+        location, _normal, index, _dist = self.bvh.ray_cast(Vector(origin), Vector(direction))
+        return None if index is None else self._uv(location, index)
+
+    def under_mouse(self, context, event):
+        """UV under the mouse cursor of a 3D viewport event, or None."""
+        from bpy_extras import view3d_utils
+
+        region, rv3d = context.region, context.region_data
+        coord = (event.mouse_region_x, event.mouse_region_y)
+        origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)
+        direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, coord)
+        return self.ray_cast(origin, direction)
+
+    def nearest(self, point, max_distance: float = 1e30):
+        """UV of the closest surface point to ``point``, or None."""
+        location, _normal, index, _dist = self.bvh.find_nearest(Vector(point), max_distance)
+        return None if index is None else self._uv(location, index)
+
+    def diagonal(self) -> float:
+        """Length of the diagonal of the mesh's world-space bounding box."""
+        lo = [min(v[i] for v in self.verts) for i in range(3)]
+        hi = [max(v[i] for v in self.verts) for i in range(3)]
+        return sum((b - a) ** 2 for a, b in zip(lo, hi, strict=True)) ** 0.5
+
+
+class MS_StrokePoint(bpy.types.PropertyGroup):
+    """One point of a recorded stroke: what the stroke tools' EXEC path replays (scripts, tests)."""
+
+    location: bpy.props.FloatVectorProperty(name="Location", size=3, description="World-space point (3D strokes)")
+    uv: bpy.props.FloatVectorProperty(name="UV", size=2, description="UV point (UV strokes)")
+    pressure: bpy.props.FloatProperty(name="Pressure", default=1.0, min=0.0, max=1.0)
+
+
+def stroke_property():
+    """The ``stroke`` property of a stroke tool: the points its EXEC path replays."""
+    return bpy.props.CollectionProperty(type=MS_StrokePoint, options={"SKIP_SAVE"})
+
+
+def stroke_space_property():
+    """The ``stroke_space`` property of a stroke tool: whether the points are UVs or 3D points."""
+    return bpy.props.EnumProperty(
+        name="Stroke Space",
+        items=[("UV", "UV", "Stroke points are UV coordinates"), ("WORLD", "World", "3D points on the surface")],
+        default="UV",
+        options={"SKIP_SAVE"},
+    )
+
+
+def stroke_uvs(stroke, space: str, obj, depsgraph, tolerance: float | None = None) -> list:
+    """``[(uv, pressure), ...]`` of a recorded stroke on ``obj``: UV points as they are, 3D points mapped to
+    the nearest surface point's UV (``tolerance``: points farther from the surface than this fraction of the
+    object's size are dropped). Raises ValueError for fewer than 2 points on the mesh."""
+    if len(stroke) < 2:
+        raise ValueError("a stroke needs at least 2 points")
+    if space == "UV":
+        return [((p.uv[0], p.uv[1]), p.pressure) for p in stroke]
+    lookup = MeshUVLookup(obj, depsgraph)
+    reach = 1e30 if tolerance is None else max(1e-6, tolerance * lookup.diagonal())
+    out = [(uv, p.pressure) for p in stroke if (uv := lookup.nearest(p.location, reach)) is not None]
+    if len(out) < 2:
+        raise ValueError(f"the stroke does not touch the mesh of '{obj.name}'")
+    return out
+
+
+def end_modal_progress(context, timer) -> None:
+    """The end of a modal operator that showed progress: its timer removed, the progress bar and the status
+    bar text cleared."""
+    wm = context.window_manager
+    if timer is not None:
+        wm.event_timer_remove(timer)
+    wm.progress_end()
+    if context.workspace is not None:
+        context.workspace.status_text_set(None)
+
+
+CLASSES: list[type] = [MS_StrokePoint]
