@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -40,6 +41,93 @@ def test_core_sources_have_no_bpy_import_lines():
                         if s.startswith(("import bpy", "from bpy")):
                             offenders.append(os.path.join(dirpath, f))
     assert offenders == []
+
+
+# The layers and what each may import (by package of ``material_structures``). ``core`` is the model; ``render`` is
+# the headless harness, which knows no feature; ``addon`` is the Blender layer of the features; ``showcase``
+# builds the sample library on both. Lazy imports (inside functions) count the same as top-level ones.
+FORBIDDEN = {
+    "core": {"addon", "render", "showcase", "cli", "scaleout", "benchmarks"},
+    "render": {"addon", "showcase", "cli", "scaleout", "benchmarks"},
+    "addon": {"showcase", "cli", "scaleout", "benchmarks"},
+}
+PACKAGE = "material_structures"
+
+
+def _module_name(path: str, root: str) -> str:
+    rel = os.path.relpath(path, root)[: -len(".py")].split(os.sep)
+    if rel[-1] == "__init__":
+        rel = rel[:-1]
+    return ".".join([PACKAGE, *rel])
+
+
+def imported_modules(path: str, root: str = ROOT) -> set[str]:
+    """Absolute names of every module ``path`` (a file of the package rooted at ``root``) imports, anywhere
+    in it (function bodies included); ``from X import Y`` counts as X and as X.Y (Y may be a submodule)."""
+    with open(path, encoding="utf-8") as f:
+        tree = ast.parse(f.read(), path)
+    name = _module_name(path, root)
+    package = name if path.endswith("__init__.py") else name.rpartition(".")[0]
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            out.add(module)
+            out.update(f"{module}.{alias.name}" for alias in node.names)
+    return out
+
+
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == PACKAGE else None
+
+
+def _python_files(folder: str):
+    for dirpath, dirnames, files in os.walk(os.path.join(ROOT, folder)):
+        dirnames[:] = [d for d in dirnames if d != "__pycache__"]
+        yield from (os.path.join(dirpath, f) for f in sorted(files) if f.endswith(".py"))
+
+
+def test_imported_modules_resolves_relative_and_lazy_imports(tmp_path):
+    pkg = tmp_path / "render"
+    pkg.mkdir()
+    (pkg / "mod.py").write_text(
+        "from .. import addon\nfrom ..showcase.library import x\nimport numpy\n"
+        "def f():\n    from ...outside import y\n    from .scene import z\n"
+    )
+    found = imported_modules(str(pkg / "mod.py"), str(tmp_path))
+    assert {"material_structures.addon", "material_structures.showcase.library", "numpy",
+            "material_structures.render.scene"} <= found
+
+
+@pytest.mark.parametrize("layer", sorted(FORBIDDEN))
+def test_import_direction(layer):
+    """render (the harness) never imports addon or showcase, addon never imports showcase, core imports
+    none of them: no cycle between the layers, and none hidden in a function body."""
+    offenders = []
+    files = list(_python_files(layer))
+    assert files
+    for path in files:
+        for module in sorted(imported_modules(path)):
+            if _layer(module) in FORBIDDEN[layer]:
+                offenders.append(f"{os.path.relpath(path, ROOT)} imports {module}")
+    assert offenders == []
+
+
+def test_showcase_is_a_package_apart_from_the_harness():
+    """The library's scenes, stage, contact sheet and asset library live in ``showcase/``; ``render/`` holds
+    the harness only."""
+    render = {os.path.basename(p) for p in _python_files("render")}
+    assert render == {"__init__.py", "session.py", "osl.py", "scene.py", "output.py"}
+    showcase = {os.path.basename(p) for p in _python_files("showcase")}
+    assert {"library.py", "stage.py", "contact_sheet.py", "asset_library.py", "scenes.py"} <= showcase
 
 
 def test_package_import_does_not_import_bpy():
