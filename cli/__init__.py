@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 
 SUBCOMMANDS = ("render", "build", "bench", "demo", "library", "fabric", "scratch", "teeth")
@@ -40,6 +41,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _raise_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def _interrupt_on_sigterm():
+    """SIGTERM (a job scheduler, ``kill``) stops a command as Ctrl-C does: its cleanup runs (worker pools
+    shut down, temporary files removed, checkpoints kept). Returns the previous handler (None off the
+    main thread, where handlers cannot be set)."""
+    try:
+        return signal.signal(signal.SIGTERM, _raise_interrupt)
+    except ValueError:
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     if argv is None:
         argv = sys.argv[1:]
@@ -50,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) or a bad command line (2, said on stderr)
         return int(exc.code or 0)
+    previous = _interrupt_on_sigterm()
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
@@ -64,3 +80,6 @@ def main(argv: list[str] | None = None) -> int:
             f"{exc.filename}: {exc.strerror or exc}"
         print(f"error: {text}", file=sys.stderr)
         return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)

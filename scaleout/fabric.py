@@ -95,9 +95,14 @@ def _run_tiles(client, todo, cache, init_args, progress, total) -> None:
         from tqdm import tqdm
 
         bar = tqdm(total=total, initial=total - len(todo), desc="fit tiles (dask)", unit="tile", file=sys.stderr)
-    for future in as_completed(futures):
-        future.result()  # raises the task's error, if any
+    try:
+        for future in as_completed(futures):
+            future.result()  # raises the task's error, if any
+            if bar:
+                bar.update(1)
+    except BaseException:  # Ctrl-C, SIGTERM or a failed tile: the finished tiles stay checkpointed, the others
+        client.cancel(futures)  # are dropped from the cluster instead of running on
+        raise
+    finally:
         if bar:
-            bar.update(1)
-    if bar:
-        bar.close()
+            bar.close()

@@ -172,10 +172,14 @@ def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int =
             with fork_warning_silenced(), ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx,
                                                               initializer=_init_worker, initargs=init_args) as pool:
                 futures = [pool.submit(_fit_one, t, cache) for t in todo]
-                for fut in as_completed(futures):
-                    iters.append(fut.result()[2])
-                    if bar:
-                        bar.update(1)
+                try:
+                    for fut in as_completed(futures):
+                        iters.append(fut.result()[2])
+                        if bar:
+                            bar.update(1)
+                except BaseException:  # Ctrl-C, SIGTERM or a failed tile: drop the queued tiles, let the
+                    pool.shutdown(wait=True, cancel_futures=True)  # running ones finish, leave no worker
+                    raise
     if bar:
         bar.close()
     t_fit = time.perf_counter()
