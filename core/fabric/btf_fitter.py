@@ -121,9 +121,14 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         n, h, w, _ = meta["shape"]
         # texel-major (H, W, N, 3): a tile's samples are contiguous, so a worker maps only its tile
         mm = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(h, w, n, 3))
-        for k0, vals in iter_btf_blocks(btf_path, progress=progress):
-            mm[:, :, k0:k0 + vals.shape[0]] = vals.transpose(1, 2, 0, 3)
-        mm.flush()
+        try:
+            for k0, vals in iter_btf_blocks(btf_path, progress=progress):
+                mm[:, :, k0:k0 + vals.shape[0]] = vals.transpose(1, 2, 0, 3)
+            mm.flush()
+        except BaseException:  # an unreadable image, Ctrl-C: no BTF-sized leftover
+            del mm
+            shutil.rmtree(cache, ignore_errors=True)
+            raise
         del mm
         os.replace(tmp, values_path)
         np.savez(os.path.join(cache, "ndf_operator.npz"), A=op.A, directions=op.directions,

@@ -105,7 +105,12 @@ def load_params(params_dir: str | os.PathLike) -> FabricMaps:
     if not os.path.isfile(jpath):
         raise FileNotFoundError(f"not a fabric parameter folder (no params.json): {params_dir}")
     with open(jpath) as f:
-        desc = json.load(f)
+        try:
+            desc = json.load(f)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{jpath}: not valid JSON ({exc})") from exc
+    if not isinstance(desc, dict) or not isinstance(desc.get("maps", {}), dict):
+        raise ValueError(f"{jpath}: expected an object with a 'maps' object")
     arrays = {}
     for name, (default_file, c) in MAP_FILES.items():
         entry = desc.get("maps", {}).get(name, {})
@@ -115,4 +120,27 @@ def load_params(params_dir: str | os.PathLike) -> FabricMaps:
             arrays[name] = read_exr(path, channels=chans)
         except ExrError as exc:
             raise ValueError(f"parameter map {name!r}: {exc}") from exc
+    check_maps(arrays, params_dir)
     return make_maps(**arrays)
+
+
+def check_maps(arrays: dict, source: str) -> None:
+    """Refuse maps eq. 3.9 cannot shade: different sizes, NaN / inf, negative albedos, standard deviations
+    that are not > 0 (NaN predictions), quaternions of zero length. One line naming the folder."""
+    shapes = {name: a.shape[:2] for name, a in arrays.items()}
+    if len(set(shapes.values())) > 1:
+        raise ValueError(f"{source}: the maps differ in size: {shapes}")
+    for name, a in arrays.items():
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise ValueError(f"{source}: map {name!r} holds {int(bad.any(axis=-1).sum())} texels that are NaN or "
+                             "infinite")
+    for name in ("kd", "ks"):
+        if (arrays[name] < 0).any():
+            n_neg = int((arrays[name] < 0).any(axis=-1).sum())
+            raise ValueError(f"{source}: map {name!r} has negative albedo in {n_neg} texels")
+    if (arrays["sigma"] <= 0).any():
+        raise ValueError(f"{source}: map 'sigma' must be > 0; {int((arrays['sigma'] <= 0).any(axis=-1).sum())} texels "
+                         "are not")
+    if (np.linalg.norm(arrays["basis"], axis=-1) < 1e-8).any():
+        raise ValueError(f"{source}: map 'basis' has quaternions of zero length")

@@ -102,3 +102,47 @@ def test_sigterm_stops_a_fabric_fit_with_its_workers_and_it_resumes(tmp_path, po
     import json
 
     assert json.loads(r.stdout)["tiles_fitted_this_run"] == 256 - done
+
+
+@pytest.mark.parametrize("damage, said", [
+    ("sigma0", "map 'sigma' must be > 0; 1 texels are not"),
+    ("kd-1", "map 'kd' has negative albedo in 1 texels"),
+    ("ks-nan", "ks.exr: 3 non-finite value(s)"),
+    ("basis0", "map 'basis' has quaternions of zero length"),
+    ("json", "params.json: not valid JSON"),
+])
+def test_parameter_maps_that_cannot_be_shaded_are_refused(tmp_path, capsys, damage, said):
+    import numpy as np
+
+    from material_structures.core.exr_io import read_exr, write_exr
+
+    params = tmp_path / "params"
+    assert main(["fabric", "synth", "--out", str(tmp_path / "btf"), "--width", "3", "--height", "3",
+                 "--gt-out", str(params)]) == 0
+    if damage == "json":
+        (params / "params.json").write_text("{")
+    else:
+        name = {"sigma0": "sigma", "kd-1": "kd", "ks-nan": "ks", "basis0": "basis"}[damage]
+        a = read_exr(str(params / f"{name}.exr"), channels=("R", "G", "B", "A")[:{"kd": 3, "ks": 3, "sigma": 2,
+                                                                                  "basis": 4}[name]])
+        a[1, 2] = {"sigma0": 0.0, "kd-1": -1.0, "ks-nan": np.nan, "basis0": 0.0}[damage]
+        write_exr(str(params / f"{name}.exr"), a)
+    capsys.readouterr()
+    assert main(["fabric", "eval", str(params), "--directions", str(tmp_path / "btf"), "--out",
+                 str(tmp_path / "pred")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
+    assert not (tmp_path / "pred").exists()
+
+
+def test_an_unreadable_btf_image_leaves_no_cache_behind(tmp_path, capsys):
+    btf = tmp_path / "btf"
+    assert main(["fabric", "synth", "--out", str(btf), "--width", "4", "--height", "4", "--lights", "8", "--views",
+                 "8"]) == 0
+    (btf / "0005.exr").write_bytes(b"not an exr")
+    capsys.readouterr()
+    assert main(["fabric", "fit", str(btf), "--out", str(tmp_path / "fit"), "--no-dask", "--workers", "1",
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "0005.exr" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "fit" / ".fit_cache").exists()
