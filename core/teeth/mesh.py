@@ -66,10 +66,21 @@ def load_mesh(path: str | os.PathLike) -> TriMesh:
         raise FileNotFoundError(f"mesh file not found: {path}")
     if not path.lower().endswith((".ply", ".obj")):
         raise ValueError(f"unsupported mesh format (use .ply or .obj): {path}")
-    m = trimesh.load(path, force="mesh", process=False)
+    try:
+        m = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds on a malformed file
+        raise ValueError(f"{path}: not a readable mesh ({type(exc).__name__}: {exc})") from exc
+    v, f = np.asarray(getattr(m, "vertices", np.zeros((0, 3))), dtype=np.float64), np.asarray(
+        getattr(m, "faces", np.zeros((0, 3))))
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+        raise ValueError(f"{path}: no triangles")
+    if not np.isfinite(v).all():
+        raise ValueError(f"{path}: {int((~np.isfinite(v)).any(axis=1).sum())} vertices are NaN or infinite")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"{path}: faces refer to vertices that do not exist")
     uv = getattr(getattr(m, "visual", None), "uv", None)
-    corner_uv = None if uv is None or len(uv) != len(m.vertices) else np.asarray(uv)[np.asarray(m.faces)]
-    return TriMesh(np.asarray(m.vertices), np.asarray(m.faces), corner_uv)
+    corner_uv = None if uv is None or len(uv) != len(v) else np.asarray(uv)[f]
+    return TriMesh(v, f, corner_uv)
 
 
 def save_mesh(mesh: TriMesh, path: str | os.PathLike) -> None:

@@ -197,3 +197,17 @@ def test_resume_from_a_missing_or_broken_checkpoint_is_one_line(capture_dir, tmp
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "checkpoint.json" in err and "not a fit checkpoint" in err and err.count("\n") == 1, err
+
+
+@pytest.mark.parametrize("text, name, said", [
+    ("v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", "nan.obj", "1 vertices are NaN or infinite"),
+    ("v 0 0 0\nv 1 0 0\n", "points.obj", "no triangles"),
+    ("garbage\n", "junk.ply", "not a readable mesh"),
+])
+def test_a_mesh_that_cannot_be_traced_is_refused_naming_the_file(tmp_path, text, name, said):
+    from material_structures.core.teeth.mesh import load_mesh
+
+    (tmp_path / name).write_text(text)
+    with pytest.raises(ValueError, match=said) as info:
+        load_mesh(tmp_path / name)
+    assert name in str(info.value)
