@@ -11,7 +11,10 @@ um (x_um = u * patch_size_um[0], y_um = v * patch_size_um[1]), wrapped into the 
 that frame, any length unit. Radiance is linear in the light's radiance (area lights) or irradiance
 (directional; point lights: intensity / d^2). sigma (coherence radius) defaults to 60 um.
 
-Per point x and per segment m of its grid cell (scalar form, what the shader does):
+Per point x and per segment m of its grid cell, for each periodic image of m (m shifted by whole
+patch sizes, ``scratch_set.image_range``) whose bounding box comes within the cull distance of x
+(normally just m itself; near a patch border also the neighbouring tile's copy) (scalar form, what
+the shader does):
 
 1. geometry: d = p1 - p0, len = |d|, t = d / len, b = (-t_y, t_x); v0 = (p0 - x) . b (= s_b);
    on_seg = 0 <= (x - p0) . t < len; footprint ellipse {x + J u, |u| <= 1}, A_P = pi |det J|,
@@ -78,7 +81,7 @@ from .scratch_footprint import (
     scratch_weighted_length,
 )
 from .scratch_model_terms import coherence_area, scratch_depth_term_sq
-from .scratch_set import REACH_SIGMAS, ScratchSet
+from .scratch_set import REACH_SIGMAS, ScratchSet, periodic_images
 
 
 @dataclass
@@ -417,7 +420,11 @@ def _walk_block(ctx: dict, a0: int, b0: int):
         # (3.5 sigma for footprints below 2 A_C, where rho_C's wider Gaussian matters)
         seg = cm_seg[pos]
         xp = xw[pp]
-        keep = _point_segment_distance_fast(xp, seg) <= _take(ctx["reach"], pp)
+        reach = np.broadcast_to(_take(ctx["reach"], pp), pp.shape)
+        # periodic images of each listed segment within reach of the point (the patch tiles)
+        row, seg = periodic_images(seg, s.patch_size_um, xp - reach[:, None], xp + reach[:, None])
+        pp, pos, xp, reach = pp[row], pos[row], xp[row], reach[row]
+        keep = _point_segment_distance_fast(xp, seg) <= reach
         if not np.any(keep):
             continue
         pp, pos, seg, xp = pp[keep], pos[keep], seg[keep], xp[keep]

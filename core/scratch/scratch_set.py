@@ -12,6 +12,14 @@ long as its footprint's semi-major axis plus 3.5 sigma stays below the query rad
 shrinks larger footprints to that size). Lists are stored CSR-style: ``cell_segments`` holds segment
 indices cell after cell (row-major, iy * nx + ix), ``grid_offset``/``grid_count`` (ny, nx) give each
 cell's slice.
+
+The patch tiles the plane, so the index is periodic: a cell also lists every segment one of whose
+periodic images (the segment shifted by (kx Px, ky Py), integers kx, ky) comes within the query
+radius of it, and the lookup (``scratch_radiance`` and the OSL shader) shades, per listed segment,
+each image that comes within reach of the point (:func:`image_range`). A footprint near a patch
+border therefore sees the scratches of the neighbouring tile: no seam. The tables keep the segment
+index only (the file format is unchanged); sets indexed before this (no images listed) still load
+and shade, with the old seam.
 """
 
 from __future__ import annotations
@@ -139,6 +147,37 @@ def validate_scratch_set(s: ScratchSet) -> None:
         raise ValueError(f"too many entries for exact float32 tables (limit {MAX_TABLE_INDEX})")
 
 
+def image_range(
+    lo: ArrayLike, hi: ArrayLike, a: ArrayLike, b: ArrayLike, period: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Integers k0, k1 such that [lo + k P, hi + k P] meets [a, b] exactly for k0 <= k <= k1 (P = period;
+    k1 < k0: none). Elementwise; the periodic-image range of a segment's extent along one axis."""
+    lo, hi, a, b = (np.asarray(v, dtype=np.float64) for v in (lo, hi, a, b))
+    return np.ceil((a - hi) / period).astype(np.int64), np.floor((b - lo) / period).astype(np.int64)
+
+
+def periodic_images(seg: np.ndarray, ps: np.ndarray, a: np.ndarray, b: np.ndarray):
+    """Periodic images of segments (P, 4) whose bounding boxes meet the boxes [a, b] ((P, 2) or (2,)
+    corners): the image rule of the index and of the lookup (the OSL shader ports it).
+
+    Returns (row (Q,) index into ``seg``, shifted segments (Q, 4)). Rows with exactly one image, the
+    segment itself, are the common case and cost one pass."""
+    lo = np.minimum(seg[:, :2], seg[:, 2:])
+    hi = np.maximum(seg[:, :2], seg[:, 2:])
+    kx0, kx1 = image_range(lo[:, 0], hi[:, 0], a[..., 0], b[..., 0], ps[0])
+    ky0, ky1 = image_range(lo[:, 1], hi[:, 1], a[..., 1], b[..., 1], ps[1])
+    wx = np.maximum(kx1 - kx0 + 1, 0)
+    n = wx * np.maximum(ky1 - ky0 + 1, 0)
+    if np.all(n == 1) and not np.any(kx0) and not np.any(ky0):
+        return np.arange(seg.shape[0]), seg
+    row = np.repeat(np.arange(seg.shape[0]), n)
+    local = np.arange(row.size) - np.repeat(np.cumsum(n) - n, n)
+    kx = kx0[row] + local % np.maximum(wx[row], 1)
+    ky = ky0[row] + local // np.maximum(wx[row], 1)
+    shift = np.stack([kx * ps[0], ky * ps[1]], -1)
+    return row, seg[row] + np.concatenate([shift, shift], 1)
+
+
 def build_grid_index(
     segments: ArrayLike,
     patch_size_um: ArrayLike,
@@ -147,21 +186,28 @@ def build_grid_index(
     *,
     progress: ProgressFn | None = None,
     chunk_candidates: int = 250_000,
+    periodic: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """CSR grid index: (grid_offset (ny, nx), grid_count (ny, nx), cell_segments (K,)).
 
-    A segment is listed in a cell when it comes within ``query_radius_um`` of the cell's square
-    (exact segment-square distance). Segments are tested in chunks of about ``chunk_candidates``
-    (segment, cell) pairs (bounded memory; the result does not depend on the chunking), reporting the
-    fraction of pairs tested to ``progress``. An index that would exceed the float32 tables' limit
-    (``MAX_TABLE_INDEX`` entries) is refused as soon as it does, not after the whole grid is built.
+    A segment is listed in a cell when it, or with ``periodic`` (default) one of its periodic images
+    (module docstring), comes within ``query_radius_um`` of the cell's square (exact segment-square
+    distance); each segment is listed once per cell, cells' lists in segment order. Segments are
+    tested in chunks of about ``chunk_candidates`` (segment, cell) pairs (bounded memory; the result
+    does not depend on the chunking), reporting the fraction of pairs tested to ``progress``. An
+    index that would exceed the float32 tables' limit (``MAX_TABLE_INDEX`` entries) is refused as
+    soon as it does, not after the whole grid is built.
     """
-    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    seg0 = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     ps = np.asarray(patch_size_um, dtype=np.float64)
     c = float(cell_size_um)
     r = float(query_radius_um)
     nx = int(np.ceil(ps[0] / c - 1e-9))
     ny = int(np.ceil(ps[1] / c - 1e-9))
+    if periodic and seg0.shape[0]:
+        src, seg = periodic_images(seg0, ps, np.full(2, -r), np.array([nx * c, ny * c]) + r)
+    else:
+        src, seg = np.arange(seg0.shape[0]), seg0
     lo = np.minimum(seg[:, :2], seg[:, 2:]) - r
     hi = np.maximum(seg[:, :2], seg[:, 2:]) + r
     ix0 = np.clip(np.floor(lo[:, 0] / c).astype(np.int64), 0, nx - 1)
@@ -188,7 +234,7 @@ def build_grid_index(
         ix = ix0[rep] + local % wx[rep]
         iy = iy0[rep] + local // wx[rep]
         keep = segment_rect_distance(seg[rep], ix * c, iy * c, c) <= r
-        reps.append(rep[keep])
+        reps.append(src[rep[keep]])
         cells.append((iy * nx + ix)[keep])
         kept += int(keep.sum())
         if kept >= MAX_TABLE_INDEX:
@@ -201,6 +247,10 @@ def build_grid_index(
             progress(float(ends[b - 1]) / total)
     rep = np.concatenate(reps) if reps else np.zeros(0, np.int64)
     cell = np.concatenate(cells) if cells else np.zeros(0, np.int64)
+    if periodic and rep.size:  # images: one entry per (cell, segment), in segment order
+        key = np.sort(cell * max(seg0.shape[0], 1) + rep)
+        key = key[np.concatenate([[True], key[1:] != key[:-1]])]
+        cell, rep = key // max(seg0.shape[0], 1), key % max(seg0.shape[0], 1)
     order = np.argsort(cell, kind="stable")
     cell_segments = rep[order]
     count = np.bincount(cell, minlength=nx * ny)

@@ -17,6 +17,7 @@ from material_structures.core.scratch import (
 from material_structures.core.scratch.cie_colour import spectral_to_srgb_matrix
 from material_structures.core.scratch.scratch_footprint import scratch_footprint_phase_sq, scratch_weighted_length
 from material_structures.core.scratch.scratch_model_terms import scratch_depth_term_sq
+from material_structures.core.scratch.scratch_set import periodic_images
 
 SIG = 60.0
 
@@ -44,12 +45,17 @@ def _inputs(n, seed, radius=(120.0, 240.0)):
     ],
 )
 def test_grid_walk_matches_brute_force_all_pairs(wear, light):
+    """Brute force over every segment and every periodic image that can reach the patch (the patch
+    tiles: points near a border see the neighbouring tile's scratches)."""
     pts, fp, wo = _inputs(150, 1)
     got = scratch_radiance(pts, fp, wo, light, wear, "rgb")
-    m = wear.n_segments
+    q = wear.query_radius_um
+    src, img = periodic_images(wear.segments, wear.patch_size_um, np.full(2, -q), wear.patch_size_um + q)
+    assert img.shape[0] > wear.n_segments  # some segments near the borders have images
+    m = img.shape[0]
     pp = np.repeat(np.arange(len(pts)), m)
     ps = np.tile(np.arange(m), len(pts))
-    ref = scratch_radiance_pairs(pts, fp, wo, light, wear.segments, wear.width_um, wear.depth_um, pp, ps, "rgb")
+    ref = scratch_radiance_pairs(pts, fp, wo, light, img, wear.width_um[src], wear.depth_um[src], pp, ps, "rgb")
     assert np.count_nonzero(ref.spectral.sum(1)) > 10
     assert np.allclose(got.spectral, ref.spectral, rtol=1e-9, atol=1e-12 * ref.spectral.max())
     assert np.allclose(got.rgb, ref.rgb, rtol=1e-9, atol=1e-12 * np.abs(ref.rgb).max())

@@ -24,8 +24,10 @@ from material_structures.core.scratch.scratch_set import point_segment_distance
 @pytest.mark.parametrize(
     "make",
     [
+        lambda: uniform_wear(300, (8000.0, 6000.0), seed=1, boundary="clip"),
         lambda: uniform_wear(300, (8000.0, 6000.0), seed=1),
         lambda: circular_polish(200, (8000.0, 6000.0), seed=2),
+        lambda: circular_polish(200, (8000.0, 6000.0), seed=2, centres=5, boundary="wrap"),
         lambda: hairline_brush(100, (8000.0, 6000.0), angle_rad=0.3, seed=3),
     ],
 )
@@ -34,8 +36,12 @@ def test_generators_respect_patch_and_thesis_ranges(make):
     s.validate()
     seg = s.segments
     assert s.n_segments > 100
-    assert np.all(seg[:, [0, 2]] >= -1e-9) and np.all(seg[:, [0, 2]] <= 8000 + 1e-9)
-    assert np.all(seg[:, [1, 3]] >= -1e-9) and np.all(seg[:, [1, 3]] <= 6000 + 1e-9)
+    mid = 0.5 * (seg[:, :2] + seg[:, 2:])
+    assert np.all(mid >= 0) and np.all(mid < (8000.0, 6000.0))
+    # clipped: inside the patch; wrapped: midpoints inside, ends at most half a segment (250 um) out
+    slack = 125.0 + 1e-9 if np.any(seg < -1e-9) else 1e-9
+    assert np.all(seg[:, [0, 2]] >= -slack) and np.all(seg[:, [0, 2]] <= 8000 + slack)
+    assert np.all(seg[:, [1, 3]] >= -slack) and np.all(seg[:, [1, 3]] <= 6000 + slack)
     for a in (s.width_um, s.depth_um):
         assert a.min() >= 0.8 and a.max() <= 6.0
     # width and depth are constant along a scratch
