@@ -128,7 +128,7 @@ def test_energy_scratch_term_never_exceeds_the_removed_base():
         e_s = _hemisphere_scratch_energy(seg, W, D, lam, J, wo)
         kw = dict(wavelengths_nm=[lam * 1000], sigma_um=SIG)
         args = (np.zeros((1, 2)), J[None], wo[None], DirectionalLight([0, 0, 1.0], 1.0), seg[None], [W], [D], [0], [0])
-        cons = scratch_radiance_pairs(*args, energy="conserving", **kw).rho_p[0, 0]
+        cons = scratch_radiance_pairs(*args, energy="conserving-spectral", **kw).rho_p[0, 0]
         thes = scratch_radiance_pairs(*args, energy="thesis", **kw).rho_p[0]
         assert e_s <= cons * (1 + 1e-6) + 1e-15  # energy-conserving alpha: never more out than removed
         ratios_thesis.append((e_s / thes, scratch_depth_term_sq(D, lam) / 2))
