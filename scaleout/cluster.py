@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import os
 
+SCHEDULER_TIMEOUT_S = 10  # an address that does not answer: a mistyped host or port, or a scheduler not started
+
 
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, n_workers: int | None = None, threads_per_worker: int = 1):
@@ -17,7 +19,11 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, thre
     from distributed import Client, LocalCluster
 
     if scheduler:
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+        except OSError as exc:
+            raise OSError(f"no Dask scheduler answers at {scheduler} within {SCHEDULER_TIMEOUT_S} s: start one "
+                          "(dask scheduler) or leave out --scheduler to use this machine's cores") from exc
         try:
             yield client
         finally:
