@@ -246,3 +246,13 @@ float ms_sinc(float y)  // numpy's sinc: sin(pi y) / (pi y)
     float a = MS_PI * y;
     return abs(a) < 1e-6 ? 1.0 : sin(a) / a;
 }
+
+// |eta_P|^2 of one segment: footprint rule "chords" blended towards the point sample by alpha_P
+// (scratch_footprint.scratch_footprint_phase_sq with scratch_weighted_length)
+float ms_phase_sq(float A, float B, float C, float ed, float qe, float ee, float len, float v0, float V,
+                  float sigma, float alpha, float area, int on_seg)
+{
+    float lw = ms_weighted_length(A, B, C, ed, qe, ee, len, v0, V, sigma);
+    float small = on_seg ? 2.0 * MS_PI * sigma * sigma * exp(-(v0 * v0) / (sigma * sigma)) : 0.0;
+    return alpha * 2.0 * sigma * sigma * sigma * MS_SQRT_PI * lw * MS_PI / area + (1.0 - alpha) * small;
+}
