@@ -299,7 +299,7 @@ def run_render(args: argparse.Namespace) -> int:
 def run_sensitivity(args: argparse.Namespace) -> int:
     from ..core.teeth.capture import Capture
     from ..core.teeth.scene import load_scene
-    from ..core.teeth.sensitivity import capture_sensitivity, default_directions
+    from ..core.teeth.sensitivity import capture_sensitivity, cramer_rao_std, default_directions
 
     cap = Capture.load(args.capture)
     scene = load_scene(args.scene or os.path.join(args.capture, "scene.json"))
@@ -307,14 +307,19 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     out = capture_sensitivity(scene, cap, directions, passes=args.passes, block=args.block,
                               noise_variance=args.noise_variance, capture_spp=args.capture_spp,
                               max_depth=args.max_depth)
-    rows = sorted(zip(names, out["chi2"].tolist(), strict=True), key=lambda r: -r[1])
+    bound = cramer_rao_std(out["information"])
+    rows = sorted(zip(names, out["chi2"].tolist(), bound.tolist(), strict=True), key=lambda r: -r[1])
     print(f"chi2 of each change against the capture noise (variance {out['noise_variance']:.3g} per value, "
-          f"{out['tiles']} tiles of {args.block} x {args.block} px; sigma_s/sigma_a: +10 %, c: +0.05)")
-    for name, c in rows:
-        print(f"  {name:32s} {c:12.1f}")
+          f"{out['tiles']} tiles of {args.block} x {args.block} px; sigma_s/sigma_a: +10 %, c: +0.05), and the "
+          "smallest standard deviation of its size that any fit can reach with every parameter free, in units "
+          "of the change (inf: other changes imitate it, or too few passes to tell)")
+    print(f"  {'':32s} {'chi2':>12s} {'best std':>10s}")
+    for name, c, b in rows:
+        print(f"  {name:32s} {c:12.1f} {b:10.3g}")
     if args.json:
         from ..core.json_io import save_json
 
-        save_json(args.json, {"chi2": dict(rows), "noise_variance": out["noise_variance"], "tiles": out["tiles"],
+        save_json(args.json, {"chi2": {r[0]: r[1] for r in rows}, "best_std": {r[0]: r[2] for r in rows},
+                              "noise_variance": out["noise_variance"], "tiles": out["tiles"],
                               "block": args.block, "passes": args.passes})
     return 0

@@ -78,7 +78,9 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     tile_of, n_tiles = traced_tiles(pixels, h, w, block)
     tile_pixels = np.bincount(tile_of, minlength=n_tiles).astype(np.float64)
     cs = CompiledScene(scene, layout=layout)
-    s1 = s2 = None
+    wt = 1.0 / tile_pixels
+    s1 = None
+    s2 = np.zeros((k, k))  # sum over passes of the pass's own information, the bias of s1 s1^T
     img_sum = img_sq = 0.0
     for i in range(passes):
         st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + i)
@@ -91,13 +93,29 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
         t = np.zeros((n_tiles,) + a.shape[1:])
         np.add.at(t, tile_of, a)
         s1 = t if s1 is None else s1 + t
-        s2 = t * t if s2 is None else s2 + t * t
+        s2 += np.einsum("tlck,tlcj,t->kj", t, t, wt)
         vals = traced_values(r.images, pixels)
         img_sum = img_sum + vals
         img_sq = img_sq + vals * vals
     if noise_variance is None:
         var1 = np.mean((img_sq - img_sum * img_sum / passes) / (passes - 1))  # pooled 1-spp variance
         noise_variance = float(var1 / capture_spp)
-    energy = (s1 * s1 - s2) / (passes * (passes - 1))  # unbiased (E[J] d)^2 per tile, light, channel
-    chi2 = np.einsum("tlck,t->k", energy, 1.0 / tile_pixels) / max(noise_variance, 1e-300)
-    return {"chi2": chi2, "noise_variance": float(noise_variance), "tiles": int(n_tiles)}
+    # unbiased sum over tiles, lights, channels of (E[J] d_k)(E[J] d_j) / tile pixels
+    info = (np.einsum("tlck,tlcj,t->kj", s1, s1, wt) - s2) / (passes * (passes - 1)) / max(noise_variance, 1e-300)
+    info = 0.5 * (info + info.T)
+    return {"chi2": np.diag(info).copy(), "information": info, "noise_variance": float(noise_variance),
+            "tiles": int(n_tiles)}
+
+
+def cramer_rao_std(information: np.ndarray) -> np.ndarray:
+    """The smallest standard deviation any unbiased estimate of each direction's coefficient can have from
+    the capture (square roots of the diagonal of the inverse information matrix; Cramer-Rao). The
+    information is chi2 in the module docstring's sense between pairs of directions: F_kj = sum (J d_k)
+    (J d_j) / noise. A direction that others can imitate (a similarity relation between sigma_t, albedo
+    and g, say) keeps a large bound however large its own chi2 = F_kk. Where the estimate of F is not
+    positive definite (estimator noise), the bound is inf for the directions it leaves unconstrained."""
+    w, v = np.linalg.eigh(0.5 * (information + information.T))
+    ok = w > 1e-12 * max(float(w.max()), 1e-300)
+    var = (v[:, ok] ** 2 / w[ok]).sum(axis=1)
+    unconstrained = (v[:, ~ok] ** 2 > 1e-6).any(axis=1)
+    return np.sqrt(np.where(unconstrained, np.inf, var))

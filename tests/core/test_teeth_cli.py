@@ -63,6 +63,7 @@ def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
     names = list(table["chi2"])
     assert "tooth0.enamel.sigma_s[0]" in names and "tooth0.c[2]" in names and table["noise_variance"] > 0
     assert table["chi2"]["tooth0.enamel.sigma_s[1]"] > 0
+    assert set(table["best_std"]) == set(names) and all(v > 0 for v in table["best_std"].values())
     assert "chi2 of each change" in capsys.readouterr().out
     capsys.readouterr()
     assert main(["teeth", "sensitivity", str(cap_dir)]) == 2  # neither noise option: one line

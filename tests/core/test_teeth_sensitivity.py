@@ -113,3 +113,36 @@ def test_sensitivity_rejects_bad_input(problem):
         capture_sensitivity(sc, cap, D, passes=1, capture_spp=8)
     with pytest.raises(ValueError, match="exactly one"):
         capture_sensitivity(sc, cap, D)
+
+
+def test_cramer_rao_bound_matches_the_closed_form_and_sees_imitating_directions():
+    from material_structures.core.teeth.sensitivity import cramer_rao_std
+
+    # two directions whose image changes are a and b: F = [[a.a, a.b], [a.b, b.b]]
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=50)
+    for mix in (0.0, 0.9, 0.999):
+        b = mix * a + np.sqrt(1 - mix**2) * rng.normal(size=50)
+        F = np.array([[a @ a, a @ b], [a @ b, b @ b]])
+        want = np.sqrt(np.diag(np.linalg.inv(F)))  # independent: the explicit inverse
+        np.testing.assert_allclose(cramer_rao_std(F), want, rtol=1e-9)
+        # each direction alone would be bounded by 1/sqrt(F_kk); imitation by the other widens it
+        assert np.all(cramer_rao_std(F) >= 1 / np.sqrt(np.diag(F)) * (1 - 1e-12))
+    F = np.array([[4.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 1.0, 1.0]])  # 2 and 3 indistinguishable
+    std = cramer_rao_std(F)
+    assert std[0] == pytest.approx(0.5) and np.isinf(std[1]) and np.isinf(std[2])
+
+
+def test_information_off_diagonal_is_the_chi2_of_summed_directions(problem):
+    """F_kj is bilinear: chi2(d1 + d2) = F_11 + F_22 + 2 F_12 from the same passes (the bias correction of the
+    cross terms must match that of the squares)."""
+    sc, cap = problem
+    layout = ParamLayout(sc)
+    names, D = default_directions(sc, layout)
+    d1, d2 = D[names.index("tooth0.dentin.sigma_s[1]")], D[names.index("tooth0.enamel.sigma_a[1]")]
+    out = capture_sensitivity(sc, cap, np.vstack([d1, d2, d1 + d2]), passes=4, block=4, noise_variance=2e-5,
+                              max_depth=5, seed=3)
+    F = out["information"]
+    assert F[2, 2] == pytest.approx(F[0, 0] + F[1, 1] + 2 * F[0, 1], rel=1e-9)
+    np.testing.assert_allclose(np.diag(F), out["chi2"])
+    assert abs(F[0, 1]) > 1e-3 * np.sqrt(F[0, 0] * F[1, 1])  # a real cross term, not zeros
