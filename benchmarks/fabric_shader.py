@@ -35,7 +35,59 @@ def _enable_addon():
         addon.register()
 
 
+KD, KS = (0.05, 0.03, 0.02), (0.7, 0.4, 0.3)  # render_patch_vs_core's defaults
+FLAKES = (("surface_like_sigma_0.3_0.8", (0.3, 0.8)), ("fibre_like_sigma_2.5_2.5", (2.5, 2.5)))
+
+
+def closure_accuracy() -> dict:
+    """Closure representations vs eq. 3.9 in numpy (Cycles' closures as ported in
+    core.fabric.cycles_closures): the previous fixed approximation ("before") and the per-texel fitted
+    mix ("after"), per flake type and fibre tilt (azimuth 40 degrees): relative error median / p90
+    over the patch pixels under the benchmark's point lamp, and over 72 cosine-stratified views under
+    each procedural HDRI (numpy quadrature of eq. 3.9 x radiance over the hemisphere). RGB, k_d/k_s
+    as in the render benchmark."""
+    from ..core.fabric import closure_accuracy as A
+    from ..core.fabric.closure_fit import closure_eval, fit_closure_maps, legacy_closure_eval
+    from ..core.fabric.preset_maps import tilted_quat
+
+    envs = {"sky": A.env_lights(A.sky_hdri()), "interior": A.env_lights(A.interior_hdri())}
+    points, wo_patch = A.patch_points()
+    views = A.view_set()
+    kd, ks = np.asarray(KD), np.asarray(KS)
+    out: dict = {}
+    fit_s = 0.0
+    for label, sigma in FLAKES:
+        for tilt in TILTS:
+            quat = tilted_quat(tilt, 40.0)
+            sg = np.asarray(sigma, float)
+            start = time.perf_counter()
+            fit = fit_closure_maps(sg[None, None], quat[None, None])
+            fit_s += time.perf_counter() - start
+            params = (fit.weights[0, 0], fit.shape[0, 0], fit.ggx_scale[0, 0])
+            fns = {
+                "reference": A.reference_eval(kd, ks, sg, quat),
+                "before": lambda wi, wo, q=quat, s=sg: legacy_closure_eval(wi, wo, kd, ks, s, q),
+                "after": lambda wi, wo, q=quat, s=sg, p=params: closure_eval(wi, wo, kd, ks, s, q, p),
+            }
+            case = {}
+            ref_pt = A.point_light_radiance(fns["reference"], points, wo_patch)
+            ref_env = {k: A.env_radiance(fns["reference"], views, e) for k, e in envs.items()}
+            for which in ("before", "after"):
+                res = {"point_light": A.rel_stats(A.point_light_radiance(fns[which], points, wo_patch), ref_pt)}
+                for k, e in envs.items():
+                    res[f"hdri_{k}"] = A.rel_stats(A.env_radiance(fns[which], views, e), ref_env[k])
+                case[which] = res
+            case["fit"] = {"weight_coeffs": np.round(params[0].astype(float), 4).tolist(),
+                           "shape": [round(float(v), 3) for v in params[1]], "ggx_scale": float(params[2][0])}
+            out[f"{label}/tilt_{int(tilt)}"] = case
+    worst = {w: {m: max(c[w][k][m] for c in out.values() for k in c[w]) for m in ("median", "p90")}
+             for w in ("before", "after")}
+    return {"cases": out, "worst": worst, "targets": {"median": 0.05, "p90": 0.10},
+            "fit_seconds_8_single_texel_fits": fit_s}
+
+
 def fabric_shader() -> dict:
+    numpy_part = closure_accuracy()
     _enable_addon()
     from ..addon.fabric.presets import tilted_quat
     from ..addon.fabric.verify import render_patch_vs_core
@@ -57,6 +109,7 @@ def fabric_shader() -> dict:
         "p99_rel_err": float(np.percentile(rel, 99)),
         "closure_approx_median_rel_err": closure,
         "pixels": int(rel.size),
+        "closure_numpy": numpy_part,
     }
 
 
@@ -99,4 +152,8 @@ def fabric_brush_viewport(size: int = 2048, points: int = 200, repeats: int = 3)
     }
 
 
-BENCHMARKS = {"fabric-shader": fabric_shader, "fabric-brush-viewport": fabric_brush_viewport}
+BENCHMARKS = {
+    "fabric-shader": fabric_shader,
+    "fabric-closure-accuracy": closure_accuracy,
+    "fabric-brush-viewport": fabric_brush_viewport,
+}

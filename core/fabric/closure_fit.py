@@ -1,0 +1,312 @@
+"""Per-texel fit of a small mix of Cycles closures to eq. 3.9 (for world and indirect light).
+
+Cycles' OSL can only return its built-in closures, whose weights cannot depend on the light
+direction. The fabric shader keeps its exact lamp path (eq. 3.9 through ``emission()``); everything
+else (HDRI, indirect light, Fast Preview) sees a closure mix. This module chooses that mix per texel.
+
+Mix (all in the texel's tangent frame, n = shading normal, a0/a2 = fibre x/z axes of the SGGX
+basis, a2 flipped into the upper hemisphere)::
+
+    kd * diffuse(n) + ks * ( w_d diffuse(n) + w_s sheen(n, r_s)
+                             + w_v ashikhmin_velvet(N_v, s_v) + w_g microfacet("ggx", N_g, a0, ax, ay) )
+    N_v = normalize((1 - k_v) n + k_v a2),  N_g = normalize((1 - k_g) n + k_g a2)
+    (ax, ay) = clip(c_g (sigma_x, sigma_y), 0, 1)
+
+Eq. 3.9 is linear in k_d and k_s, so the fit is of the k_s = 1 specular term alone, a scalar function
+of (sigma, basis); k_d is carried by the diffuse closure exactly, and both colours stay the texel's
+own maps: only scalars are fitted. The fitted quantities are frame-free (built from n, a0, a2), so a
+fit depends only on (sigma_x, sigma_y, tilt of a2, twist of a0 about a2): texels are reduced to that
+canonical key (quantised), each distinct key is fitted once, vectorised over all keys at once.
+
+The fit: relative least squares of ``closure_eval(wi, wo) - f_spec(wi, wo) cos_i`` over a stratified
+set of light and view directions (both cosine-distributed: the renderer's view of the texel),
+residuals divided by ``f_spec cos_i + 0.05 mean``. Nonlinear shape parameters (r_s, s_v, k_v, k_g,
+c_g) are chosen from a small grid; for each grid combination the non-negative weights are solved
+exactly (4 unknowns: all 16 active sets of the normal equations), all keys at once.
+
+Stored maps (``ClosureMaps``): ``closure_weights`` (w_d, w_s, w_v, w_g) and ``closure_shape``
+(r_s, s_v, k_v, k_g), and ``closure_ggx_scale`` (c_g), all per texel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+
+from .cycles_closures import diffuse_eval, ggx_eval, sheen_eval, velvet_eval
+from .quaternion import quat_to_matrix
+from .sggx_brdf import sggx_specular
+
+SHEEN_ROUGHNESS = (0.5, 1.0)
+VELVET_SIGMA = (0.25, 0.4, 0.6, 1.0)
+VELVET_TILT = (0.0, 0.5, 1.0)
+GGX_TILT = (0.5, 1.0)
+GGX_SCALE = (1.0, 1.4)
+REL_FLOOR = 0.05
+
+
+@dataclasses.dataclass(frozen=True)
+class ClosureMaps:
+    """Fitted closure parameters per texel (float32): ``weights`` (H, W, 4) = (w_d, w_s, w_v, w_g)
+    multiplying k_s; ``shape`` (H, W, 4) = (sheen roughness, velvet sigma, velvet tilt k_v, GGX tilt
+    k_g); ``ggx_scale`` (H, W, 1) = c_g (GGX alphas = clip(c_g sigma, 0, 1))."""
+
+    weights: np.ndarray
+    shape: np.ndarray
+    ggx_scale: np.ndarray
+
+
+def _norm(v):
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-30)
+
+
+def fibre_axes(quat):
+    """Fibre axes (a0, a2) of the basis quaternion(s), a2 flipped into the upper hemisphere."""
+    rot = quat_to_matrix(np.asarray(quat, float))
+    a0, a2 = rot[..., :, 0], rot[..., :, 2]
+    s = np.where(a2[..., 2:3] < 0, -1.0, 1.0)
+    return a0, a2 * s
+
+
+def lobe_evals(wi, wo, sigma, quat, shape, ggx_scale):
+    """The four unit closures (diffuse, sheen, velvet, GGX) of the mix, ``(..., 4)``, as Cycles
+    evaluates them (BSDF x cosine, see ``cycles_closures``). Parameters broadcast against the
+    directions with a trailing vector axis (e.g. sigma (..., 2), quat (..., 4), shape (..., 4))."""
+    wi = np.asarray(wi, float)
+    wo = np.asarray(wo, float)
+    shape = np.asarray(shape, float)
+    a0, a2 = fibre_axes(quat)
+    n = np.array([0.0, 0.0, 1.0])
+    kv, kg = shape[..., 2:3], shape[..., 3:4]
+    nv = _norm((1 - kv) * n + kv * a2)
+    nga = _norm((1 - kg) * n + kg * a2)
+    alpha = np.clip(np.asarray(ggx_scale, float) * np.asarray(sigma, float), 1e-4, 1.0)
+    out = [
+        np.broadcast_to(diffuse_eval(wi), np.broadcast_shapes(wi.shape, wo.shape)[:-1]),
+        sheen_eval(wi, wo, shape[..., 0]),
+        velvet_eval(wi, wo, shape[..., 1], nv),
+        ggx_eval(wi, wo, nga, a0, alpha[..., 0], alpha[..., 1]),
+    ]
+    shp = np.broadcast_shapes(*(o.shape for o in out))
+    return np.stack([np.broadcast_to(o, shp) for o in out], axis=-1)
+
+
+def view_basis(wo, quat):
+    """Non-negative view-dependent weight basis (..., 4): Bernstein ``((1 - mu)^2, 2 mu (1 - mu), mu^2)``
+    in mu = cos(theta_o) and ``(1 - mu) (1 + <wo, t>) / 2`` with t the unit tangential direction the
+    fibre axis leans towards (0 for an upright fibre). With non-negative coefficients every weight is
+    non-negative for every view. A closure weight may depend on the view (the shader knows it), never
+    on the light."""
+    wo = np.asarray(wo, float)
+    _, a2 = fibre_axes(quat)
+    t = a2 * np.array([1.0, 1.0, 0.0])
+    tl = np.linalg.norm(t, axis=-1, keepdims=True)
+    t = np.where(tl > 1e-6, t / np.maximum(tl, 1e-12), 0.0)
+    mu = wo[..., 2]
+    tw = np.sum(wo * t, axis=-1)
+    mu, tw = np.broadcast_arrays(mu, tw)
+    return np.stack([(1 - mu) ** 2, 2 * mu * (1 - mu), mu * mu, (1 - mu) * (1 + tw) / 2], axis=-1)
+
+
+def closure_weights(wo, quat, coeffs):
+    """Per-view closure weights ``max(coeffs @ view_basis, 0)`` (..., 4) from coefficients (..., 4, 4)
+    [closure, basis]."""
+    phi = view_basis(wo, quat)
+    return np.maximum(np.einsum("...jb,...b->...j", np.asarray(coeffs, float), phi), 0.0)
+
+
+def closure_eval(wi, wo, kd, ks, sigma, quat, fit: ClosureMaps | tuple):
+    """RGB radiance per unit incident radiance of the fitted closure mix (compare with
+    ``sggx_brdf(...) * cos_i``). ``fit``: ClosureMaps or (coeffs, shape, ggx_scale) that broadcast
+    against the directions (coeffs with two trailing axes (4, 4))."""
+    coeffs, shape, scale = (fit.weights, fit.shape, fit.ggx_scale) if isinstance(fit, ClosureMaps) else fit
+    lobes = lobe_evals(wi, wo, sigma, quat, shape, scale)
+    w = closure_weights(wo, quat, coeffs)
+    spec = np.sum(lobes * w, axis=-1, keepdims=True)
+    return np.asarray(kd, float) * lobes[..., :1] + np.asarray(ks, float) * spec
+
+
+def legacy_closure_eval(wi, wo, kd, ks, sigma, quat):
+    """The shader's previous fixed approximation (before issue 38), for comparison: k_d diffuse plus
+    k_s/2 GGX along the fibre axis with alpha = sigma when sigma_x, sigma_y <= 1, else k_s sheen(n)
+    with roughness clip(1 / sigma_max, 0.05, 1)."""
+    wi = np.asarray(wi, float)
+    wo = np.asarray(wo, float)
+    sigma = np.asarray(sigma, float)
+    a0, a2 = fibre_axes(quat)
+    smax = np.max(sigma, axis=-1)
+    ggx = 0.5 * ggx_eval(wi, wo, a2, a0, np.minimum(sigma[..., 0], 1.0), np.minimum(sigma[..., 1], 1.0))
+    sh = sheen_eval(wi, wo, np.clip(1.0 / smax, 0.05, 1.0))
+    spec = np.where(smax <= 1.0, ggx, sh)[..., None]
+    return np.asarray(kd, float) * diffuse_eval(wi)[..., None] + np.asarray(ks, float) * spec
+
+
+def hemisphere_grid(n_theta: int, n_phi: int, offset: float = 0.0) -> np.ndarray:
+    """Cosine-stratified directions: cos(theta) = sqrt((i + 1/2) / n_theta), even azimuths."""
+    mu = np.sqrt((np.arange(n_theta) + 0.5) / n_theta)
+    th = np.arccos(mu)
+    ph = (np.arange(n_phi) + offset) / n_phi * 2.0 * np.pi
+    t, p = np.meshgrid(th, ph, indexing="ij")
+    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1).reshape(-1, 3)
+
+
+def canonical_keys(sigma, quat, quantum=(0.005, 0.25, 1.0)):
+    """Rotation-about-n invariant description (sigma_x, sigma_y, tilt deg, twist deg) of each texel,
+    quantised (relative sigma step, tilt step in degrees, twist step in degrees)."""
+    sigma = np.asarray(sigma, float).reshape(-1, 2)
+    rot = quat_to_matrix(np.asarray(quat, float).reshape(-1, 4))
+    a0, a2 = rot[:, :, 0], rot[:, :, 2]
+    a2 = a2 * np.where(a2[:, 2:3] < 0, -1.0, 1.0)
+    tilt = np.degrees(np.arccos(np.clip(a2[:, 2], -1.0, 1.0)))
+    phi = np.where(tilt > 1e-6, np.arctan2(a2[:, 1], a2[:, 0]), np.arctan2(a0[:, 1], a0[:, 0]))
+    ex = np.stack([np.cos(phi) * a2[:, 2], np.sin(phi) * a2[:, 2], -np.sqrt(np.maximum(1 - a2[:, 2] ** 2, 0))], -1)
+    ey = np.stack([-np.sin(phi), np.cos(phi), np.zeros_like(phi)], -1)
+    twist = np.degrees(np.arctan2(np.sum(a0 * ey, -1), np.sum(a0 * ex, -1))) % 180.0
+    qs, qt, qw = quantum
+    lsig = np.round(np.log(np.maximum(sigma, 1e-6)) / qs) * qs
+    key = np.stack([lsig[:, 0], lsig[:, 1], np.round(tilt / qt) * qt, (np.round(twist / qw) * qw) % 180.0], -1)
+    return key
+
+
+def _canonical_params(keys):
+    """sigma (K, 2) and quaternion (K, 4) of canonical keys (a2 in the x-z plane)."""
+    from .quaternion import matrix_to_quat
+
+    sigma = np.exp(keys[:, :2])
+    t, w = np.radians(keys[:, 2]), np.radians(keys[:, 3])
+    a2 = np.stack([np.sin(t), np.zeros_like(t), np.cos(t)], -1)
+    ex = np.stack([np.cos(t), np.zeros_like(t), -np.sin(t)], -1)
+    ey = np.broadcast_to([0.0, 1.0, 0.0], ex.shape)
+    a0 = np.cos(w)[:, None] * ex + np.sin(w)[:, None] * ey
+    a1 = np.cross(a2, a0)
+    return sigma, matrix_to_quat(np.stack([a0, a1, a2], axis=-1))
+
+
+def _nnls4(gram, rhs, tt):
+    """Exact non-negative least squares with <= 4 unknowns, batched: every active set of the normal
+    equations, the feasible one with the least residual. Returns (weights (B, m), residual (B,))."""
+    b, m = rhs.shape
+    best_w = np.zeros((b, m))
+    best_r = tt.copy()
+    eye = np.eye(m) * 1e-12
+    for mask in itertools.product((0, 1), repeat=m):
+        idx = [i for i in range(m) if mask[i]]
+        if not idx:
+            continue
+        g = gram[:, idx][:, :, idx] + eye[: len(idx), : len(idx)] * np.trace(gram, axis1=1, axis2=2)[:, None, None]
+        w = np.linalg.solve(g, rhs[:, idx][..., None])[..., 0]
+        ok = np.all(w >= 0, axis=1)
+        full = np.zeros((b, m))
+        full[:, idx] = w
+        r = tt - 2 * np.sum(full * rhs, 1) + np.einsum("bi,bij,bj->b", full, gram, full)
+        better = ok & (r < best_r)
+        best_w[better] = full[better]
+        best_r[better] = r[better]
+    return best_w, best_r
+
+
+def _nnls_batched(gram, rhs, iters: int = 12):
+    """Approximate batched non-negative least squares on normal equations: solve on the free set,
+    fix the variables that went negative at 0, repeat (Lawson-Hanson without re-release)."""
+    b, m = rhs.shape
+    free = np.ones((b, m), bool)
+    eye = np.eye(m)
+    x = np.zeros((b, m))
+    for _ in range(iters):
+        f2 = free[:, :, None] & free[:, None, :]
+        g = np.where(f2, gram, eye * np.diagonal(gram, axis1=1, axis2=2)[:, :, None])
+        x = np.linalg.solve(g, np.where(free, rhs, 0.0)[..., None])[..., 0]
+        neg = free & (x < 0)
+        if not neg.any():
+            break
+        free &= ~neg
+    return np.maximum(np.where(free, x, 0.0), 0.0)
+
+
+def fit_keys(sigma, quat, n_light=(10, 20), n_view=(5, 12), chunk=32):
+    """Fit the mix for K texel geometries (sigma (K, 2), quat (K, 4)), vectorised over K.
+
+    Returns (weights (K, 4), shape (K, 4), ggx_scale (K, 1), rel_rms (K,)).
+    """
+    wi = hemisphere_grid(*n_light)[None, None, :, :]
+    wo = hemisphere_grid(*n_view, offset=0.25)[None, :, None, :]
+    combos = list(itertools.product(range(len(SHEEN_ROUGHNESS)), range(len(VELVET_SIGMA)), range(len(VELVET_TILT)),
+                                    range(len(GGX_TILT)), range(len(GGX_SCALE))))
+    k_all = len(sigma)
+    out_w = np.zeros((k_all, 4, 4))
+    out_idx = np.zeros((k_all, 4), int)
+    out_s = np.zeros((k_all, 4))
+    out_c = np.ones((k_all, 1))
+    out_r = np.zeros(k_all)
+    for c0 in range(0, k_all, chunk):
+        sg = np.asarray(sigma[c0:c0 + chunk], float)[:, None, None, :]
+        qt = np.asarray(quat[c0:c0 + chunk], float)[:, None, None, :]
+        target = sggx_specular(wi, wo, sg, qt) * wi[..., 2]
+        wts = 1.0 / (target + REL_FLOOR * target.mean(axis=(1, 2), keepdims=True))
+        kk = target.shape[0]
+        a0, a2 = fibre_axes(qt)
+        n = np.array([0.0, 0.0, 1.0])
+        cols = [diffuse_eval(wi) + 0 * target]
+        cols += [sheen_eval(wi, wo, r) + 0 * target for r in SHEEN_ROUGHNESS]
+        for s in VELVET_SIGMA:
+            cols += [velvet_eval(wi, wo, s, _norm((1 - k) * n + k * a2)) for k in VELVET_TILT]
+        for k in GGX_TILT:
+            for c in GGX_SCALE:
+                al = np.clip(c * sg, 1e-4, 1.0)
+                cols.append(ggx_eval(wi, wo, _norm((1 - k) * n + k * a2), a0, al[..., 0], al[..., 1]))
+        cmat = np.stack([np.broadcast_to(c, target.shape) for c in cols], -1).reshape(kk, -1, len(cols))
+        cmat = cmat * wts.reshape(kk, -1, 1)
+        y = (target * wts).reshape(kk, -1)
+        gram = np.einsum("kmi,kmj->kij", cmat, cmat)
+        rhs = np.einsum("kmi,km->ki", cmat, y)
+        tt = np.sum(y * y, 1)
+        best = np.full(kk, np.inf)
+        ns, nv = len(SHEEN_ROUGHNESS), len(VELVET_TILT)
+        for i_s, i_v, i_k, i_g, i_c in combos:
+            idx = [0, 1 + i_s, 1 + ns + i_v * nv + i_k, 1 + ns + len(VELVET_SIGMA) * nv + i_g * len(GGX_SCALE) + i_c]
+            w, r = _nnls4(gram[:, idx][:, :, idx], rhs[:, idx], tt)
+            better = r < best
+            sl = np.arange(c0, c0 + kk)[better]
+            best[better] = r[better]
+            out_w[sl, :, :3] = w[better][:, :, None]  # constant weight = sum of the Bernstein terms
+            out_idx[sl] = idx
+            out_s[sl] = [SHEEN_ROUGHNESS[i_s], VELVET_SIGMA[i_v], VELVET_TILT[i_k], GGX_TILT[i_g]]
+            out_c[sl] = GGX_SCALE[i_c]
+        # View-dependent weights: refit the chosen closures' coefficients of view_basis (ridge-damped
+        # linear least squares towards the constant weights just found).
+        sel = np.take_along_axis(cmat, out_idx[c0:c0 + kk][:, None, :], axis=2)  # (kk, M, 4)
+        phi = np.broadcast_to(view_basis(wo, qt), target.shape + (4,)).reshape(kk, -1, 4)
+        design = (sel[..., :, None] * phi[..., None, :]).reshape(kk, -1, 16)
+        gram16 = np.einsum("kmi,kmj->kij", design, design)
+        lam = 1e-4 * np.trace(gram16, axis1=1, axis2=2)[:, None, None] / 16
+        prior = out_w[c0:c0 + kk].reshape(kk, 16)
+        rhs16 = np.einsum("kmi,km->ki", design, y) + lam[:, 0] * prior
+        coef = _nnls_batched(gram16 + lam * np.eye(16), rhs16).reshape(kk, 4, 4)
+        wv = np.maximum(np.einsum("kmjb,kmb->kmj", coef[:, None], phi), 0.0)
+        r16 = np.sum((np.sum(sel * wv, -1) - y) ** 2, 1)
+        better = r16 < best
+        out_w[c0:c0 + kk][better] = coef[better]
+        best = np.minimum(best, r16)
+        out_r[c0:c0 + kk] = np.sqrt(np.maximum(best, 0) / y.shape[1])
+    return out_w, out_s, out_c, out_r
+
+
+def fit_closure_maps(sigma_map, basis_map, **kw) -> ClosureMaps:
+    """Fit the closure mix for every texel of (H, W, 2) sigma and (H, W, 4) basis maps.
+
+    Texels are reduced to canonical quantised keys (``canonical_keys``) and each distinct key is fitted
+    once (``fit_keys``), so uniform regions cost one fit.
+    """
+    h, w = sigma_map.shape[:2]
+    keys = canonical_keys(sigma_map, basis_map)
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    sig, quat = _canonical_params(uniq)
+    wts, shp, scl, _ = fit_keys(sig, quat, **kw)
+    inverse = inverse.reshape(-1)
+    return ClosureMaps(
+        weights=wts[inverse].reshape(h, w, 4, 4).astype(np.float32),
+        shape=shp[inverse].reshape(h, w, 4).astype(np.float32),
+        ggx_scale=scl[inverse].reshape(h, w, 1).astype(np.float32),
+    )
