@@ -310,3 +310,33 @@ def fit_closure_maps(sigma_map, basis_map, **kw) -> ClosureMaps:
         shape=shp[inverse].reshape(h, w, 4).astype(np.float32),
         ggx_scale=scl[inverse].reshape(h, w, 1).astype(np.float32),
     )
+
+
+CLOSURE_FILES = ("closure_w_diffuse.exr", "closure_w_sheen.exr", "closure_w_velvet.exr", "closure_w_ggx.exr")
+
+
+def save_closure_maps(out_dir, cm: ClosureMaps) -> None:
+    """Write the fitted closures beside a parameter folder's maps: one RGBA EXR per closure holding its
+    four view-basis coefficients, ``closure_shape.exr`` (RGBA: sheen roughness, velvet sigma, velvet
+    tilt, GGX tilt) and ``closure_ggx_scale.exr`` (R)."""
+    import os
+
+    from ..exr_io import write_exr
+
+    os.makedirs(out_dir, exist_ok=True)
+    for j, name in enumerate(CLOSURE_FILES):
+        write_exr(os.path.join(out_dir, name), cm.weights[:, :, j, :])
+    write_exr(os.path.join(out_dir, "closure_shape.exr"), cm.shape)
+    write_exr(os.path.join(out_dir, "closure_ggx_scale.exr"), cm.ggx_scale, channels=("R",))
+
+
+def load_closure_maps(params_dir) -> ClosureMaps:
+    import os
+
+    from ..exr_io import read_exr
+
+    w = np.stack([read_exr(os.path.join(params_dir, n), channels=("R", "G", "B", "A")) for n in CLOSURE_FILES], 2)
+    shape = read_exr(os.path.join(params_dir, "closure_shape.exr"), channels=("R", "G", "B", "A"))
+    scale = read_exr(os.path.join(params_dir, "closure_ggx_scale.exr"), channels=("R",))
+    return ClosureMaps(weights=w.astype(np.float32), shape=shape.astype(np.float32),
+                       ggx_scale=scale.reshape(scale.shape[0], scale.shape[1], 1).astype(np.float32))

@@ -193,3 +193,15 @@ def test_fitted_mix_beats_the_fixed_approximation_under_the_point_lamp(sigma, ti
     assert new["median"] < old["median"]
     assert new["median"] <= (0.07 if tilt >= 30 and sigma[0] > 1 else 0.05)
     assert new["p90"] <= 0.10
+
+
+def test_closure_maps_roundtrip(tmp_path):
+    from material_structures.core.fabric.closure_fit import load_closure_maps, save_closure_maps
+    from material_structures.core.fabric.preset_maps import preset_maps
+
+    maps = preset_maps("CORDUROY", size=16)
+    cm = fit_closure_maps(maps.sigma, maps.basis)
+    save_closure_maps(tmp_path, cm)
+    back = load_closure_maps(tmp_path)
+    for k in ("weights", "shape", "ggx_scale"):
+        np.testing.assert_array_equal(getattr(back, k), getattr(cm, k))
