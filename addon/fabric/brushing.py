@@ -5,7 +5,8 @@ A :class:`BrushSession` keeps a material's four maps in memory twice: as core ar
 only the window around its capsule (core functions on a sub-map), writes that window into both
 copies and uploads the changed images once (``foreach_set``), so an update of a 2048 x 2048 map
 costs a few milliseconds plus the upload. Every stroke records the windows it overwrote, so
-:meth:`BrushSession.undo_stroke` restores the maps exactly.
+:meth:`BrushSession.undo_stroke` restores the maps exactly. The sessions of this Blender session are kept
+by material name (:func:`session_for`); the save handler packs them, loading another file drops them.
 """
 
 from __future__ import annotations
