@@ -71,6 +71,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except MemoryError as exc:  # a size the machine cannot hold: the allocation failed, nothing was written
+        if getattr(args, "debug", False):
+            raise
+        print(f"error: not enough memory for this size ({exc}); choose a smaller one", file=sys.stderr)
+        return 2
     except (ValueError, OSError, RuntimeError) as exc:
         # a user's mistake (a bad value, a file that is missing, unreadable, a directory, read-only, ...):
         # one line; --debug shows the traceback

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .checks import at_least, between, finite_float, refuse_output_over_inputs
+from .checks import at_least, between, check_memory, finite_float, refuse_output_over_inputs
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -44,10 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     s = fsub.add_parser("synth", help="synthetic BTF of a known spatially varying model")
     s.add_argument("--out", required=True, help="BTF folder, or a path ending in .npz")
-    s.add_argument("--width", type=at_least(1), default=32)
-    s.add_argument("--height", type=at_least(1), default=32)
-    s.add_argument("--lights", type=at_least(1), default=16)
-    s.add_argument("--views", type=at_least(1), default=16)
+    s.add_argument("--width", type=between(1, 16384, int), default=32)
+    s.add_argument("--height", type=between(1, 16384, int), default=32)
+    s.add_argument("--lights", type=between(1, 1024, int), default=16)
+    s.add_argument("--views", type=between(1, 1024, int), default=16)
     s.add_argument("--theta-max", type=between(1.0, 89.0), default=75.0, help="largest light/view zenith angle (deg)")
     s.add_argument("--rotation", type=finite_float, default=0.0, help="azimuth offset of the direction sets (rad)")
     s.add_argument("--noise", type=between(0.0, 1.0), default=0.0, help="Gaussian noise level (0.05 = 5 %%)")
@@ -116,6 +116,9 @@ def run_synth(args: argparse.Namespace) -> int:
     from ..core.fabric.parameter_maps import save_params
     from ..core.fabric.synthetic_btf import light_view_pairs, render_btf, synthetic_maps
 
+    # the BTF is rendered in memory (float64 while rendering) before it is written
+    check_memory(args.width * args.height * args.lights * args.views * 3 * 8 * 2,
+                 f"a {args.width} x {args.height} BTF of {args.lights * args.views} light/view pairs")
     maps = synthetic_maps(args.height, args.width, seed=args.seed, max_tilt_deg=args.max_tilt)
     wi, wo = light_view_pairs(args.lights, args.views, args.theta_max, args.rotation)
     save_btf(args.out, render_btf(maps, wi, wo, noise=args.noise, seed=args.seed + 1,

@@ -13,7 +13,7 @@ import json
 import os
 
 from ..core.teeth.fit_settings import FitSettings
-from .checks import at_least, positive_float, refuse_output_over_inputs
+from .checks import at_least, between, positive_float, refuse_output_over_inputs
 
 FIT_DEFAULTS = FitSettings()  # the defaults of ``teeth fit``: the fit's own, no second table
 
@@ -24,14 +24,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     s = tsub.add_parser("synth", help="render a synthetic capture of a known ground truth")
     s.add_argument("out", help="output capture folder (capture.json, images/, masks/, scene.json)")
-    s.add_argument("--teeth", type=at_least(1), default=2, help="number of teeth (incisor, canine, premolar, molar)")
-    s.add_argument("--width", type=at_least(4), default=96)
-    s.add_argument("--height", type=at_least(4), default=64)
-    s.add_argument("--lights", type=at_least(1), default=54)
-    s.add_argument("--cameras", type=at_least(1), default=3)
+    s.add_argument("--teeth", type=between(1, 32, int), default=2,
+                   help="number of teeth (incisor, canine, premolar, molar)")
+    s.add_argument("--width", type=between(4, 16384, int), default=96)
+    s.add_argument("--height", type=between(4, 16384, int), default=64)
+    s.add_argument("--lights", type=between(1, 4096, int), default=54)
+    s.add_argument("--cameras", type=between(1, 256, int), default=3)
     s.add_argument("--spp", type=at_least(1), default=16, help="samples per masked (tooth) pixel")
     s.add_argument("--spp-background", type=at_least(0), default=2, help="samples per other pixel")
-    s.add_argument("--resolution", type=at_least(4), default=32, help="tooth mesh resolution")
+    s.add_argument("--resolution", type=between(4, 1024, int), default=32, help="tooth mesh resolution")
     s.add_argument("--seed", type=int, default=12345)
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
                    help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "

@@ -43,6 +43,14 @@ def inputs(tmp_path_factory):
     (["scratch", "eval", "{d}/s.npz", "--size", "200000", "--out", "{o}/e.exr"], "--size: must be <= 16384"),
     (["scratch", "eval", "{d}/s.npz", "--light", "0", "0", "1", "0", "--out", "{o}/e.exr"], "radius R must be > 0"),
     (["scratch", "eval", "{d}/s.npz", "--view-deg", "inf", "--out", "{o}/e.exr"], "'inf' is not a finite number"),
+    (["fabric", "synth", "--out", "{o}/b", "--width", "1000000"], "--width: must be <= 16384, got 1000000"),
+    (["fabric", "synth", "--out", "{o}/b", "--width", "16384", "--height", "16384", "--lights", "1024", "--views",
+      "1024"], "GiB of memory;"),
+    (["teeth", "synth", "{o}/t", "--width", "100000"], "--width: must be <= 16384, got 100000"),
+    (["teeth", "synth", "{o}/t", "--lights", "10000000"], "--lights: must be <= 4096"),
+    (["teeth", "synth", "{o}/t", "--resolution", "100000"], "--resolution: must be <= 1024"),
+    (["scratch", "generate", "--patch-mm", "10000", "--sigma-um", "0.1", "--max-footprint-um", "0.1", "--count",
+      "10", "--out", "{o}/g.npz"], "not enough memory for this size (Unable to allocate"),
 ])
 def test_bad_numbers_and_unfittable_btfs_are_one_line_errors(inputs, tmp_path, capsys, argv, said):
     before = _tree(inputs)
