@@ -46,7 +46,7 @@ def _enable_addon():
 
 def _scene(bpy, name, plain, resolution, samples):
     from ..render import configure_cycles
-    from ..render.scenes_scratch import build_scratched_plate
+    from ..showcase.scenes_scratch import build_scratched_plate
 
     scene = bpy.data.scenes.new(name)
     configure_cycles(scene, resolution=resolution, samples=samples, seed=0)
@@ -70,7 +70,7 @@ def scratch_render() -> dict:
     err = np.concatenate(errs)
 
     hdri = _hdri_error()
-    from ..render.library import SCENES, available_scenes
+    from ..showcase.library import SCENES, available_scenes
 
     available_scenes()
     entry = SCENES[SAMPLE_SCENE]

@@ -166,7 +166,7 @@ def content_hash(s: ScratchSet) -> str:
     for arr in set_to_arrays(s).values():
         h.update(np.ascontiguousarray(arr).tobytes())
     h.update(repr(set_meta(s, "")).encode())
-    h.update(b"cache-layout-2")  # scratch_io tables + cell-major tables
+    h.update(b"cache-layout-3")  # scratch_io tables + cell-major tables; 3: the shader walks tile copies
     return h.hexdigest()[:16]
 
 
