@@ -83,7 +83,10 @@ def light_wear_material(scene, workdir: str = ""):
 
 
 def polished_circles_material(scene, workdir: str = ""):
-    return _worn_metal("Polished Circles Aluminium", circular_polish(1500, (20000.0, 20000.0), seed=4), scene,
+    # 8 polishing centres with arcs wrapped across the patch border: the patch tiles without a seam or one
+    # bow-tie highlight per tile (one centre per 20 mm patch, tiled 5 x 5, showed a grid of wedges)
+    marks = circular_polish(1500, (20000.0, 20000.0), seed=4, centres=8, boundary="wrap")
+    return _worn_metal("Polished Circles Aluminium", marks, scene,
                        spectral=True, base_color=(0.92, 0.93, 0.94), roughness=0.04)
 
 
