@@ -3,7 +3,8 @@
 How it fits together
 --------------------
 * ``cycles_osl/ms_scratch_metal.osl`` (+ ``ms_scratch.h``, generated ``ms_scratch_spectra.h``) ports
-  ``core/scratch/scratch_radiance.py`` (energy "thesis", footprint rule "chords") to OSL. Output:
+  ``core/scratch/scratch_radiance.py`` (energy "conserving", footprint rule "chords"; its Energy input 0
+  gives "thesis") to OSL. Output:
   ``BSDF`` = (1 - rho_P) x base metal (GGX, F82-tint colour or complex IOR), which keeps seeing every
   lamp and the world, and ``Scratch`` = the scratch term through ``emission()``. Lamps are never
   light-linked away from scratched objects.
