@@ -77,6 +77,7 @@ def _children(pid: int) -> list[int]:
     return kids
 
 
+@pytest.mark.heavy  # 20 s each: outside `make test-fast`
 @pytest.mark.parametrize("pool", ["--no-dask", "dask"])
 def test_sigterm_stops_a_fabric_fit_with_its_workers_and_it_resumes(tmp_path, pool):
     import os
