@@ -204,6 +204,9 @@ def build_grid_index(
     r = float(query_radius_um)
     nx = int(np.ceil(ps[0] / c - 1e-9))
     ny = int(np.ceil(ps[1] / c - 1e-9))
+    if nx * ny > MAX_TABLE_INDEX:  # the cell tables address cells through the same float32 index
+        raise ValueError(f"a grid of {nx} x {ny} cells of {c:g} um is more than the tables can address "
+                         f"({MAX_TABLE_INDEX} cells): use a larger footprint or coherence length, or a smaller patch")
     if periodic and seg0.shape[0]:
         src, seg = periodic_images(seg0, ps, np.full(2, -r), np.array([nx * c, ny * c]) + r)
     else:

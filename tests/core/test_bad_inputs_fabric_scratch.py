@@ -50,7 +50,7 @@ def inputs(tmp_path_factory):
     (["teeth", "synth", "{o}/t", "--lights", "10000000"], "--lights: must be <= 4096"),
     (["teeth", "synth", "{o}/t", "--resolution", "100000"], "--resolution: must be <= 1024"),
     (["scratch", "generate", "--patch-mm", "10000", "--sigma-um", "0.1", "--max-footprint-um", "0.1", "--count",
-      "10", "--out", "{o}/g.npz"], "not enough memory for this size (Unable to allocate"),
+      "10", "--out", "{o}/g.npz"], "is more than the tables can address"),
 ])
 def test_bad_numbers_and_unfittable_btfs_are_one_line_errors(inputs, tmp_path, capsys, argv, said):
     before = _tree(inputs)
@@ -155,3 +155,17 @@ def test_an_unreadable_btf_image_leaves_no_cache_behind(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "0005.exr" in err and err.count("\n") == 1, err
     assert not (tmp_path / "fit" / ".fit_cache").exists()
+
+
+def test_a_size_the_machine_cannot_hold_is_one_line(monkeypatch, capsys):
+    import numpy as np
+
+    import material_structures.cli.scratch as scratch_cli
+
+    def allocate(args):
+        np.empty((2**40, 2**20))  # numpy refuses before touching memory
+
+    monkeypatch.setattr(scratch_cli, "run_info", allocate)
+    assert main(["scratch", "info", "whatever.npz"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: not enough memory for this size (Unable to allocate") and err.count("\n") == 1
