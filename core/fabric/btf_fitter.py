@@ -26,6 +26,7 @@ import numpy as np
 from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
 from .btf_io import iter_btf_blocks, read_btf_header
+from .closure_fit import fit_closure_maps, save_closure_maps
 from .levenberg_marquardt import Samples
 from .ndf_extraction import NdfOperator, check_ndf_coverage, ndf_operator
 from .parameter_maps import FabricMaps, make_maps, save_params
@@ -211,6 +212,9 @@ def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int =
         "median_cost": float(np.median(cost)), "flip_regions": int(labels.max()),
     }
     save_params(out_dir, maps, extra={"fit": stats})
+    # The closure mix world and indirect light see in Cycles, beside the maps (issue 38): an import
+    # then reads it instead of fitting it.
+    save_closure_maps(out_dir, fit_closure_maps(maps.sigma, maps.basis))
     if not keep_cache:
         shutil.rmtree(cache, ignore_errors=True)
     return maps, stats

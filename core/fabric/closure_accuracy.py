@@ -10,8 +10,9 @@ Two lighting situations, both evaluated with the same directions for the referen
 
 Equirect convention here: row i covers polar angle theta in [i, i + 1] pi / H from +Z (zenith at row
 0), column j azimuth phi in [j, j + 1] 2 pi / W from +X towards +Y. (Blender's world ``Environment
-Texture`` maps direction d to u = atan2(d_y, -d_x) / 2 pi + 1/2, v = atan2(d_z, hypot(d_x, d_y)) / pi +
-1/2 with v = 0 the bottom row: ``to_blender_equirect`` resamples for a Cycles render.)
+Texture`` maps direction d to u = atan2(d_y, -d_x) / 2 pi (mod 1), v = atan2(d_z, hypot(d_x, d_y)) / pi +
+1/2 with v = 0 the bottom row (checked on Cycles renders of the background): ``to_blender_equirect``
+resamples for a Cycles render; at the same size it is a permutation of the texels.)
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ def to_blender_equirect(img: np.ndarray) -> np.ndarray:
     u = (np.arange(w) + 0.5) / w
     uu, vv = np.meshgrid(u, v)
     elev = (vv - 0.5) * np.pi
-    az = (uu - 0.5) * 2 * np.pi  # = atan2(d_y, -d_x)
+    az = uu * 2 * np.pi  # = atan2(d_y, -d_x) (mod 2 pi)
     dx, dy, dz = -np.cos(elev) * np.cos(az), np.cos(elev) * np.sin(az), np.sin(elev)
     th = np.arccos(np.clip(dz, -1, 1))
     ph = np.arctan2(dy, dx) % (2 * np.pi)

@@ -293,23 +293,65 @@ def fit_keys(sigma, quat, n_light=(10, 20), n_view=(5, 12), chunk=32):
     return out_w, out_s, out_c, out_r
 
 
-def fit_closure_maps(sigma_map, basis_map, **kw) -> ClosureMaps:
-    """Fit the closure mix for every texel of (H, W, 2) sigma and (H, W, 4) basis maps.
+KEY_QUANTUM = (0.005, 0.25, 1.0)  # canonical_keys' default: log sigma, tilt (deg), twist (deg)
+
+
+def fit_closure_texels(sigma, basis, cache: dict | None = None, progress=None, max_keys: int | None = None,
+                       info: dict | None = None, **kw):
+    """Fit the closure mix for N texels (sigma (N, 2), basis (N, 4)); returns (weights (N, 4, 4),
+    shape (N, 4), ggx_scale (N, 1)) float32.
 
     Texels are reduced to canonical quantised keys (``canonical_keys``) and each distinct key is fitted
-    once (``fit_keys``), so uniform regions cost one fit.
+    once (``fit_keys``, about 30 ms per key on one core). ``max_keys``: when the texels hold more
+    distinct keys, the quantum is doubled (all three steps) until they hold at most that many (a
+    measured map varies continuously: every texel would be its own key), and ``info["coarsening"]``
+    says by which factor. ``cache``: a dict of key -> fitted row kept by the caller (the brush keeps one
+    per material), so keys fitted before cost nothing. ``progress(done, total)`` is called between
+    chunks of keys (an import shows it).
     """
-    h, w = sigma_map.shape[:2]
-    keys = canonical_keys(sigma_map, basis_map)
-    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
-    sig, quat = _canonical_params(uniq)
-    wts, shp, scl, _ = fit_keys(sig, quat, **kw)
+    sigma = np.asarray(sigma, float).reshape(-1, 2)
+    basis = np.asarray(basis, float).reshape(-1, 4)
+    factor = 1
+    while True:
+        quantum = tuple(q * factor for q in KEY_QUANTUM)
+        keys = canonical_keys(sigma, basis, quantum)
+        uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+        if max_keys is None or len(uniq) <= max_keys or factor >= 4096:
+            break
+        factor *= 2
+    if info is not None:
+        info.update(keys=len(uniq), coarsening=factor)
     inverse = inverse.reshape(-1)
-    return ClosureMaps(
-        weights=wts[inverse].reshape(h, w, 4, 4).astype(np.float32),
-        shape=shp[inverse].reshape(h, w, 4).astype(np.float32),
-        ggx_scale=scl[inverse].reshape(h, w, 1).astype(np.float32),
-    )
+    k = len(uniq)
+    wts = np.zeros((k, 4, 4))
+    shp = np.zeros((k, 4))
+    scl = np.ones((k, 1))
+    tuples = [tuple(row) for row in uniq.tolist()]
+    todo = [i for i, t in enumerate(tuples) if cache is None or t not in cache]
+    for i, t in enumerate(tuples):
+        if cache is not None and t in cache:
+            wts[i], shp[i], scl[i] = cache[t]
+    step = max(kw.pop("chunk", 32), 1)
+    for c0 in range(0, len(todo), step):
+        idx = todo[c0:c0 + step]
+        sig, quat = _canonical_params(uniq[idx])
+        w, s_, c, _ = fit_keys(sig, quat, chunk=step, **kw)
+        wts[idx], shp[idx], scl[idx] = w, s_, c
+        if cache is not None:
+            for j, i in enumerate(idx):
+                cache[tuples[i]] = (w[j], s_[j], c[j])
+        if progress is not None:
+            progress(min(c0 + step, len(todo)), len(todo))
+    return (wts[inverse].astype(np.float32), shp[inverse].astype(np.float32), scl[inverse].astype(np.float32))
+
+
+def fit_closure_maps(sigma_map, basis_map, cache: dict | None = None, progress=None, **kw) -> ClosureMaps:
+    """Fit the closure mix for every texel of (H, W, 2) sigma and (H, W, 4) basis maps
+    (``fit_closure_texels``: each distinct texel geometry once, so uniform regions cost one fit;
+    ``max_keys`` and ``info`` as there)."""
+    h, w = sigma_map.shape[:2]
+    wts, shp, scl = fit_closure_texels(sigma_map, basis_map, cache=cache, progress=progress, **kw)
+    return ClosureMaps(weights=wts.reshape(h, w, 4, 4), shape=shp.reshape(h, w, 4), ggx_scale=scl.reshape(h, w, 1))
 
 
 CLOSURE_FILES = ("closure_w_diffuse.exr", "closure_w_sheen.exr", "closure_w_velvet.exr", "closure_w_ggx.exr")
