@@ -86,8 +86,49 @@ def closure_accuracy() -> dict:
             "fit_seconds_8_single_texel_fits": fit_s}
 
 
+HDRI_VIEWS = (3, 4)  # cosine-stratified view set of the Cycles HDRI renders (theta rings, azimuths)
+
+
+def cycles_hdri_accuracy(samples: int = 64, views: tuple[int, int] = HDRI_VIEWS) -> dict:
+    """The fitted closures rendered by Cycles (the OSL shader reading the closure images, world light
+    only) under each procedural HDRI, a flat patch seen along cosine-stratified views with an
+    orthographic camera: relative error median / p90 (over views and RGB) against eq. 3.9 and against
+    the numpy closure model (``closure_fit.closure_eval``), both as quadratures over the same
+    environment. Per flake type and fibre tilt (azimuth 40 degrees), k_d/k_s as above."""
+    import os
+    import tempfile
+
+    _enable_addon()
+    from ..addon.fabric.presets import tilted_quat
+    from ..addon.fabric.verify import render_hdri_patch_vs_core
+    from ..core.fabric import closure_accuracy as A
+    from ..core.fabric.closure_fit import hemisphere_grid
+
+    wo = hemisphere_grid(*views, offset=0.125)
+    out: dict = {}
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for env_name, env in (("sky", A.sky_hdri()), ("interior", A.interior_hdri())):
+            path = os.path.join(tmp, f"{env_name}.exr")
+            for label, sigma in FLAKES:
+                for tilt in TILTS:
+                    rgb, ref, model = render_hdri_patch_vs_core(
+                        env, path, wo, kd=KD, ks=KS, sigma=sigma, quat=tilted_quat(tilt, 40.0), samples=samples
+                    )
+                    out[f"hdri_{env_name}/{label}/tilt_{int(tilt)}"] = {
+                        "vs_eq_3_9": A.rel_stats(rgb, ref),
+                        "vs_numpy_closures": A.rel_stats(rgb, model),
+                        "numpy_closures_vs_eq_3_9": A.rel_stats(model, ref),
+                    }
+    worst = {k: {m: max(c[k][m] for c in out.values()) for m in ("median", "p90")}
+             for k in ("vs_eq_3_9", "vs_numpy_closures")}
+    return {"cases": out, "worst": worst, "views": len(wo), "samples": samples, "pixels_per_view": 64,
+            "targets_vs_eq_3_9": {"median": 0.05, "p90": 0.10}, "seconds": time.perf_counter() - start}
+
+
 def fabric_shader() -> dict:
     numpy_part = closure_accuracy()
+    cycles_hdri = cycles_hdri_accuracy()
     _enable_addon()
     from ..addon.fabric.presets import tilted_quat
     from ..addon.fabric.verify import render_patch_vs_core
@@ -97,19 +138,27 @@ def fabric_shader() -> dict:
         rgb, ref, mask = render_patch_vs_core(sigma=sigma, quat=tilted_quat(tilt, az), view=view, lamp_position=lamp)
         rel.append((np.abs(rgb[mask] - ref[mask]) / ref[mask]).ravel())
     rel = np.concatenate(rel)
-    closure = {}
-    for label, sigma in (("surface_like_sigma_0.3_0.8", (0.3, 0.8)), ("fibre_like_sigma_2.5_2.5", (2.5, 2.5))):
-        per_tilt = {}
+    closure, fitted = {}, {}
+    for label, sigma in FLAKES:
+        per_tilt, per_tilt_fit = {}, {}
         for tilt in TILTS:
             rgb, ref, mask = render_patch_vs_core(sigma=sigma, quat=tilted_quat(tilt, 40.0), fast_preview=True)
             per_tilt[f"tilt_{int(tilt)}"] = float(np.median(np.abs(rgb[mask] - ref[mask]) / ref[mask]))
+            rgb, ref, mask = render_patch_vs_core(sigma=sigma, quat=tilted_quat(tilt, 40.0), fast_preview=True,
+                                                  fitted_closures=True)
+            rel_fit = np.abs(rgb[mask] - ref[mask]) / ref[mask]
+            per_tilt_fit[f"tilt_{int(tilt)}"] = {"median": float(np.median(rel_fit)),
+                                                 "p90": float(np.percentile(rel_fit, 90))}
         closure[label] = per_tilt
+        fitted[label] = per_tilt_fit
     return {
         "median_rel_err": float(np.median(rel)),
         "p99_rel_err": float(np.percentile(rel, 99)),
         "closure_approx_median_rel_err": closure,
+        "fitted_closures_fast_preview_rel_err": fitted,
         "pixels": int(rel.size),
         "closure_numpy": numpy_part,
+        "closure_cycles_hdri": cycles_hdri,
     }
 
 
@@ -129,7 +178,14 @@ def fabric_brush_viewport(size: int = 2048, points: int = 200, repeats: int = 3)
         basis=np.tile([1.0, 0.0, 0.0, 0.0], (size, size, 1)),
     )
     bpy.ops.wm.read_homefile(use_empty=True)
-    session = BrushSession(maps_to_images(maps, "Bench"))
+    from ..addon.fabric.maps import closure_maps_to_images
+    from ..core.fabric.closure_fit import ClosureMaps, fit_closure_maps
+
+    one = fit_closure_maps(maps.sigma[:1, :1], maps.basis[:1, :1])  # uniform map: one geometry
+    cm = ClosureMaps(*(np.ascontiguousarray(np.broadcast_to(a, (size, size) + a.shape[2:]))
+                       for a in (one.weights, one.shape, one.ggx_scale)))
+    session = BrushSession(maps_to_images(maps, "Bench"), closure_maps_to_images(cm, "Bench"))
+    refit_s, refit_texels = [], []
     t = np.linspace(0.0, 1.0, points)
     uv = np.stack([0.1 + 0.8 * t, 0.5 + 0.3 * np.sin(6.0 * t)], axis=-1) + rng.normal(scale=1e-4, size=(points, 2))
     timings = []
@@ -142,6 +198,10 @@ def fabric_brush_viewport(size: int = 2048, points: int = 200, repeats: int = 3)
                 session.segment(a, b, settings)
                 session.flush()
                 timings.append(time.perf_counter() - start)
+            refit_texels.append(int(session.stale.sum()))
+            start = time.perf_counter()
+            session.refit_closures()  # what end_stroke does first
+            refit_s.append(time.perf_counter() - start)
             session.end_stroke()
     ms = 1000.0 * np.asarray(timings)
     return {
@@ -149,11 +209,15 @@ def fabric_brush_viewport(size: int = 2048, points: int = 200, repeats: int = 3)
         "p95_ms_per_update": float(np.percentile(ms, 95)),
         "map_size": size,
         "segments": len(timings),
+        "closures": "marked stale per segment, refitted at the stroke's end (too slow per segment)",
+        "stroke_end_refit_s": [round(t, 3) for t in refit_s],
+        "stroke_end_refit_texels": refit_texels,
     }
 
 
 BENCHMARKS = {
     "fabric-shader": fabric_shader,
     "fabric-closure-accuracy": closure_accuracy,
+    "fabric-closure-hdri": cycles_hdri_accuracy,
     "fabric-brush-viewport": fabric_brush_viewport,
 }

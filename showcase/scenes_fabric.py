@@ -10,7 +10,7 @@ import numpy as np
 
 from ..addon.fabric.brushing import BrushSession, BrushSettings
 from ..addon.fabric.maps import load_fit_folder, maps_to_images
-from ..addon.fabric.material import create_fabric_material, sync_fabric_lamps
+from ..addon.fabric.material import create_fabric_material, fit_closure_images, sync_fabric_lamps
 from ..core.fabric.btf_io import save_btf
 from ..core.fabric.parameter_maps import make_maps
 from ..core.fabric.preset_maps import preset_maps, tilted_quat
@@ -27,7 +27,8 @@ def _preset_maps(preset: str, size: int = MAP_SIZE, seed: int = 0):
 
 
 def _mapped_material(maps, name, scene, strokes=(), btf_frame=False):
-    """A mapped fabric material; ``strokes``: list of (uv points, BrushSettings) brushed into it."""
+    """A mapped fabric material with its fitted closures; ``strokes``: list of (uv points, BrushSettings)
+    brushed into it."""
     images = maps_to_images(maps, name, btf_frame=btf_frame)
     if strokes:
         session = BrushSession(images)
@@ -36,7 +37,9 @@ def _mapped_material(maps, name, scene, strokes=(), btf_frame=False):
             for a, b in zip(points[:-1], points[1:], strict=True):
                 session.segment(a, b, settings)
             session.end_stroke()  # uploads and packs
-    return create_fabric_material(name, maps=images, scene=scene)
+        maps = session.maps()
+    closures = fit_closure_images(maps, name)
+    return create_fabric_material(name, maps=images, scene=scene, closures=closures)
 
 
 def _wear(obj, mat):

@@ -7,6 +7,13 @@ copies and uploads the changed images once (``foreach_set``), so an update of a 
 costs a few milliseconds plus the upload. Every stroke records the windows it overwrote, so
 :meth:`BrushSession.undo_stroke` restores the maps exactly. The sessions of this Blender session are kept
 by material name (:func:`session_for`); the save handler packs them, loading another file drops them.
+
+Fitted closure maps (what world and indirect light see, ``core.fabric.closure_fit``) are not refitted
+per segment: a refit costs about 30 ms per distinct fibre geometry, and one combing segment creates
+tens to hundreds of them, far over the 100 ms budget of an update. Segments that change sigma or the
+basis mark their texels stale; :meth:`BrushSession.end_stroke` refits the stale texels (each distinct
+geometry once, remembered for the session) and the stroke's undo restores the closures as well.
+Colour strokes (k_d, k_s) leave the closures as they are: the fit is of the k_s = 1 term.
 """
 
 from __future__ import annotations
@@ -17,12 +24,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...core.fabric import brushing as core_brush
+from ...core.fabric.closure_fit import fit_closure_texels
 from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps, load_params
-from .maps import btf_quat_to_mesh
-from .material import material_map_images
+from .maps import CLOSURE_CHANNELS, CLOSURE_KEYS, btf_quat_to_mesh
+from .material import material_closure_images, material_map_images
 
 MODES = ("COMB", "RECOLOR", "SMOOTH", "ANISOTROPY", "DATA_DRIVEN")
 MAX_UNDO = 32
+REFIT_KEY_BUDGET = 128  # distinct fibre geometries refitted at a stroke's end (~30 ms each, cached)
 
 
 @dataclass
@@ -41,12 +50,13 @@ class BrushSettings:
 @dataclass
 class _Stroke:
     saved: list = field(default_factory=list)  # (key, r0, r1, c0, c1, old array)
+    closures: tuple | None = None  # (rows, cols, {key: old closure values}) of the refit at its end
 
 
 class BrushSession:
     """The maps of one material, ready for strokes. ``images``: kd/ks/sigma/basis Blender images."""
 
-    def __init__(self, images: dict):
+    def __init__(self, images: dict, closures: dict | None = None):
         missing = [k for k in MAP_FILES if k not in images]
         if missing:
             raise ValueError(f"the material has no {', '.join(missing)} map(s): brushing edits parameter maps")
@@ -66,6 +76,16 @@ class BrushSession:
             if key == "basis":
                 top = btf_quat_to_mesh(top)  # the reflection is its own inverse: mesh -> BTF frame
             self.top[key] = top
+        self.closures: dict = {}
+        self.closure_buffers: dict[str, np.ndarray] = {}
+        if closures and set(closures) == set(CLOSURE_KEYS) and all(tuple(closures[k].size) == (w, h) for k in closures):
+            self.closures = {k: closures[k] for k in CLOSURE_KEYS}
+            for key in CLOSURE_KEYS:
+                buf = np.empty(h * w * 4, dtype=np.float32)
+                self.closures[key].pixels.foreach_get(buf)
+                self.closure_buffers[key] = buf.reshape(h, w, 4)
+        self.stale = np.zeros((h, w), dtype=bool)  # texels whose closures need a refit (rows from the top)
+        self.fit_cache: dict = {}  # canonical fibre geometry -> fitted closure parameters
         self.undo_stack: list[_Stroke] = []
         self._stroke: _Stroke | None = None
         self._dirty: set[str] = set()  # changed, not uploaded to the images yet
@@ -86,7 +106,11 @@ class BrushSession:
         self._stroke = _Stroke()
 
     def end_stroke(self) -> None:
-        """Close the stroke (one undo step), upload and pack what it changed: saving is safe after it."""
+        """Close the stroke (one undo step), refit the closures of the texels whose fibres it changed,
+        upload and pack what it changed: saving is safe after it."""
+        refit = self.refit_closures()
+        if self._stroke is not None and refit is not None:
+            self._stroke.closures = refit
         if self._stroke is not None and self._stroke.saved:
             self.undo_stack.append(self._stroke)
             del self.undo_stack[:-MAX_UNDO]
@@ -129,9 +153,39 @@ class BrushSession:
                 continue
             if self._stroke is not None:
                 self._stroke.saved.append((key, r0, r1, c0, c1, old_sub.copy()))
-            self._write(key, r0, r1, c0, c1, np.asarray(new_sub, dtype=np.float32), c)
+            new_sub = np.asarray(new_sub, dtype=np.float32)
+            if key in ("sigma", "basis") and self.closures:
+                self.stale[r0:r1, c0:c1] |= np.any(new_sub != old_sub, axis=-1)
+            self._write(key, r0, r1, c0, c1, new_sub, c)
             changed = True
         return changed
+
+    @property
+    def closures_stale(self) -> bool:
+        """Whether some texels' fitted closures lag behind their painted sigma / basis."""
+        return bool(self.closures) and bool(self.stale.any())
+
+    def refit_closures(self):
+        """Refit the closures of the stale texels now; returns (rows, cols, old values) or None."""
+        if not self.closures_stale:
+            return None
+        rows, cols = np.nonzero(self.stale)
+        self.stale[rows, cols] = False
+        wts, shp, scl = fit_closure_texels(self.top["sigma"][rows, cols], self.top["basis"][rows, cols],
+                                           cache=self.fit_cache, max_keys=REFIT_KEY_BUDGET)
+        new = {key: wts[:, j, :] for j, key in enumerate(CLOSURE_KEYS[:4])}
+        new["shape"], new["ggx_scale"] = shp, scl
+        old = {key: self._closure_write(key, rows, cols, new[key]) for key in CLOSURE_KEYS}
+        return rows, cols, old
+
+    def _closure_write(self, key, rows, cols, values):
+        """Write closure values of texels (rows from the top); returns the values they replace."""
+        c = CLOSURE_CHANNELS[key]
+        brow = self.height - 1 - rows
+        old = self.closure_buffers[key][brow, cols, :c].copy()
+        self.closure_buffers[key][brow, cols, :c] = values
+        self._dirty.add("fit " + key)
+        return old
 
     def _window(self, p0, p1, radius, settings):
         lo = np.floor(np.minimum(p0, p1) - radius - 1).astype(int)
@@ -157,6 +211,10 @@ class BrushSession:
         stroke = self.undo_stack.pop()
         for key, r0, r1, c0, c1, old in reversed(stroke.saved):
             self._write(key, r0, r1, c0, c1, old, MAP_FILES[key][1])
+        if stroke.closures is not None:
+            rows, cols, old = stroke.closures
+            for key in CLOSURE_KEYS:
+                self._closure_write(key, rows, cols, old[key])
         self.flush()
         self.pack()
         return True
@@ -164,8 +222,8 @@ class BrushSession:
     def flush(self) -> None:
         """Upload the changed images to Blender (what the viewport and renders see)."""
         for key in sorted(self._dirty):
-            image = self.images[key]
-            image.pixels.foreach_set(self.buffers[key].ravel())
+            image = self._image(key)
+            image.pixels.foreach_set(self._buffer(key).ravel())
             image.update()
         self._unpacked |= self._dirty
         self._dirty.clear()
@@ -174,8 +232,14 @@ class BrushSession:
         """Store the uploaded pixels of the changed maps in the .blend (packed images): what save,
         autosave and undo keep. About 0.15 s per 2048 x 2048 map, so once per stroke, not per segment."""
         for key in sorted(self._unpacked):
-            self.images[key].pack()
+            self._image(key).pack()
         self._unpacked.clear()
+
+    def _image(self, key):
+        return self.closures[key[4:]] if key.startswith("fit ") else self.images[key]
+
+    def _buffer(self, key):
+        return self.closure_buffers[key[4:]] if key.startswith("fit ") else self.buffers[key]
 
 
 _SESSIONS: dict[str, BrushSession] = {}  # material name -> its brush session, for this Blender session
@@ -184,14 +248,15 @@ _SESSIONS: dict[str, BrushSession] = {}  # material name -> its brush session, f
 def session_for(mat) -> BrushSession:
     """The brush session of ``mat`` (rebuilt when its images changed)."""
     images = material_map_images(mat)
+    closures = material_closure_images(mat)
     session = _SESSIONS.get(mat.name)
     if session is not None:
         same = all(session.images.get(k) == images.get(k) for k in session.images) and all(
             tuple(images[k].size) == (session.width, session.height) for k in images
-        )
+        ) and all(session.closures.get(k) == closures.get(k) for k in set(session.closures) | set(closures))
         if same:
             return session
-    session = BrushSession(images)
+    session = BrushSession(images, closures)
     _SESSIONS[mat.name] = session
     return session
 

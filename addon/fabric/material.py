@@ -20,15 +20,17 @@ import os
 
 import bpy
 
+from ...core.fabric.closure_fit import CLOSURE_FILES, fit_closure_maps, load_closure_maps
 from ...render import load_osl_script
 from ..common import add_eevee_fallback, group_material, group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
-from .maps import load_fit_folder, maps_to_images
+from .maps import CLOSURE_KEYS, closure_maps_to_images, load_fit_folder, maps_to_images
 
 GROUP_NAME = "SGGX Fabric"
 VIEWPORT_OUTPUT = "Viewport"
 SCRIPT_NODE = "SGGX Exact"
 MARKER = "material_structures_fabric"  # custom property on groups/materials made here
+CLOSURE_NODE_PREFIX = "fit_"  # image nodes of the fitted closure maps (map_* are the parameter maps)
 
 # (socket name, socket type, default, min, max); the OSL input of the same name takes it.
 GROUP_INPUTS = [
@@ -44,7 +46,32 @@ GROUP_INPUTS = [
     ("Anisotropy", "NodeSocketFloat", 0.0, 0.0, 0.95),
     ("FastPreview", "NodeSocketInt", 0, 0, 1),
 ]
+# Fitted closures (issue 38): linked from the closure images, switched on by UseFittedClosures.
+FIT_INPUTS = [
+    ("UseFittedClosures", "NodeSocketInt", 0, 0, 1),
+    ("FitDiffuse", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
+    ("FitDiffuseA", "NodeSocketFloat", 0.0, 0.0, 1e4),
+    ("FitSheen", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
+    ("FitSheenA", "NodeSocketFloat", 0.0, 0.0, 1e4),
+    ("FitVelvet", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
+    ("FitVelvetA", "NodeSocketFloat", 0.0, 0.0, 1e4),
+    ("FitGGX", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
+    ("FitGGXA", "NodeSocketFloat", 0.0, 0.0, 1e4),
+    ("FitShape", "NodeSocketColor", (1.0, 0.4, 0.0, 1.0), None, None),
+    ("FitShapeA", "NodeSocketFloat", 0.0, 0.0, 1.0),
+    ("FitGGXScale", "NodeSocketFloat", 1.0, 0.0, 10.0),
+]
+GROUP_INPUTS = GROUP_INPUTS + FIT_INPUTS
 SHADER_INPUTS = [name for name, *_ in GROUP_INPUTS] + ["Tangent"]
+# closure image key -> (group input of its Color output, group input of its Alpha output)
+CLOSURE_SOCKETS = {
+    "diffuse": ("FitDiffuse", "FitDiffuseA"),
+    "sheen": ("FitSheen", "FitSheenA"),
+    "velvet": ("FitVelvet", "FitVelvetA"),
+    "ggx": ("FitGGX", "FitGGXA"),
+    "shape": ("FitShape", "FitShapeA"),
+    "ggx_scale": ("FitGGXScale", None),
+}
 
 
 def _load_script(tree, scene):
@@ -58,14 +85,12 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     group = bpy.data.node_groups.get(GROUP_NAME)
     if group is not None and group.get(MARKER):
         ensure_viewport_look(group)
+        ensure_fit_inputs(group, scene)
         return group
     group = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
     group[MARKER] = 1
-    for name, socket_type, default, lo, hi in GROUP_INPUTS:
-        sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
-        sock.default_value = default
-        if lo is not None:
-            sock.min_value, sock.max_value = lo, hi
+    for spec in GROUP_INPUTS:
+        _new_input(group, *spec)
     group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
     group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
     nodes, links = group.nodes, group.links
@@ -85,6 +110,34 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     add.location, gout.location = (150, 0), (350, 0)
     _build_viewport_look(group)
     return group
+
+
+def _new_input(group, name, socket_type, default, lo, hi):
+    sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
+    sock.default_value = default
+    if lo is not None:
+        sock.min_value, sock.max_value = lo, hi
+    return sock
+
+
+def ensure_fit_inputs(group, scene=None) -> None:
+    """Give a group from an older file the fitted-closure inputs (off until closure maps are linked)."""
+    have = {item.name for item in group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
+    missing = [spec for spec in FIT_INPUTS if spec[0] not in have]
+    if not missing:
+        return
+    script = next((n for n in group.nodes if n.type == "SCRIPT" and "Lamp1Type" in n.inputs), None)
+    if script is not None and any(spec[0] not in script.inputs for spec in missing):
+        from ...render.osl import compile_script_node, shader_text
+
+        if script.mode == "INTERNAL" and script.script is not None:
+            shader_text("ms_sggx_fabric.osl")  # refresh the embedded text to the shipped shader
+        compile_script_node(script, scene)
+    gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
+    for spec in missing:
+        _new_input(group, *spec)
+        if script is not None and spec[0] in script.inputs:
+            group.links.new(gin.outputs[spec[0]], script.inputs[spec[0]])
 
 
 def ensure_viewport_look(group) -> None:
@@ -189,12 +242,14 @@ def create_fabric_material(
     quat=(1.0, 0.0, 0.0, 0.0),
     maps: dict | None = None,
     scene=None,
+    closures: dict | None = None,
 ) -> bpy.types.Material:
     """A material on the SGGX Fabric group, from constants or from images.
 
     ``maps`` may hold Blender images under ``"kd"``, ``"ks"``, ``"sigma"`` (R = sigma_x,
     G = sigma_y) and ``"basis"`` (RGBA = quaternion w, x, y, z); each is read with closest-texel
-    sampling at the UV map and overrides the constant.
+    sampling at the UV map and overrides the constant. ``closures``: the six fitted closure images
+    (``maps.closure_maps_to_images``, keys ``maps.CLOSURE_KEYS``) that world and indirect light see.
     """
     scene = scene or bpy.context.scene
     group = ensure_fabric_group(scene)
@@ -208,7 +263,81 @@ def create_fabric_material(
     add_eevee_fallback(mat, out_cycles, gnode.outputs[VIEWPORT_OUTPUT], location=(400, -200))
     if maps:
         _link_maps(mat.node_tree, gnode, maps)
+    if closures:
+        link_closure_images(mat, closures)
     return mat
+
+
+def link_closure_images(mat, closures: dict) -> None:
+    """Read the fitted closure images (closest texel at the UV map) into the group and switch the shader
+    to them; replaces images linked before."""
+    tree = mat.node_tree
+    gnode = fabric_group_node(mat)
+    old = material_closure_images(mat)
+    if set(old) == set(CLOSURE_KEYS):
+        for node in tree.nodes:
+            if node.type == "TEX_IMAGE" and node.name.startswith(CLOSURE_NODE_PREFIX):
+                node.image = closures[node.name[len(CLOSURE_NODE_PREFIX):]]
+        gnode.inputs["UseFittedClosures"].default_value = 1
+        return
+    uv = next((n for n in tree.nodes if n.type == "UVMAP"), None) or tree.nodes.new("ShaderNodeUVMap")
+    y = -900
+    for key in CLOSURE_KEYS:
+        tex = tree.nodes.new("ShaderNodeTexImage")
+        tex.name = tex.label = CLOSURE_NODE_PREFIX + key
+        tex.image = closures[key]
+        tex.interpolation = "Closest"
+        tex.extension = "EXTEND"
+        tex.location = (-650, y)
+        tex.hide = True
+        y -= 60
+        tree.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+        color_in, alpha_in = CLOSURE_SOCKETS[key]
+        if alpha_in is None:  # one channel: R
+            sep = tree.nodes.new("ShaderNodeSeparateColor")
+            sep.location = (-400, y + 60)
+            sep.hide = True
+            tree.links.new(tex.outputs["Color"], sep.inputs["Color"])
+            tree.links.new(sep.outputs[0], gnode.inputs[color_in])
+        else:
+            tree.links.new(tex.outputs["Color"], gnode.inputs[color_in])
+            tree.links.new(tex.outputs["Alpha"], gnode.inputs[alpha_in])
+    gnode.inputs["UseFittedClosures"].default_value = 1
+
+
+def material_closure_images(mat) -> dict:
+    """The fitted closure images a fabric material reads, by key (empty when it has none)."""
+    out = {}
+    for node in mat.node_tree.nodes:
+        if node.type == "TEX_IMAGE" and node.name.startswith(CLOSURE_NODE_PREFIX) and node.image is not None:
+            out[node.name[len(CLOSURE_NODE_PREFIX):]] = node.image
+    return out
+
+
+FIT_KEY_BUDGET = 512  # distinct fibre geometries fitted per map (about 30 ms each): an import stays < ~20 s
+
+
+def fit_closure_images(maps, prefix: str, progress=None, cache: dict | None = None, info: dict | None = None) -> dict:
+    """Fit the closure mix to core ``maps`` (``closure_fit.fit_closure_maps``) and make its images.
+
+    Each distinct fibre geometry is fitted once: a 256 x 256 preset takes well under a second. Maps
+    with more than ``FIT_KEY_BUDGET`` distinct geometries (a measured fit varies per texel) are fitted
+    on a coarser grid of geometries (``info["coarsening"]`` > 1). ``progress(done, total)`` reports the
+    geometries fitted."""
+    cm = fit_closure_maps(maps.sigma, maps.basis, cache=cache, progress=progress, max_keys=FIT_KEY_BUDGET, info=info)
+    return closure_maps_to_images(cm, prefix)
+
+
+def _folder_closures(params_dir: str, shape):
+    """Closure maps saved beside a fit folder's maps (the fitter writes them), if complete and of its size."""
+    names = [*CLOSURE_FILES, "closure_shape.exr", "closure_ggx_scale.exr"]
+    if not all(os.path.isfile(os.path.join(params_dir, n)) for n in names):
+        return None
+    try:
+        cm = load_closure_maps(params_dir)
+    except (OSError, ValueError, KeyError):
+        return None
+    return cm if cm.shape.shape[:2] == tuple(shape) else None
 
 
 def _link_maps(tree, gnode, maps: dict) -> None:
@@ -241,12 +370,17 @@ def _link_maps(tree, gnode, maps: dict) -> None:
             raise ValueError(f"unknown fabric map {key!r}")
 
 
-def import_fit_material(params_dir: str, scene=None):
-    """Material from a fit folder; images are packed into the .blend."""
+def import_fit_material(params_dir: str, scene=None, progress=None):
+    """Material from a fit folder; images are packed into the .blend. The fitted closure maps come from
+    the folder when the fitter wrote them there, else they are fitted now (``progress`` as in
+    :func:`fit_closure_images`)."""
     maps = load_fit_folder(params_dir)
     name = os.path.basename(os.path.normpath(params_dir)) or "fit"
     images = maps_to_images(maps, f"SGGX {name}")
-    mat = create_fabric_material(f"Fabric {name}", maps=images, scene=scene)
+    cm = _folder_closures(params_dir, maps.shape)
+    closures = (closure_maps_to_images(cm, f"SGGX {name}") if cm is not None
+                else fit_closure_images(maps, f"SGGX {name}", progress=progress))
+    mat = create_fabric_material(f"Fabric {name}", maps=images, scene=scene, closures=closures)
     mat["material_structures_source"] = params_dir
     return mat
 

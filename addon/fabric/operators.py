@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import bpy
 
+from ...core.fabric.closure_fit import save_closure_maps
 from ...core.fabric.parameter_maps import save_params
 from ..common import (
     AddGroupNode,
@@ -25,14 +26,16 @@ from ..common import (
     stroke_uvs,
 )
 from .brushing import BrushSettings, load_brush_states, open_session, session_for
-from .maps import images_to_maps, maps_to_images
+from .maps import CLOSURE_KEYS, images_to_closure_maps, images_to_maps, maps_to_images
 from .material import (
     GROUP_NAME,
     MARKER,
     create_fabric_material,
     ensure_fabric_group,
     fabric_material,
+    fit_closure_images,
     import_fit_material,
+    material_closure_images,
     material_map_images,
     sync_fabric_lamps,
 )
@@ -53,8 +56,10 @@ class MS_OT_fabric_new_material(bpy.types.Operator):
         if not require_uv_mesh(self, obj):
             return {"CANCELLED"}
         name = f"Fabric {self.preset.title()}"
-        images = maps_to_images(preset_maps(self.preset), name, btf_frame=False)  # preset bases: mesh frame
-        mat = create_fabric_material(name, maps=images, scene=context.scene)
+        maps = preset_maps(self.preset)
+        images = maps_to_images(maps, name, btf_frame=False)  # preset bases: mesh frame
+        closures = fit_closure_images(maps, name)  # 256 x 256 presets: under half a second
+        mat = create_fabric_material(name, maps=images, scene=context.scene, closures=closures)
         assign_material(obj, mat)
         sync_fabric_lamps(context.scene)
         return {"FINISHED"}
@@ -73,11 +78,23 @@ class MS_OT_fabric_import_maps(FileBrowser, bpy.types.Operator):
         obj = context.active_object
         if not require_uv_mesh(self, obj):
             return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+
+        def progress(done, total):  # fitting the closures of the distinct fibre geometries
+            wm.progress_update(int(100 * done / max(total, 1)))
+            if context.workspace is not None:
+                context.workspace.status_text_set(f"Fabric: fitting world-light closures {done}/{total}")
+
         try:
-            mat = import_fit_material(bpy.path.abspath(self.directory), context.scene)
+            mat = import_fit_material(bpy.path.abspath(self.directory), context.scene, progress=progress)
         except (OSError, ValueError) as exc:
             self.report({"ERROR"}, f"Cannot import fabric maps: {exc}")
             return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+            if context.workspace is not None:
+                context.workspace.status_text_set(None)
         assign_material(obj, mat)
         sync_fabric_lamps(context.scene)
         self.report({"INFO"}, f"Fabric maps imported ({mat.name})")
@@ -102,7 +119,11 @@ class MS_OT_fabric_save_maps(FileBrowser, bpy.types.Operator):
         mat = getattr(context, "material", None) or context.active_object.active_material
         try:
             maps = images_to_maps(material_map_images(mat))
-            save_params(bpy.path.abspath(self.directory), maps, {"source": "Blender: " + mat.name})
+            folder = bpy.path.abspath(self.directory)
+            save_params(folder, maps, {"source": "Blender: " + mat.name})
+            closures = material_closure_images(mat)
+            if set(closures) == set(CLOSURE_KEYS):
+                save_closure_maps(folder, images_to_closure_maps(closures))
         except (OSError, ValueError) as exc:
             self.report({"ERROR"}, f"Cannot save maps: {exc}")
             return {"CANCELLED"}

@@ -24,10 +24,16 @@ from ...render import (
     view_direction,
 )
 from .maps import maps_to_images
-from .material import create_fabric_material, fabric_group_node, sync_fabric_lamps
+from .material import (
+    create_fabric_material,
+    fabric_group_node,
+    fit_closure_images,
+    link_closure_images,
+    sync_fabric_lamps,
+)
 from .presets import tilted_quat
 
-__all__ = ["render_maps_vs_core", "render_patch_vs_core", "tilted_quat"]
+__all__ = ["hdri_world", "render_hdri_patch_vs_core", "render_maps_vs_core", "render_patch_vs_core", "tilted_quat"]
 
 
 def render_patch_vs_core(
@@ -45,15 +51,24 @@ def render_patch_vs_core(
     samples=1,
     fast_preview=False,
     seed=0,
+    fitted_closures=False,
 ):
     """Render the patch and return ``(rendered_rgb, reference_rgb, mask)`` for its pixels.
 
-    ``view`` = (theta, phi) of the direction towards the camera in degrees.
+    ``view`` = (theta, phi) of the direction towards the camera in degrees. ``fitted_closures``: the
+    material reads its fitted closure maps (1 x 1 images) instead of the fixed closure approximation
+    (what Fast Preview and world light see).
     """
     scene = reset_scene()
     configure_cycles(scene, resolution=resolution, samples=samples, seed=seed)
     dark_world(scene)
     mat = create_fabric_material("Patch", kd=kd, ks=ks, sigma=sigma, quat=quat, scene=scene)
+    if fitted_closures:
+        from ...core.fabric.parameter_maps import make_maps
+
+        one = make_maps(kd=np.reshape(kd, (1, 1, 3)), ks=np.reshape(ks, (1, 1, 3)), sigma=np.reshape(sigma, (1, 1, 2)),
+                        basis=np.reshape(quat, (1, 1, 4)))
+        link_closure_images(mat, fit_closure_images(one, "Patch"))
     fabric_group_node(mat).inputs["FastPreview"].default_value = 1 if fast_preview else 0
     plane = add_textured_plane(scene, 1.0, mat)
     wo = view_direction(*view)
@@ -159,3 +174,85 @@ def render_maps_vs_core(
     )
     ref = f * np.maximum(wi[..., 2:3], 0.0) * lamp_power / (4.0 * math.pi) / dist2
     return rgb, ref, mask
+
+
+def hdri_world(scene, env, path: str):
+    """A world lit only by the environment ``env`` (core.fabric.closure_accuracy convention, (H, W, 3)),
+    written to ``path`` as an EXR in Blender's equirect layout and read through an Environment Texture
+    with closest-texel lookup (so Cycles integrates the same piecewise-constant radiance as the core
+    quadrature)."""
+    import bpy
+
+    from ...core.exr_io import write_exr
+    from ...core.fabric.closure_accuracy import to_blender_equirect
+
+    write_exr(path, to_blender_equirect(np.asarray(env, np.float32))[::-1])  # file row 0 = top
+    world = dark_world(scene, strength=1.0)
+    tree = world.node_tree
+    bg = next(n for n in tree.nodes if n.type == "BACKGROUND")
+    tex = tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(path, check_existing=False)
+    tex.image.colorspace_settings.name = "Non-Color"  # the stored floats are the radiance
+    tex.interpolation = "Closest"
+    tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    return world
+
+
+def hdri_references(env, views, kd, ks, sigma, quat, fit, supersample: int = 4):
+    """Numpy references for a flat patch under ``env`` seen along each of ``views`` (V, 3): eq. 3.9 and
+    the fitted closure model (``closure_fit.closure_eval``), both as the quadrature of f cos_i times the
+    environment's radiance over the upper hemisphere, the environment's texels split ``supersample``^2
+    times (it is piecewise constant, as the render reads it). Returns (eq39 (V, 3), closures (V, 3))."""
+    from ...core.fabric import closure_accuracy as A
+    from ...core.fabric.closure_fit import closure_eval
+
+    fine = np.repeat(np.repeat(np.asarray(env), supersample, axis=0), supersample, axis=1)
+    lights = A.env_lights(fine)
+    kd, ks, sigma, quat = (np.asarray(v, float) for v in (kd, ks, sigma, quat))
+    ref = A.env_radiance(A.reference_eval(kd, ks, sigma, quat), views, lights)
+    model = A.env_radiance(lambda wi, wo: closure_eval(wi, wo, kd, ks, sigma, quat, fit), views, lights)
+    return ref, model
+
+
+def render_hdri_patch_vs_core(
+    env,
+    env_path: str,
+    views,
+    kd=(0.05, 0.03, 0.02),
+    ks=(0.7, 0.4, 0.3),
+    sigma=(0.3, 0.8),
+    quat=(1.0, 0.0, 0.0, 0.0),
+    resolution=(8, 8),
+    samples=256,
+    seed=0,
+):
+    """A flat fabric patch with fitted closures (uniform 4 x 4 maps), lit only by the world ``env``,
+    rendered by Cycles along each view direction (V, 3) with an orthographic camera; every pixel of a
+    view sees the same radiance, so the mean over the patch's pixels is the view's value.
+
+    Returns ``(rendered (V, 3), eq39 (V, 3), closure_model (V, 3))``.
+    """
+    from ...core.fabric.closure_fit import fit_closure_maps
+    from ...core.fabric.parameter_maps import make_maps
+
+    scene = reset_scene()
+    configure_cycles(scene, resolution=resolution, samples=samples, seed=seed)
+    hdri_world(scene, env, env_path)
+    n = 4
+    maps = make_maps(kd=np.broadcast_to(kd, (n, n, 3)), ks=np.broadcast_to(ks, (n, n, 3)),
+                     sigma=np.broadcast_to(sigma, (n, n, 2)), basis=np.broadcast_to(quat, (n, n, 4)))
+    images = maps_to_images(maps, "HDRI patch", btf_frame=False)
+    closures = fit_closure_images(maps, "HDRI patch")
+    mat = create_fabric_material("HDRI Patch", maps=images, scene=scene, closures=closures)
+    add_textured_plane(scene, 1.0, mat)
+    cam = add_orthographic_camera(scene, ortho_scale=0.25)  # inside the patch for views up to 75 degrees
+    out = []
+    for wo in np.asarray(views, float):
+        if wo[2] < 0.26:
+            raise ValueError("views must be within 75 degrees of the normal (the patch fills the frame)")
+        look_from(cam, wo)
+        out.append(render_to_array(scene)[..., :3].reshape(-1, 3).mean(axis=0))
+    cm = fit_closure_maps(np.asarray(sigma, float)[None, None], np.asarray(quat, float)[None, None])
+    fit = (cm.weights[0, 0], cm.shape[0, 0], cm.ggx_scale[0, 0])
+    ref, model = hdri_references(env, np.asarray(views, float), kd, ks, sigma, quat, fit)
+    return np.asarray(out), ref, model

@@ -10,6 +10,23 @@ from material_structures.core.fabric import brushing as core_brush
 from material_structures.core.fabric.parameter_maps import make_maps, save_params
 
 
+@pytest.fixture(autouse=True)
+def _small_fit_budget(monkeypatch, addon_module):
+    """Random maps hold a distinct fibre geometry per texel: fit the closures on a coarse grid of them
+    (in the enabled extension's modules, which the operators run)."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module(f"{addon_module}.addon.fabric.material"), "FIT_KEY_BUDGET", 24)
+    monkeypatch.setattr(importlib.import_module(f"{addon_module}.addon.fabric.brushing"), "REFIT_KEY_BUDGET", 24)
+
+
+def _closures(obj):
+    from material_structures.addon.fabric.maps import images_to_closure_maps
+    from material_structures.addon.fabric.material import material_closure_images
+
+    return images_to_closure_maps(material_closure_images(obj.active_material))
+
+
 def _setup(tmp_path, h=48, w=64, seed=3):
     from material_structures import render as R
 
@@ -69,6 +86,38 @@ def test_replayed_comb_stroke_matches_core_and_undo_restores(addon_module, tmp_p
 
     assert bpy.ops.material_structures.fabric_brush_undo() == {"FINISHED"}
     np.testing.assert_array_equal(_current(obj).basis, before.basis)
+
+
+def test_comb_stroke_refits_the_closures_of_its_texels_and_undo_restores_them(addon_module, tmp_path):
+    from material_structures.core.fabric.closure_fit import fit_closure_texels
+
+    scene, obj, _ = _setup(tmp_path)
+    brush = scene.material_structures.fabric_brush
+    brush.mode, brush.radius, brush.strength, brush.fibre_length = "COMB", 0.06, 0.9, 1.5
+    before, cm_before = _current(obj), _closures(obj)
+    assert bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS)) == {"FINISHED"}
+    after, cm_after = _current(obj), _closures(obj)
+    changed = np.any(after.basis != before.basis, axis=-1)
+    assert changed.sum() > 50
+    # the stroke's texels hold the fit of their new geometry (the same key budget), the others are untouched
+    wts, shp, scl = fit_closure_texels(after.sigma[changed], after.basis[changed], max_keys=24)
+    np.testing.assert_allclose(cm_after.weights[changed], wts, atol=1e-6)
+    np.testing.assert_allclose(cm_after.shape[changed], shp, atol=1e-6)
+    np.testing.assert_allclose(cm_after.ggx_scale[changed], scl, atol=1e-6)
+    np.testing.assert_array_equal(cm_after.weights[~changed], cm_before.weights[~changed])
+    assert bpy.ops.material_structures.fabric_brush_undo() == {"FINISHED"}
+    cm_undone = _closures(obj)
+    np.testing.assert_array_equal(cm_undone.weights, cm_before.weights)
+    np.testing.assert_array_equal(cm_undone.shape, cm_before.shape)
+
+
+def test_recolor_stroke_keeps_the_closures(addon_module, tmp_path):
+    scene, obj, _ = _setup(tmp_path)
+    brush = scene.material_structures.fabric_brush
+    brush.mode, brush.radius, brush.recolor_diffuse = "RECOLOR", 0.08, True
+    cm_before = _closures(obj)
+    assert bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS)) == {"FINISHED"}
+    np.testing.assert_array_equal(_closures(obj).weights, cm_before.weights)
 
 
 def test_world_space_stroke_equals_uv_stroke(addon_module, tmp_path):

@@ -59,6 +59,47 @@ def test_new_material_from_preset(addon_module):
     assert targets == ["CYCLES", "EEVEE"]  # never pink in EEVEE
 
 
+def test_preset_material_carries_its_fitted_closures(addon_module):
+    from material_structures.addon.fabric.maps import CLOSURE_KEYS, images_to_closure_maps, images_to_maps
+    from material_structures.addon.fabric.material import (
+        fabric_group_node,
+        material_closure_images,
+        material_map_images,
+    )
+    from material_structures.core.fabric.closure_fit import fit_closure_maps
+
+    _, obj = _scene_with_plane()
+    assert bpy.ops.material_structures.fabric_new_material(preset="CORDUROY") == {"FINISHED"}
+    mat = obj.active_material
+    images = material_closure_images(mat)
+    assert sorted(images) == sorted(CLOSURE_KEYS)
+    assert all(img.packed_file is not None and img.colorspace_settings.name == "Non-Color" for img in images.values())
+    assert fabric_group_node(mat).inputs["UseFittedClosures"].default_value == 1
+    maps = images_to_maps(material_map_images(mat), btf_frame=False)
+    expect = fit_closure_maps(maps.sigma, maps.basis)
+    got = images_to_closure_maps(images)
+    np.testing.assert_allclose(got.weights, expect.weights, atol=1e-6)
+    np.testing.assert_allclose(got.shape, expect.shape, atol=1e-6)
+    np.testing.assert_allclose(got.ggx_scale, expect.ggx_scale, atol=1e-6)
+
+
+def test_import_reads_closures_the_fitter_saved_and_save_writes_them(addon_module, tmp_path):
+    from material_structures.addon.fabric.maps import images_to_closure_maps
+    from material_structures.addon.fabric.material import material_closure_images
+    from material_structures.core.fabric.closure_fit import ClosureMaps, load_closure_maps, save_closure_maps
+
+    _write_fit(tmp_path / "fit")
+    marked = ClosureMaps(weights=np.full((3, 4, 4, 4), 0.25, np.float32), shape=np.full((3, 4, 4), 0.5, np.float32),
+                         ggx_scale=np.full((3, 4, 1), 1.4, np.float32))
+    save_closure_maps(tmp_path / "fit", marked)
+    _, obj = _scene_with_plane()
+    assert bpy.ops.material_structures.fabric_import_maps(directory=str(tmp_path / "fit")) == {"FINISHED"}
+    got = images_to_closure_maps(material_closure_images(obj.active_material))
+    np.testing.assert_array_equal(got.weights, marked.weights)
+    assert bpy.ops.material_structures.fabric_save_maps(directory=str(tmp_path / "saved")) == {"FINISHED"}
+    np.testing.assert_array_equal(load_closure_maps(tmp_path / "saved").ggx_scale, marked.ggx_scale)
+
+
 def test_import_and_save_roundtrip(addon_module, tmp_path):
     maps = _write_fit(tmp_path / "fit")
     _, obj = _scene_with_plane()
@@ -68,6 +109,9 @@ def test_import_and_save_roundtrip(addon_module, tmp_path):
 
     images = material_map_images(mat)
     assert sorted(images) == ["basis", "kd", "ks", "sigma"]
+    from material_structures.addon.fabric.material import material_closure_images
+
+    assert len(material_closure_images(mat)) == 6  # fitted on import (no closure maps in the folder)
     assert all(img.packed_file is not None for img in images.values())  # saved inside the .blend
     assert bpy.ops.material_structures.fabric_save_maps(directory=str(tmp_path / "saved")) == {"FINISHED"}
     back = load_params(tmp_path / "saved")
