@@ -7,12 +7,17 @@ import os
 import sys
 import time
 
+from .checks import between
+
+WIDTH = 640  # the showcase's picture size; heights follow each scene's aspect
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="render the sample library into out/ with a contact sheet")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--only", nargs="*", default=None, help="render only these scenes / library materials")
-    p.add_argument("--scale", type=float, default=1.0, help="resolution scale factor")
+    p.add_argument("--width", type=between(64, 4096, int), default=WIDTH,
+                   help=f"image width in pixels (default {WIDTH})")
     p.set_defaults(func=run)
 
 
@@ -44,13 +49,13 @@ def run(args: argparse.Namespace) -> int:
         slug = "".join(c.lower() if c.isalnum() else "-" for c in name).strip("-")
         exr = os.path.join(args.out, f"{kind}-{slug}.exr")
         if kind == "material":
-            res = tuple(max(8, int(round(v * args.scale))) for v in (160, 120))
-            rgba = library.render_material_preview(name, workdir, res, 16, exr)
+            res = (args.width, args.width * 3 // 4)
+            rgba = library.render_material_preview(name, workdir, res, 16, exr, denoise=True)
             label = f"{library.MATERIALS[name].catalog.split('/')[0]}: {library.MATERIALS[name].label}"
         else:
             entry = library.SCENES[name]
-            res = tuple(max(8, int(round(v * args.scale))) for v in entry.resolution)
-            rgba = library.render_library_scene(name, workdir, res, None, exr)
+            res = (args.width, max(8, round(args.width * entry.resolution[1] / entry.resolution[0])))
+            rgba = library.render_library_scene(name, workdir, res, None, exr, denoise=True)
             label = entry.label
         save_image(exr[:-4] + ".png", rgba)
         images.append(rgba)

@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 
 from ..addon.fabric.material import sync_fabric_lamps
-from ..render import configure_cycles, dark_world, render_to_array, reset_scene
+from ..render import configure_cycles, dark_world, denoise_for_display, render_to_array, reset_scene
 from . import scenes, scenes_fabric, scenes_scratch, scenes_teeth  # noqa: F401  (they register on import)
 from .registry import MATERIALS, SCENES, LibraryMaterial, LibraryScene  # noqa: F401  (the registries, re-exported)
 from .stage import add_studio_stage
@@ -53,14 +53,18 @@ def render_material_preview(
     resolution: tuple[int, int] = (160, 120),
     samples: int = 16,
     exr_path: str | None = None,
+    denoise: bool = False,
 ) -> np.ndarray:
-    """Render library material ``name`` on its preview stage; returns linear RGBA."""
+    """Render library material ``name`` on its preview stage; returns linear RGBA. ``denoise``: for
+    display (the showcase), not for references."""
     if name not in MATERIALS:
         raise ValueError(f"unknown library material {name!r}; available: {', '.join(sorted(MATERIALS))}")
     scene = _fresh_scene(workdir, resolution, samples)
     entry = MATERIALS[name]
     material = entry.build(scene, workdir)
     (entry.preview or build_preview_scene)(scene, material)
+    if denoise:
+        denoise_for_display(scene)
     return render_to_array(scene, exr_path)
 
 
@@ -70,11 +74,15 @@ def render_library_scene(
     resolution: tuple[int, int] | None = None,
     samples: int | None = None,
     exr_path: str | None = None,
+    denoise: bool = False,
 ) -> np.ndarray:
-    """Build scene ``name`` from scratch and render it; returns linear RGBA (H, W, 4)."""
+    """Build scene ``name`` from scratch and render it; returns linear RGBA (H, W, 4). ``denoise``: for
+    display (the showcase), not for references."""
     if name not in SCENES:
         raise ValueError(f"unknown scene {name!r}; available: {', '.join(sorted(SCENES))}")
     entry = SCENES[name]
     scene = _fresh_scene(workdir, resolution or entry.resolution, samples or entry.samples)
     entry.build(scene, workdir)
+    if denoise:
+        denoise_for_display(scene)
     return render_to_array(scene, exr_path)
