@@ -41,13 +41,7 @@ def between(low: float, high: float, kind: type = float):
 
 def finite_float(text: str) -> float:
     """An argparse ``type``: any finite number."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
+    return at_least(-math.inf, float)(text)
 
 
 def available_memory() -> int | None:
