@@ -97,8 +97,9 @@ def check_btf(btf_path: str) -> tuple:
     return hdr, op
 
 
-def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool, checked=None):
-    hdr, op = checked or check_btf(btf_path)
+def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool, checked: tuple):
+    """The fit cache of ``out_dir`` for the BTF that ``check_btf`` accepted (``checked``: its result)."""
+    hdr, op = checked
     cache = os.path.join(out_dir, CACHE)
     meta = {
         "source": os.path.abspath(hdr.source),
