@@ -17,6 +17,7 @@ import threading
 
 from ..core.fabric import btf_fitter
 from ..core.fabric.tile_fit import FitOptions
+from ..core.folder_lock import FolderLock
 
 _INIT_LOCK = threading.Lock()
 
@@ -52,16 +53,17 @@ def fit_btf_dask(
     options = options or FitOptions()
     checked = btf_fitter.check_btf(btf_path)
     os.makedirs(out_dir, exist_ok=True)
-    hdr, cache, values_path = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress, checked)
-    tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
-    todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
-    init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
-    if todo:
-        if client is not None:
-            _run_tiles(client, todo, cache, init_args, progress, len(tiles))
-        else:
-            with dask_client(scheduler, n_workers) as own:
-                _run_tiles(own, todo, cache, init_args, progress, len(tiles))
+    with FolderLock(out_dir):  # the tiles; fit_btf below takes the lock again for the assembly
+        hdr, cache, values_path = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress, checked)
+        tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
+        todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
+        init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
+        if todo:
+            if client is not None:
+                _run_tiles(client, todo, cache, init_args, progress, len(tiles))
+            else:
+                with dask_client(scheduler, n_workers) as own:
+                    _run_tiles(own, todo, cache, init_args, progress, len(tiles))
     # Every tile is checkpointed now: the local fitter only assembles and post-processes.
     maps, stats = btf_fitter.fit_btf(
         btf_path, out_dir, tile=tile, workers=1, options=options, progress=False, keep_cache=keep_cache

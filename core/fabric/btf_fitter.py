@@ -23,6 +23,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from ..folder_lock import FolderLock
 from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
 from .btf_io import iter_btf_blocks, read_btf_header
@@ -149,11 +150,17 @@ def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int =
     post-processed maps and a stats dict (also stored in ``params.json`` under ``"fit"``).
     """
     btf_path, out_dir = os.fspath(btf_path), os.fspath(out_dir)
-    options = options or FitOptions()
-    workers = workers or os.cpu_count() or 1
-    t_start = time.perf_counter()
     checked = check_btf(btf_path)
     os.makedirs(out_dir, exist_ok=True)
+    with FolderLock(out_dir):  # a second fit into the folder would mix its tiles with this one's
+        return _fit_btf(btf_path, out_dir, tile, workers, options or FitOptions(), progress, preferred, keep_cache,
+                        checked)
+
+
+def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, options: FitOptions, progress: bool,
+             preferred, keep_cache: bool, checked: tuple) -> tuple[FabricMaps, dict]:
+    workers = workers or os.cpu_count() or 1
+    t_start = time.perf_counter()
     hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress, checked)
     t_loaded = time.perf_counter()
     tiles = _tiles(hdr.height, hdr.width, tile)

@@ -20,10 +20,11 @@ from dataclasses import asdict
 
 import numpy as np
 
+from ..folder_lock import FolderLock
 from ..json_io import save_json
 from .adam import Adam
 from .capture import Capture
-from .fit_checkpoint import FitState, FolderLock, check_identity, load_state
+from .fit_checkpoint import FitState, check_identity, load_state
 from .fit_gradient import iteration_gradient
 from .fit_loss import block_sums, l2_loss, paired_loss
 from .fit_report import plot_loss

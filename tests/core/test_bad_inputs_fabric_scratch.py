@@ -167,3 +167,23 @@ def test_a_size_the_machine_cannot_hold_is_one_line(monkeypatch, capsys):
     assert main(["scratch", "info", "whatever.npz"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: not enough memory for this size (Unable to allocate") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("pool", [["--no-dask"], []])
+def test_a_second_fabric_fit_into_a_busy_folder_is_refused(tmp_path, capsys, pool):
+    import subprocess
+
+    btf, out = tmp_path / "btf", tmp_path / "fit"
+    assert main(["fabric", "synth", "--out", str(btf), "--width", "4", "--height", "4"]) == 0
+    out.mkdir()
+    other = subprocess.Popen(["sleep", "60"])  # stands for the first fit, still writing
+    try:
+        (out / ".fit.lock").write_text(str(other.pid))
+        capsys.readouterr()
+        assert main(["fabric", "fit", str(btf), "--out", str(out), "--no-progress", *pool]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and f"another fit (process {other.pid})" in err and err.count("\n") == 1
+        assert sorted(p.name for p in out.iterdir()) == [".fit.lock"]  # nothing of the second fit
+    finally:
+        other.kill()
+        other.wait()

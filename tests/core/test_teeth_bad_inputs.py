@@ -14,8 +14,8 @@ import pytest
 
 from material_structures.cli import main
 from material_structures.core.exr_io import write_exr
+from material_structures.core.folder_lock import FolderLock
 from material_structures.core.teeth.capture import Capture
-from material_structures.core.teeth.fit_checkpoint import FolderLock
 from material_structures.core.teeth.optimise import FitSettings, fit
 from material_structures.core.teeth.scene import load_scene
 
