@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
+from bpy_extras.io_utils import ExportHelper, ImportHelper
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 from mathutils.geometry import barycentric_transform
@@ -140,13 +141,22 @@ class AddGroupNode:
         return {"FINISHED"}
 
 
-class FileBrowser:
-    """Base of the operators that pick a file or folder (their path property): INVOKE opens the file browser,
-    EXEC does the work (scripts and tests call EXEC with the path)."""
+class FilePicker(ImportHelper):
+    """Base of the operators that read a file (``filepath``; subclasses may set ``filter_glob``): INVOKE opens
+    Blender's file browser, EXEC does the work (scripts and tests call EXEC with the path)."""
 
-    def invoke(self, context, event):
-        context.window_manager.fileselect_add(self)
-        return {"RUNNING_MODAL"}
+
+class FolderPicker(ImportHelper):
+    """Base of the operators that read or write a folder (``directory``): INVOKE opens Blender's file browser
+    showing folders only, EXEC does the work."""
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH")
+    filter_folder: bpy.props.BoolProperty(default=True, options={"HIDDEN"})
+
+
+class FileSaver(ExportHelper):
+    """Base of the operators that write a file (``filepath``, ``filename_ext``): INVOKE opens Blender's file
+    browser with a file name, EXEC does the work."""
 
 
 class SyncLamps:

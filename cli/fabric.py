@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 
 from .checks import at_least, between, check_memory, finite_float, refuse_output_over_inputs
 
@@ -75,6 +76,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(func=run_score)
 
 
+PROGRESS_ENV = "MATERIAL_STRUCTURES_PROGRESS"  # "json": progress as JSON lines on stdout, no bars
+
+
+def _event(**fields) -> None:
+    print(json.dumps(fields), flush=True)
+
+
 def run_fit(args: argparse.Namespace) -> int:
     from ..core.fabric.btf_fitter import fit_btf
     from ..core.fabric.tile_fit import FitOptions
@@ -85,7 +93,18 @@ def run_fit(args: argparse.Namespace) -> int:
     options = FitOptions(weighting=args.weighting)
     if args.no_dask and args.scheduler:
         raise ValueError("--no-dask and --scheduler exclude each other")
-    if args.no_dask:
+    if os.environ.get(PROGRESS_ENV) == "json":  # the Blender add-on: progress as JSON lines, a local process pool
+        if args.scheduler:
+            raise ValueError(f"{PROGRESS_ENV}=json fits in local processes: leave out --scheduler")
+        _event(progress="status", message="reading the BTF")
+
+        def tiles_done(done: int, total: int) -> None:
+            _event(progress="fit", iteration=done, iterations=total, phase="tiles",
+                   message="fitting the world-light closures" if done == total else "")
+
+        _, stats = fit_btf(args.btf, args.out, tile=args.tile, workers=args.workers, options=options,
+                           progress=tiles_done, keep_cache=not args.drop_cache)
+    elif args.no_dask:
         _, stats = fit_btf(args.btf, args.out, tile=args.tile, workers=args.workers, options=options,
                            progress=not args.no_progress, keep_cache=not args.drop_cache)
     else:

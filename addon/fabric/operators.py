@@ -10,21 +10,26 @@ through the save handler). Headless: pass the stroke as properties and call EXEC
 
 from __future__ import annotations
 
+import os
+
 import bpy
 
 from ...core.fabric.closure_fit import save_closure_maps
 from ...core.fabric.parameter_maps import save_params
+from ..background_job import usable_cores
 from ..common import (
     AddGroupNode,
-    FileBrowser,
+    FolderPicker,
     MeshUVLookup,
     SyncLamps,
     assign_material,
+    end_modal_progress,
     require_uv_mesh,
     stroke_property,
     stroke_space_property,
     stroke_uvs,
 )
+from . import fit_job
 from .brushing import BrushSettings, load_brush_states, open_session, session_for
 from .maps import CLOSURE_KEYS, images_to_closure_maps, images_to_maps, maps_to_images
 from .material import (
@@ -65,14 +70,12 @@ class MS_OT_fabric_new_material(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_fabric_import_maps(FileBrowser, bpy.types.Operator):
+class MS_OT_fabric_import_maps(FolderPicker, bpy.types.Operator):
     """Create a fabric material from a fit's output folder (kd/ks/sigma/basis EXR maps + params.json)"""
 
     bl_idname = "material_structures.fabric_import_maps"
     bl_label = "Import Fitted Fabric Maps"
     bl_options = {"REGISTER", "UNDO"}
-
-    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH")
 
     def execute(self, context):
         obj = context.active_object
@@ -101,14 +104,12 @@ class MS_OT_fabric_import_maps(FileBrowser, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_fabric_save_maps(FileBrowser, bpy.types.Operator):
+class MS_OT_fabric_save_maps(FolderPicker, bpy.types.Operator):
     """Write the active fabric material's (painted) maps to a folder as EXR + params.json"""
 
     bl_idname = "material_structures.fabric_save_maps"
     bl_label = "Save Fabric Maps"
     bl_options = {"REGISTER"}
-
-    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH")
 
     @classmethod
     def poll(cls, context):
@@ -128,6 +129,116 @@ class MS_OT_fabric_save_maps(FileBrowser, bpy.types.Operator):
             self.report({"ERROR"}, f"Cannot save maps: {exc}")
             return {"CANCELLED"}
         self.report({"INFO"}, f"Saved {mat.name} maps to {self.directory}")
+        return {"FINISHED"}
+
+
+class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
+    """Fit the pile-fabric model to a measured BTF folder in the background, then give the active mesh a new
+    fabric material with the fitted maps"""
+
+    bl_idname = "material_structures.fabric_fit_btf"
+    bl_label = "Fit BTF"
+    bl_options = {"REGISTER"}
+
+    out_dir: bpy.props.StringProperty(name="Output Folder", subtype="DIR_PATH",
+                                      description="Where the fitted maps are written (default: beside the BTF "
+                                                  "folder, its name + _fit)")
+
+    _timer = None
+    _job = None  # the job this (modal) operator watches
+
+    @classmethod
+    def poll(cls, context):
+        if fit_job.job_running():
+            cls.poll_message_set("A fabric fit is already running")
+            return False
+        return True
+
+    def _start(self, context):
+        btf = os.path.normpath(bpy.path.abspath(self.directory))
+        out = bpy.path.abspath(self.out_dir) if self.out_dir else fit_job.default_out_dir(btf)
+        if fit_job.job_running():
+            self.report({"ERROR"}, "A fabric fit is already running")
+            return None
+        try:
+            job = fit_job.FabricFitJob(btf, out, workers=usable_cores()).start()
+        except (FileNotFoundError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return None
+        fit_job.set_current_job(job)
+        return job
+
+    def _finish(self, context, job, state):
+        job.settled = True
+        if state != "FINISHED":
+            job.outcome = f"{state.lower()}: see {job.log_path}"
+            self.report({"WARNING" if state == "CANCELLED" else "ERROR"}, f"Fabric fit {state.lower()}: "
+                        f"{job.last_line}")
+            return {"CANCELLED"}
+        try:
+            mat = import_fit_material(job.out_dir, context.scene)
+        except (OSError, ValueError) as exc:
+            job.outcome = f"finished, not imported: {exc}"
+            self.report({"ERROR"}, f"Fabric fit finished but its maps cannot be imported: {exc}")
+            return {"CANCELLED"}
+        obj = context.active_object
+        if obj is not None and obj.type == "MESH" and obj.data.uv_layers:
+            assign_material(obj, mat)
+            sync_fabric_lamps(context.scene)
+            where = f" on {obj.name}"
+        else:
+            mat.use_fake_user = True  # kept for the next mesh, although nothing uses it yet
+            where = " (select a mesh with a UV map and pick it in its material slot)"
+        job.outcome = f"done: {mat.name}{where}"
+        self.report({"INFO"}, f"Fabric fit finished: {mat.name}{where}")
+        return {"FINISHED"}
+
+    def execute(self, context):
+        job = self._start(context)
+        if job is None:
+            return {"CANCELLED"}
+        if context.window is None:  # scripts, tests, headless: wait for the fit
+            return self._finish(context, job, job.wait())
+        self._job = job  # from the file browser: watch the fit while Blender keeps running
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.5, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, 1000)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._job or fit_job.current_job()
+        if job is None:
+            end_modal_progress(context, self._timer)
+            return {"CANCELLED"}
+        if event.type == "ESC":
+            job.cancel()
+        if event.type in {"TIMER", "ESC"}:
+            state = job.poll()
+            context.window_manager.progress_update(int(1000 * job.progress))
+            if context.workspace is not None:
+                context.workspace.status_text_set(job.status_text())
+            for area in context.screen.areas if context.screen else ():
+                area.tag_redraw()
+            if state != "RUNNING":
+                end_modal_progress(context, self._timer)
+                return self._finish(context, job, state)
+        return {"PASS_THROUGH"}
+
+
+class MS_OT_fabric_fit_cancel(bpy.types.Operator):
+    """Stop the running fabric fit (the tiles it has fitted are kept: fitting the same folder again goes on
+    from there)"""
+
+    bl_idname = "material_structures.fabric_fit_cancel"
+    bl_label = "Cancel Fabric Fit"
+
+    def execute(self, context):
+        job = fit_job.current_job()
+        if job is None or not fit_job.job_running():
+            self.report({"WARNING"}, "No fabric fit is running")
+            return {"CANCELLED"}
+        job.cancel()
         return {"FINISHED"}
 
 
@@ -296,6 +407,8 @@ CLASSES: list[type] = [
     MS_OT_fabric_new_material,
     MS_OT_fabric_import_maps,
     MS_OT_fabric_save_maps,
+    MS_OT_fabric_fit_btf,
+    MS_OT_fabric_fit_cancel,
     MS_OT_fabric_sync_lamps,
     MS_OT_fabric_add_group_node,
     MS_OT_fabric_brush,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import bpy
 
 from ..common import MaterialPanel, SidebarPanel, draw_group_inputs
+from . import fit_job
 from .material import GROUP_NAME, MARKER, fabric_group_node, material_map_images
 
 MULTIPLIERS = (("Tint", "Tint"), ("SigmaScale", "Roughness Scale"), ("Anisotropy", "Anisotropy"),
@@ -51,6 +52,15 @@ class VIEW3D_PT_material_structures_fabric(SidebarPanel, bpy.types.Panel):
         layout.operator_menu_enum("material_structures.fabric_new_material", "preset", icon="MATERIAL")
         layout.operator("material_structures.fabric_import_maps", icon="IMPORT")
         layout.operator("material_structures.fabric_sync_lamps", icon="LIGHT")
+        job = fit_job.current_job()
+        box = layout.box()
+        if job is not None and job.is_alive():
+            box.progress(factor=job.progress, text=job.status_text().replace(" (Esc cancels)", ""))
+            box.operator("material_structures.fabric_fit_cancel", icon="CANCEL")
+        else:
+            box.operator("material_structures.fabric_fit_btf", icon="PLAY")
+            if job is not None:
+                box.label(text=f"Last fit: {job.ended_text()}")
         brush = context.scene.material_structures.fabric_brush
         box = layout.box()
         box.label(text="Brush", icon="BRUSH_DATA")

@@ -15,7 +15,8 @@ import bpy
 
 from ...core.scratch.scratch_io import EXR_FILES, load_scratch_set, save_kind, save_scratch_set
 from ..common import (
-    FileBrowser,
+    FilePicker,
+    FileSaver,
     MeshUVLookup,
     SyncLamps,
     assign_material,
@@ -338,7 +339,7 @@ def import_source(path: str) -> str:
     return folder if is_exr_table_folder(folder) else path
 
 
-class MS_OT_scratch_import(FileBrowser, bpy.types.Operator):
+class MS_OT_scratch_import(FilePicker, bpy.types.Operator):
     """Import a scratch set onto the active object: a .npz file, or an EXR-table folder (pick the folder or
     any table inside it)"""
 
@@ -365,7 +366,7 @@ class MS_OT_scratch_import(FileBrowser, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_scratch_export(FileBrowser, bpy.types.Operator):
+class MS_OT_scratch_export(FileSaver, bpy.types.Operator):
     """Export the active object's scratch set: a path ending .npz writes one file, a path without an
     extension a folder of EXR tables; any other extension is refused"""
 
@@ -374,6 +375,8 @@ class MS_OT_scratch_export(FileBrowser, bpy.types.Operator):
     bl_options = {"REGISTER"}
 
     filepath: bpy.props.StringProperty(name="File", subtype="FILE_PATH")
+    filename_ext = ".npz"
+    check_extension = None  # a path without an extension writes a folder of EXR tables: keep it as typed
 
     @classmethod
     def poll(cls, context):

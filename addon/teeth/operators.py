@@ -6,8 +6,8 @@ import os
 
 import bpy
 
-from ..common import AddGroupNode, FileBrowser, end_modal_progress
-from .fit_job import _JOB, FitJob, job_running, set_current_job, usable_cores  # _JOB: this session's one fit
+from ..common import AddGroupNode, FilePicker, end_modal_progress
+from .fit_job import FitJob, current_job, job_running, set_current_job, usable_cores
 from .geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
 from .materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
 from .properties import CHECK_IMAGE_NAME, owner
@@ -202,7 +202,7 @@ class MS_OT_teeth_read_capture_teeth(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_teeth_apply_fit_file(FileBrowser, bpy.types.Operator):
+class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
     """Write a fitted scene (scene_fit.json) into the teeth materials and dentin shape keys of the teeth chosen
     under Fit to capture (a tooth not listed there: the tooth of the same name)"""
 
@@ -324,7 +324,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
         self._timer = None
 
     def modal(self, context, event):
-        job = getattr(self, "_job", None) or _JOB["job"]
+        job = getattr(self, "_job", None) or current_job()
         if job is None:
             self._cleanup(context)
             return {"CANCELLED"}
@@ -350,7 +350,7 @@ class MS_OT_teeth_fit_cancel(bpy.types.Operator):
     bl_label = "Cancel Fit"
 
     def execute(self, context):
-        job = _JOB["job"]
+        job = current_job()
         if job is None or not job_running():  # nothing of a fit is stored in the file: nothing can be stuck
             self.report({"WARNING"}, "No teeth fit is running")
             return {"CANCELLED"}
@@ -358,7 +358,7 @@ class MS_OT_teeth_fit_cancel(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_teeth_import_scene(FileBrowser, bpy.types.Operator):
+class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
     """Import a core teeth scene (scene.json / scene_fit.json): teeth pairs, gums and oral-cavity proxy"""
 
     bl_idname = "material_structures.teeth_import_scene"

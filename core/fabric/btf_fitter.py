@@ -18,6 +18,7 @@ import os
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict
 
@@ -140,14 +141,31 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
     return hdr, cache, values_path
 
 
+class _CallbackBar:
+    """A progress bar that calls ``callback(done, total)`` on each update."""
+
+    def __init__(self, callback, total: int, initial: int = 0):
+        self.callback, self.total, self.n = callback, total, initial
+        callback(self.n, total)
+
+    def update(self, k: int = 1) -> None:
+        self.n += k
+        self.callback(self.n, self.total)
+
+    def close(self) -> None:
+        pass
+
+
 def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int = 20,
-            workers: int | None = None, options: FitOptions | None = None, progress: bool = True,
-            preferred=(1.0, 0.0, 0.0), keep_cache: bool = True) -> tuple[FabricMaps, dict]:
+            workers: int | None = None, options: FitOptions | None = None,
+            progress: bool | Callable[[int, int], None] = True, preferred=(1.0, 0.0, 0.0),
+            keep_cache: bool = True) -> tuple[FabricMaps, dict]:
     """Fit eq. 3.9 to every texel of a BTF and write the parameter folder ``out_dir``.
 
-    ``workers`` processes (default: CPU count) fit ``tile x tile`` texel tiles; finished tiles are
-    checkpointed, so calling again after an interruption only fits the missing tiles. Returns the
-    post-processed maps and a stats dict (also stored in ``params.json`` under ``"fit"``).
+    ``workers`` processes (default: CPU count) fit ``tile x tile`` texel tiles (``progress``: a tqdm bar,
+    or a callable ``(tiles done, tiles)``); finished tiles are checkpointed, so calling again after an
+    interruption only fits the missing tiles. Returns the post-processed maps and a stats dict (also stored
+    in ``params.json`` under ``"fit"``).
     """
     btf_path, out_dir = os.fspath(btf_path), os.fspath(out_dir)
     checked = check_btf(btf_path)
@@ -161,13 +179,15 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
              preferred, keep_cache: bool, checked: tuple) -> tuple[FabricMaps, dict]:
     workers = workers or os.cpu_count() or 1
     t_start = time.perf_counter()
-    hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress, checked)
+    hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress is True, checked)
     t_loaded = time.perf_counter()
     tiles = _tiles(hdr.height, hdr.width, tile)
     todo = [t for t in tiles if not os.path.isfile(_tile_path(cache, t))]
     init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
     bar = None
-    if progress:
+    if callable(progress):  # progress(tiles done, tiles): e.g. JSON lines for the Blender add-on
+        bar = _CallbackBar(progress, len(tiles), len(tiles) - len(todo))
+    elif progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(tiles), initial=len(tiles) - len(todo), desc="fit tiles", unit="tile",

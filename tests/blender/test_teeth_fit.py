@@ -198,7 +198,7 @@ def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp
     fake = SimpleNamespace(_timer=object(), report=lambda *a: None)
     fake._cleanup = lambda ctx: ops.MS_OT_teeth_fit._cleanup(fake, ctx)
     fake._finish = lambda ctx, job, state: ops.MS_OT_teeth_fit._finish(fake, ctx, job, state)
-    ops._JOB["job"] = FitJob(capture_dir, str(tmp_path / "fit"), iterations=4, init="scene").start()
+    ops.set_current_job(FitJob(capture_dir, str(tmp_path / "fit"), iterations=4, init="scene").start())
     timer = SimpleNamespace(type="TIMER")
     result, deadline = {"PASS_THROUGH"}, time.time() + 120
     while result == {"PASS_THROUGH"} and time.time() < deadline:
