@@ -6,9 +6,13 @@ CVENV := .venv-compat
 CPY := $(CVENV)/bin/python
 STAMP := $(VENV)/.material-structures-stamp
 CSTAMP := $(CVENV)/.material-structures-stamp
+BSTAMP := .venv-bare/.material-structures-stamp
+BCSTAMP := .venv-bare-compat/.material-structures-stamp
+VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender_manifest.toml)
 PYTEST_JOBS ?=
 
-.PHONY: setup setup-compat test test-fast test-all test-compat lint demo library build bench refs clean help
+.PHONY: setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
+	bench refs clean help
 
 help:
 	@echo "make demo        set up and render the sample library into out/"
@@ -16,8 +20,10 @@ help:
 	@echo "make test-fast   the core tests without the heavy ones (under a minute)"
 	@echo "make test-all    also the slow suites (-m slow)"
 	@echo "make test-compat Blender-side smoke tests on Blender 4.5 LTS (CPython 3.11)"
+	@echo "make test-bare   the built zip in a Python with only bpy 5.2 (a desktop Blender): every operator"
+	@echo "make test-bare-compat  the same on Blender 4.5 LTS"
 	@echo "make library     (re)build the artist asset library in samples/library"
-	@echo "make build       installable extension zip in dist/ (includes the asset library)"
+	@echo "make build       installable extension zips in dist/, per platform and Python (with the asset library)"
 	@echo "make bench       every benchmark into bench/results/NAME.json"
 	@echo "make refs        regenerate the render-regression reference EXRs (deliberately)"
 
@@ -26,6 +32,12 @@ $(STAMP): requirements.txt pyproject.toml scripts/bootstrap.sh
 
 $(CSTAMP): requirements-compat.txt pyproject.toml scripts/bootstrap.sh
 	@bash scripts/bootstrap.sh compat
+
+$(BSTAMP): requirements-bare.txt pyproject.toml scripts/bootstrap.sh
+	@bash scripts/bootstrap.sh bare
+
+$(BCSTAMP): requirements-bare-compat.txt pyproject.toml scripts/bootstrap.sh
+	@bash scripts/bootstrap.sh bare-compat
 
 setup: $(STAMP)
 setup-compat: $(CSTAMP)
@@ -45,6 +57,22 @@ test-all: $(STAMP) lint
 test-compat: $(CSTAMP)
 	$(CPY) -m pytest -m "blender and not slow" -q tests/blender
 
+samples/library/material_structures_library.blend: | $(STAMP)
+	$(PY) -m material_structures library build
+
+# the linux-x64 zip of one Python installed into a venv with only bpy (tests/bare/bare_blender.py)
+test-bare: $(STAMP) $(BSTAMP) samples/library/material_structures_library.blend
+	$(PY) -m material_structures build --out dist --platform linux-x64 --python 3.13
+	$(PY) tests/bare/prepare.py build/bare-data
+	.venv-bare/bin/python tests/bare/bare_blender.py dist/material_structures-$(VERSION)-cp313-linux_x64.zip \
+		build/bare-data build/bare-313
+
+test-bare-compat: $(STAMP) $(BCSTAMP) samples/library/material_structures_library.blend
+	$(PY) -m material_structures build --out dist --platform linux-x64 --python 3.11
+	$(PY) tests/bare/prepare.py build/bare-data
+	.venv-bare-compat/bin/python tests/bare/bare_blender.py dist/material_structures-$(VERSION)-cp311-linux_x64.zip \
+		build/bare-data build/bare-311
+
 demo: $(STAMP)
 	$(PY) -m material_structures demo --out out
 	$(PY) -m material_structures library build
@@ -52,8 +80,7 @@ demo: $(STAMP)
 library: $(STAMP)
 	$(PY) -m material_structures library build
 
-build: $(STAMP)
-	@test -f samples/library/material_structures_library.blend || $(PY) -m material_structures library build
+build: $(STAMP) samples/library/material_structures_library.blend
 	$(PY) -m material_structures build --out dist
 
 bench: $(STAMP)

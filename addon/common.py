@@ -19,7 +19,14 @@ CATEGORY = "Material Structures"  # the 3D viewport sidebar tab
 
 
 # -- panels -------------------------------------------------------------------------------------------
-class SidebarPanel:
+class Panel:
+    """Base of every panel of the add-on (``SidebarPanel``, ``MaterialPanel``; mix in before
+    ``bpy.types.Panel``): what all of them share."""
+
+    bl_translation_context = "*"
+
+
+class SidebarPanel(Panel):
     """Base of the panels in the 3D viewport's sidebar tab "Material Structures" (mix in before
     ``bpy.types.Panel``)."""
 
@@ -28,7 +35,7 @@ class SidebarPanel:
     bl_category = CATEGORY
 
 
-class MaterialPanel:
+class MaterialPanel(Panel):
     """Base of a Material Properties panel shown for the materials a feature made (``marker``: the ID
     property it sets on them)."""
 
@@ -168,7 +175,7 @@ class SyncLamps:
 
     def execute(self, context):
         n = self.sync(context.scene)
-        self.report({"INFO"}, f"{n} lamp(s) evaluated {self.evaluated_by}")
+        self.report({"INFO"}, f"{n} light(s) evaluated {self.evaluated_by}")
         return {"FINISHED"}
 
 

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Bootstrap a project virtual environment. Usage: scripts/bootstrap.sh main|compat
-#   main   -> .venv         CPython 3.13, bpy 5.2.3 (requirements.txt)
-#   compat -> .venv-compat  CPython 3.11, bpy 4.5.15 (requirements-compat.txt)
+# Bootstrap a project virtual environment. Usage: scripts/bootstrap.sh main|compat|bare|bare-compat
+#   main        -> .venv              CPython 3.13, bpy 5.2.3 (requirements.txt)
+#   compat      -> .venv-compat       CPython 3.11, bpy 4.5.15 (requirements-compat.txt)
+#   bare        -> .venv-bare         CPython 3.13, only bpy 5.2.3: a desktop Blender's Python (make test-bare)
+#   bare-compat -> .venv-bare-compat  CPython 3.11, only bpy 4.5.15
 # Re-running is fast: nothing is reinstalled while the requirements and pyproject are unchanged.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -9,7 +11,9 @@ kind=${1:-main}
 case "$kind" in
   main)   want=3.13; venv=.venv;        reqs=requirements.txt ;;
   compat) want=3.11; venv=.venv-compat; reqs=requirements-compat.txt ;;
-  *) echo "usage: $0 main|compat" >&2; exit 2 ;;
+  bare)   want=3.13; venv=.venv-bare;   reqs=requirements-bare.txt ;;
+  bare-compat) want=3.11; venv=.venv-bare-compat; reqs=requirements-bare-compat.txt ;;
+  *) echo "usage: $0 main|compat|bare|bare-compat" >&2; exit 2 ;;
 esac
 
 log() { printf '[setup] %s\n' "$*" >&2; }
@@ -103,7 +107,10 @@ pip_install() {  # quiet unless it fails
 }
 log "installing $reqs into $venv (first time: a few minutes, bpy is large)"
 pip_install -r "$reqs"
-pip_install --no-deps -e .
-"$venv/bin/python" -c "import numpy, material_structures.core" || { log "installation failed"; exit 1; }
+case "$kind" in
+  bare*) "$venv/bin/python" -c "import bpy" || { log "installation failed"; exit 1; } ;;  # nothing of ours
+  *) pip_install --no-deps -e .
+     "$venv/bin/python" -c "import numpy, material_structures.core" || { log "installation failed"; exit 1; } ;;
+esac
 echo "$digest" > "$stamp"
 log "$venv ready"

@@ -197,7 +197,7 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
         job = self._start(context)
         if job is None:
             return {"CANCELLED"}
-        if context.window is None:  # scripts, tests, headless: wait for the fit
+        if bpy.app.background or context.window is None:  # scripts, tests, headless: wait for the fit
             return self._finish(context, job, job.wait())
         self._job = job  # from the file browser: watch the fit while Blender keeps running
         wm = context.window_manager
@@ -243,10 +243,10 @@ class MS_OT_fabric_fit_cancel(bpy.types.Operator):
 
 
 class MS_OT_fabric_sync_lamps(SyncLamps, bpy.types.Operator):
-    """Copy the scene's lamps into the fabric shaders now (normally automatic)"""
+    """Copy the scene's lights into the fabric shaders now (normally automatic)"""
 
     bl_idname = "material_structures.fabric_sync_lamps"
-    bl_label = "Sync Lamps"
+    bl_label = "Sync Lights"
     sync = staticmethod(sync_fabric_lamps)
     evaluated_by = "exactly by the fabric shader"
 

@@ -225,7 +225,8 @@ class MS_OT_scratch_generate(bpy.types.Operator):
 
 
 class MS_OT_scratch_draw(bpy.types.Operator):
-    """Draw scratches on the active object with the mouse (LMB drag; Esc/RMB done). EXEC replays ``stroke``"""
+    """Draw scratches on the active object with the mouse (drag with the left button; Esc or right click when
+    done)"""
 
     bl_idname = "material_structures.scratch_draw"
     bl_label = "Draw Scratches"
@@ -408,10 +409,10 @@ class MS_OT_scratch_export(FileSaver, bpy.types.Operator):
 
 
 class MS_OT_scratch_sync_lamps(SyncLamps, bpy.types.Operator):
-    """Copy the scene's lamps into the scratched-metal shaders now (normally automatic)"""
+    """Copy the scene's lights into the scratched-metal shaders now (normally automatic)"""
 
     bl_idname = "material_structures.scratch_sync_lamps"
-    bl_label = "Sync Scratch Lamps"
+    bl_label = "Sync Scratch Lights"
     sync = staticmethod(sync_scratch_lamps)
     evaluated_by = "by the scratch term"
 

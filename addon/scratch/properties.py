@@ -32,6 +32,6 @@ def world_lamps_property():
     return bpy.props.IntProperty(
         name="World Lights", min=0, max=MAX_WORLD_LAMPS, default=0,
         description="Brightest regions of the world's environment image given to the scratch term as distant "
-        "sphere lamps, in free lamp slots (0: the scratches see no world light; an approximation)",
+        "sphere lights, in free light slots (0: the scratches see no world light; an approximation)",
         get=get_world_lamps, set=set_world_lamps, update=update_world_lamps,
     )

@@ -64,8 +64,8 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     source: bpy.props.EnumProperty(name="Source", items=[
-        ("TEMPLATE", "Template", "procedural tooth template"),
-        ("MESH", "Active Mesh", "the active closed mesh is the enamel surface (z = tooth axis, crown up)")],
+        ("TEMPLATE", "Template", "A procedural tooth template"),
+        ("MESH", "Active Mesh", "The active closed mesh is the enamel surface (z = tooth axis, crown up)")],
         default="TEMPLATE")
     kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="incisor")
     resolution: bpy.props.IntProperty(name="Resolution", default=40, min=8, max=256)
@@ -154,7 +154,7 @@ class MS_OT_teeth_apply_fitted(bpy.types.Operator):
 
 def _group_op(kind: str):
     class _Op(AddGroupNode, bpy.types.Operator):
-        __doc__ = f"Add the {kind} node group (thesis Sec. 5.5) to the edited material"
+        __doc__ = f"Add the {kind} node group to the edited material"
         bl_idname = f"material_structures.teeth_add_{kind.lower()}_node"
         bl_label = kind
         marker = MARKER
@@ -269,7 +269,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             return None
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)
-            job = FitJob(capture, out, fs.iterations, fs.init, workers=usable_cores()).start()
+            job = FitJob(capture, out, fs.iterations, fs.init.lower(), workers=usable_cores()).start()
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return None
@@ -344,7 +344,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
 
 
 class MS_OT_teeth_fit_cancel(bpy.types.Operator):
-    """Cancel the running teeth fit (its checkpoint is kept: fit again with --resume to continue)"""
+    """Cancel the running teeth fit (what it has done so far is kept in its folder)"""
 
     bl_idname = "material_structures.teeth_fit_cancel"
     bl_label = "Cancel Fit"

@@ -18,9 +18,9 @@ from .fit_job import current_job, job_running
 from .scene_build import capture_tooth_names, fill_tooth_map
 
 C_MIN, C_MAX = RANGES["c"]
-ROLE_ITEMS = [("NONE", "None", ""), ("ENAMEL", "Enamel", "enamel shell of a tooth"),
-              ("DENTIN", "Dentin", "dentin core of a tooth"), ("GUMS", "Gums", "gingiva"),
-              ("CAVITY", "Oral Cavity", "oral-cavity proxy")]
+ROLE_ITEMS = [("NONE", "None", ""), ("ENAMEL", "Enamel", "Enamel shell of a tooth"),
+              ("DENTIN", "Dentin", "Dentin core of a tooth"), ("GUMS", "Gums", "Gingiva"),
+              ("CAVITY", "Oral Cavity", "Stand-in for the oral cavity behind the teeth")]
 
 
 def owner(obj):
@@ -62,15 +62,16 @@ def _coefficient(name: str, desc: str):
 class MS_ToothSettings(bpy.types.PropertyGroup):
     role: bpy.props.EnumProperty(name="Role", items=ROLE_ITEMS, default="NONE")
     kind: bpy.props.StringProperty(name="Tooth Type", default="")
-    tooth_name: bpy.props.StringProperty(name="Tooth Name", description="name of the tooth in the core scene / fits")
+    tooth_name: bpy.props.StringProperty(name="Tooth Name",
+                                         description="Name of the tooth in teeth scene files and fits")
     partner: bpy.props.PointerProperty(name="Partner", type=bpy.types.Object,
-                                       description="the dentin core of an enamel shell, and vice versa")
+                                       description="The dentin core of an enamel shell, and vice versa")
     mm_per_unit: bpy.props.FloatProperty(name="mm per Unit", default=1000.0, min=1e-6)
-    buccal: _coefficient("Buccal", "dentin blend mode along the buccolingual axis (c_1, eq. 5.5)")
-    proximal: _coefficient("Proximal", "dentin blend mode along the mesiodistal axis (c_2, eq. 5.5)")
-    occlusal: _coefficient("Occlusal", "dentin blend mode along the tooth axis (c_3, eq. 5.5)")
+    buccal: _coefficient("Buccal", "How far the dentin bulges toward the cheek or tongue side")
+    proximal: _coefficient("Proximal", "How far the dentin bulges toward the neighbouring teeth")
+    occlusal: _coefficient("Occlusal", "How far the dentin reaches toward the biting edge")
     fitted: bpy.props.FloatVectorProperty(name="Fitted c", size=3, default=(0.0, 0.0, 0.0),
-                                          description="dentin coefficients of the last fit")
+                                          description="Dentin shape found by the last fit")
     has_fit: bpy.props.BoolProperty(name="Has Fit", default=False)
     fit_source: bpy.props.StringProperty(name="Fit Source", default="", subtype="FILE_PATH")
 
@@ -112,9 +113,9 @@ class MS_TeethFitToothMap(bpy.types.PropertyGroup):
     """One capture tooth and the tooth of the scene its fit is applied to."""
 
     capture_tooth: bpy.props.StringProperty(name="Capture Tooth",
-                                            description="the tooth's name in the capture's scene.json")
+                                            description="The tooth's name in the capture's scene.json")
     enamel: bpy.props.PointerProperty(name="Tooth", type=bpy.types.Object, poll=_is_enamel,
-                                      description="the tooth of this scene (its enamel) that the fit of this "
+                                      description="The tooth of this scene (its enamel) that the fit of this "
                                                   "capture tooth is applied to")
 
 
@@ -131,33 +132,33 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
     """Scene-wide settings of the fitting operator (``Scene.ms_teeth_fit``)."""
 
     capture_dir: bpy.props.StringProperty(name="Capture", subtype="DIR_PATH", update=_capture_dir_changed,
-                                          description="capture folder (capture.json, images/, masks/, scene.json)")
+                                          description="Capture folder (capture.json, images/, masks/, scene.json)")
     tooth_map: bpy.props.CollectionProperty(type=MS_TeethFitToothMap, name="Capture Teeth",
-                                            description="which tooth of this scene each capture tooth's fit "
+                                            description="Which tooth of this scene each capture tooth's fit "
                                                         "is applied to")
     out_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH",
-                                      description="fit folder: log, loss plot, checkpoint, scene_fit.json")
+                                      description="Fit folder: log, loss plot, checkpoint, scene_fit.json")
     iterations: bpy.props.IntProperty(name="Iterations", default=FIT_DEFAULTS.iterations, min=1, max=100000,
-                                      description="fit iterations (7-20 s each for a 3-camera capture on 2 cores; "
+                                      description="Fit iterations (7-20 s each for a 3-camera capture on 2 cores; "
                                                   "fewer: a quicker, rougher fit)")
-    init: bpy.props.EnumProperty(name="Start", items=[("literature", "Literature", "literature-table search"),
-                                                       ("scene", "Scene", "the capture's scene.json values"),
-                                                       ("perturbed", "Perturbed", "perturbed scene values")],
-                                 default="literature")
+    init: bpy.props.EnumProperty(name="Start", default="LITERATURE", items=[
+        ("LITERATURE", "Literature", "Best match among published tooth measurements"),
+        ("SCENE", "Scene", "The values in the capture's scene.json"),
+        ("PERTURBED", "Perturbed", "The capture's scene.json values, perturbed (for testing the fit)")])
     check_image: bpy.props.StringProperty(name="Check Image", default="", subtype="FILE_PATH",
-                                          description="the last fit's held-out lights: capture | fit | difference")
+                                          description="The last fit's held-out lights: capture | fit | difference")
     check_error: bpy.props.StringProperty(name="Held-out Error", default="",
-                                          description="the last fit's error on lights it never used")
+                                          description="The last fit's error on lights it never used")
     # Job state: read from this Blender session's background fit, never stored in the .blend (a file saved
     # while a fit ran reopens idle). ``last_result`` is what became of the last fit, kept with the file.
     running: bpy.props.BoolProperty(name="Running", get=_get_running,
-                                    description="a teeth fit of this Blender session is running")
+                                    description="A teeth fit of this Blender session is running")
     progress: bpy.props.FloatProperty(name="Progress", min=0.0, max=1.0, subtype="FACTOR", get=_get_progress,
-                                      description="iterations done of the running (or last) fit of this session")
+                                      description="Iterations done of the running (or last) fit of this session")
     status: bpy.props.StringProperty(name="Status", get=_get_status,
-                                     description="the running fit's iteration and loss, else the last fit's result")
+                                     description="The running fit's iteration and loss, else the last fit's result")
     last_result: bpy.props.StringProperty(name="Last Fit", default="",
-                                          description="what became of the last fit started from this scene")
+                                          description="What became of the last fit started from this scene")
 
 
 CLASSES: list[type] = [MS_ToothSettings, MS_TeethFitToothMap, MS_TeethFitSettings]

@@ -182,7 +182,7 @@ def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_pat
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 10000
-    fs.init = "scene"
+    fs.init = "SCENE"
     # what a click on "Fit Teeth to Capture" does (invoke: background fit + modal timer), headless
     wm = _WindowManager()
     context = SimpleNamespace(scene=bpy.context.scene, window_manager=wm, window=None, workspace=None,
@@ -252,7 +252,7 @@ def test_fit_applies_to_the_mapped_tooth(addon_module, capture_dir, tmp_path):
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 2
-    fs.init = "perturbed"
+    fs.init = "PERTURBED"
     assert bpy.ops.material_structures.teeth_read_capture_teeth() == {"FINISHED"}
     assert [m.capture_tooth for m in fs.tooth_map] == ["tooth0"]
     fs.tooth_map[0].enamel = enamel  # the user's choice in the panel

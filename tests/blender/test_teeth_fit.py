@@ -42,7 +42,7 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 3
-    fs.init = "perturbed"  # c reset to 0, volumes perturbed: the fit result differs from the import
+    fs.init = "PERTURBED"  # c reset to 0, volumes perturbed: the fit result differs from the import
     assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}  # EXEC: blocking
     fit = load_scene(str(tmp_path / "fit" / "scene_fit.json"))
     t = fit.teeth[0]
@@ -78,7 +78,7 @@ def test_fit_button_runs_the_fit_settings_defaults_and_shows_the_check(addon_mod
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
     fs.iterations = 2
-    fs.init = "scene"
+    fs.init = "SCENE"
     assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
     ran = json.loads((tmp_path / "fit" / "loss.json").read_text())
     want = dataclasses.asdict(dataclasses.replace(FitSettings(), iterations=2))
