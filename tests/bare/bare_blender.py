@@ -226,7 +226,7 @@ def use(zip_path: str, data: str, work: str) -> None:
     editing = mod("addon.scratch.editing")
     counts = []
     for i, pattern in enumerate(("WEAR", "POLISH", "HAIRLINE")):  # the second and third add to the set
-        op("scratch_generate", pattern=pattern, count=100, seed=i, replace=i > 0)
+        op("scratch_generate", pattern=pattern, count=100, seed=i, replace=i == 0)
         counts.append(editing.material_set(editing.object_scratch_material(metal))[1].n_scratches)
     assert counts[0] > 0 and counts[0] < counts[1] < counts[2], counts  # (a generator drops what misses the patch)
     n_generated = counts[-1]
