@@ -112,10 +112,22 @@ def stroke(y: float = 0.5, n: int = 6) -> list[dict]:
 
 
 def render_only(bpy, objs, path: str) -> float:
-    """A 32 x 32 Cycles render of ``objs`` alone (4 samples); returns the mean of its pixels (finite, > 0)."""
+    """A 32 x 32 Cycles render of ``objs`` alone (4 samples, seen from above); returns the mean of its pixels
+    (finite, > 0)."""
     import numpy as np
+    from mathutils import Vector
 
     scene = bpy.context.scene
+    corners = [o.matrix_world @ Vector(c) for o in objs for c in o.bound_box]
+    lo = Vector([min(c[i] for c in corners) for i in range(3)])
+    hi = Vector([max(c[i] for c in corners) for i in range(3)])
+    size = max(hi - lo)
+    cam = scene.camera  # orthographic, looking down at the objects
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 1.3 * size
+    cam.data.clip_start, cam.data.clip_end = 1e-3 * size, 10.0 * size
+    cam.location = (lo + hi) / 2 + Vector((0.0, 0.0, 3.0 * size))
+    cam.rotation_euler = (0.0, 0.0, 0.0)
     keep = {o.name for o in objs} | {"Bare Camera", "Bare Light"}
     for o in scene.objects:
         o.hide_render = o.name not in keep
@@ -161,9 +173,9 @@ def use(zip_path: str, data: str, work: str) -> None:
     cam = bpy.context.active_object
     cam.name = "Bare Camera"
     scene.camera = cam
-    bpy.ops.object.light_add(type="POINT", location=(0.5, -0.5, 2.0))
+    bpy.ops.object.light_add(type="SUN", location=(0.5, -0.5, 2.0), rotation=(0.4, 0.2, 0.0))
     bpy.context.active_object.name = "Bare Light"
-    bpy.context.active_object.data.energy = 200.0
+    bpy.context.active_object.data.energy = 3.0
 
     # -- fabric -----------------------------------------------------------------------------------------
     t = time.perf_counter()
@@ -310,9 +322,7 @@ def use(zip_path: str, data: str, work: str) -> None:
     op("register_asset_library")
     assert mod("addon.operators").library_registered(bpy.context.preferences)
     t = time.perf_counter()
-    cam.location = (1.2, 1.2, 9.0)
-    cam.data.lens = 30
-    renders = {"fabric": [fabric["VELVET"], fitted], "scratches": [metal], "teeth": [target, inc]}
+    renders = {"fabric": [fabric["VELVET"], fitted], "scratches": [metal], "teeth": [target]}
     for name, objs in renders.items():
         partners = [o.ms_tooth.partner for o in objs if o.ms_tooth.partner is not None]
         mean = render_only(bpy, objs + partners, os.path.join(work, f"render_{name}.exr"))
