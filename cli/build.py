@@ -30,11 +30,11 @@ WHEELS: dict[str, tuple[str, ...]] = {
 }
 # Blender versions per CPython: 4.5 LTS and 5.0 ship 3.11, 5.1 and later 3.13 (the manifest's max is exclusive)
 BLENDER_RANGE: dict[str, tuple[str, str | None]] = {"3.11": ("4.5.0", "5.1.0"), "3.13": ("5.1.0", None)}
-# Blender platform -> pip's --platform tags (tried in order; the first that has every wheel wins)
+# Blender platform -> pip's --platform tags (any of them; the Blender versions above run on all of them)
 PLATFORMS: dict[str, tuple[str, ...]] = {
-    "linux-x64": ("manylinux_2_28_x86_64",),
+    "linux-x64": ("manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"),
     "windows-x64": ("win_amd64",),
-    "macos-arm64": ("macosx_12_0_arm64",),
+    "macos-arm64": ("macosx_12_0_arm64", "macosx_11_0_arm64"),
 }
 
 
@@ -104,32 +104,30 @@ def build(out_dir: str = "dist", source_dir: str = ROOT) -> str:
 def download_wheels(python: str, platform: str, cache: str) -> list[str]:
     """The wheels of ``WHEELS[python]`` for the Blender ``platform`` (downloaded into ``cache`` once)."""
     want = WHEELS[python]
-    errors = []
-    for tag in PLATFORMS[platform]:
-        dest = os.path.join(cache, f"cp{python.replace('.', '')}-{tag}")
-        os.makedirs(dest, exist_ok=True)
+    dest = os.path.join(cache, f"cp{python.replace('.', '')}-{platform}")
+    os.makedirs(dest, exist_ok=True)
 
-        def present(dest=dest) -> list[str]:
-            names = os.listdir(dest)
-            found = []
-            for req in want:
-                name, ver = req.split("==")
-                hits = [n for n in names if n.endswith(".whl") and n.lower().startswith(f"{name.lower()}-{ver}-")]
-                if not hits:
-                    return []
-                found.append(os.path.join(dest, sorted(hits)[0]))
-            return found
+    def present() -> list[str]:
+        names = os.listdir(dest)
+        found = []
+        for req in want:
+            name, ver = req.split("==")
+            hits = [n for n in names if n.endswith(".whl") and n.lower().startswith(f"{name.lower()}-{ver}-")]
+            if not hits:
+                return []
+            found.append(os.path.join(dest, sorted(hits)[0]))
+        return found
 
-        if present():
-            return present()
-        proc = subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check",
-                               "--no-deps", "--only-binary=:all:", "--platform", tag, "--python-version", python,
-                               "--dest", dest, *want], capture_output=True, text=True)
-        if proc.returncode == 0 and present():
-            return present()
-        errors.append(f"{tag}: " + " ".join(ln for ln in proc.stderr.splitlines()
-                                            if ln.startswith("ERROR"))[:300])
-    raise RuntimeError(f"no wheels of {', '.join(want)} for {platform} / CPython {python}: {'; '.join(errors)}")
+    if present():
+        return present()
+    tags = [a for tag in PLATFORMS[platform] for a in ("--platform", tag)]
+    proc = subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
+                           "--only-binary=:all:", *tags, "--python-version", python, "--dest", dest, *want],
+                          capture_output=True, text=True)
+    if proc.returncode == 0 and present():
+        return present()
+    errors = " ".join(ln for ln in proc.stderr.splitlines() if ln.startswith("ERROR"))[:400]
+    raise RuntimeError(f"no wheels of {', '.join(want)} for {platform} / CPython {python}: {errors}")
 
 
 def _stage(source_dir: str, stage: str, manifest: dict) -> None:
