@@ -16,56 +16,40 @@ import numpy as np
 from .. import addon
 from ..addon.teeth.materials import group_node, new_teeth_material
 from ..addon.teeth.scene_build import add_camera, add_point_light, build_teeth_scene, configure_teeth_cycles
+from ..core.teeth.anatomy import make_anatomical_tooth
+from ..core.teeth.arch import build_arch, cavity_dome, gum_mesh, merge_meshes
 from ..core.teeth.capture import Camera, PointLight, default_rig
 from ..core.teeth.optimise import FitSettings, fit, plot_loss
 from ..core.teeth.scene import Gums, OralCavity, TeethScene, Tooth, VolumeMaterial
 from ..core.teeth.synthetic import (
     GROUND_TRUTH,
-    box_mesh,
-    cavity_proxy,
     make_scene,
     perturbed_start,
     render_capture,
     scene_target,
 )
-from ..core.teeth.tooth_mesh import make_tooth
+from ..render import add_lamp
 from .registry import LibraryMaterial, LibraryScene, register_material, register_scene
 
-SMILE = ("premolar", "canine", "incisor", "incisor", "canine", "premolar")
+SMILE_UPPER_EDGE, SMILE_LOWER_EDGE = 0.0, -3.2  # incisal edges (mm): the mouth slightly open, as in the
+SMILE_OVERJET = 2.6  # thesis' captures (the volunteer bites on a rigid object); lower arch behind the upper
 
 
-def _pose(deg: float, x: float, y: float, z: float = 0.0) -> np.ndarray:
-    r = math.radians(deg)
-    m = np.eye(4)
-    m[:2, :2] = [[math.cos(r), -math.sin(r)], [math.sin(r), math.cos(r)]]
-    m[:3, 3] = (x, y, z)
-    return m
-
-
-def smile_scene(resolution: int = 28):
-    """Six upper front teeth on an arch (mouth facing +y, z up), gum ridge, cavity proxy."""
-    teeth = []
-    widths = [8.5 if k == "incisor" else 7.5 if k == "canine" else 7.0 for k in SMILE]
-    s = -0.5 * (sum(widths) + 0.2 * (len(SMILE) - 1))
-    cs = [(0.15, 0.0, 0.2), (-0.1, 0.1, 0.0), (0.25, -0.1, 0.3), (0.25, -0.1, 0.3), (-0.1, 0.1, 0.0),
-          (0.15, 0.0, 0.2)]
-    for i, (kind, w) in enumerate(zip(SMILE, widths, strict=True)):
-        x = s + 0.5 * w
-        s += w + 0.2
-        y = -0.018 * x * x  # the arch curves back
-        ang = math.degrees(math.atan(-0.036 * x))
-        geo = make_tooth(kind, resolution=resolution)
-        # incisal edges down: an upper jaw seen from the front
-        flip = np.diag([-1.0, 1.0, -1.0, 1.0])  # 180 degrees about y (keeps the winding)
-        geo = geo.transformed(_pose(ang, x, y, 0.0) @ flip)
-        teeth.append(Tooth(f"{kind}{i}", geo.enamel, geo.dentin, GROUND_TRUTH["enamel"], GROUND_TRUTH["dentin"],
-                           np.full((1, 1, 3), 0.95), np.asarray(cs[i]), kind=kind))
-    lo = np.min([t.enamel_mesh.vertices.min(axis=0) for t in teeth], axis=0)
-    hi = np.max([t.enamel_mesh.vertices.max(axis=0) for t in teeth], axis=0)
-    gums = Gums(box_mesh((lo[0] - 2.0, lo[1] - 1.0, 1.6), (hi[0] + 2.0, hi[1] - 0.5, 7.0)), GROUND_TRUTH["gums"],
-                np.full((1, 1, 3), 0.9))
-    cavity = OralCavity(cavity_proxy(x_half=30.0, y_back=-22.0, y_front=1.0, z_lo=-16.0, z_hi=10.0),
-                        GROUND_TRUTH["cavity_albedo"])
+def smile_scene(resolution: int = 40, lower: bool = True) -> TeethScene:
+    """The upper front teeth (central and lateral incisors, canines, first premolars, both sides) and, with
+    ``lower``, the lower ones, from ``core.teeth.anatomy`` on parabolic arches (``core.teeth.arch``), with
+    scalloped gums and papillae and a dark-red oral-cavity dome behind. Scene: mm, mouth facing +y, z up."""
+    jaws = [build_arch("upper", resolution=resolution, edge_z=SMILE_UPPER_EDGE)]
+    if lower:
+        jaws.append(build_arch("lower", resolution=resolution, edge_z=SMILE_LOWER_EDGE, y0=-SMILE_OVERJET))
+    teeth, gum_meshes = [], []
+    for placed, arch in jaws:
+        for t in placed:
+            teeth.append(Tooth(t.name, t.geometry.enamel, t.geometry.dentin, GROUND_TRUTH["enamel"],
+                               GROUND_TRUTH["dentin"], np.full((1, 1, 3), 0.95), np.zeros(3), kind=t.spec.kind))
+        gum_meshes.append(gum_mesh(placed, arch))
+    gums = Gums(merge_meshes(gum_meshes), GROUND_TRUTH["gums"], np.full((1, 1, 3), 0.9))
+    cavity = OralCavity(cavity_dome(), GROUND_TRUTH["cavity_albedo"])
     return TeethScene(teeth, gums, cavity)
 
 
@@ -79,13 +63,30 @@ def _light_and_camera(scene, target, width, height, span, lights):
     return cam
 
 
+def _smile_camera_and_lights(scene, width: int, height: int) -> None:
+    """A frontal dental-photography set-up: camera 250 mm in front of the incisors, slightly above the
+    occlusal plane; two soft boxes left and right of the lens (their reflections are the enamel's
+    highlights: the thin boundary is a mirror, eq. 5.1) and a dim one above."""
+    target = np.array([0.0, 0.0, 0.5 * (SMILE_UPPER_EDGE + SMILE_LOWER_EDGE) + 1.5])
+    dist, span = 250.0, 58.0
+    fov = 2.0 * math.degrees(math.atan(0.5 * span / dist))
+    cam = Camera.look_at(target + np.array([0.0, dist, 0.08 * dist]), target, (0, 0, 1), fov, width, height)
+    add_camera(scene, cam, mm_per_unit=1.0)
+    for k, (pos, power, size) in enumerate((((-110.0, 200.0, 40.0), SMILE_KEY_W, 140.0),
+                                            ((110.0, 200.0, 40.0), 0.7 * SMILE_KEY_W, 140.0),
+                                            ((0.0, 120.0, 160.0), 0.25 * SMILE_KEY_W, 140.0))):
+        add_lamp(scene, "AREA", tuple(target + np.array(pos)), power, f"Teeth Soft Box {k}", size=size,
+                 target=tuple(target))
+
+
+SMILE_KEY_W = 3.0e5  # W (1 Blender unit = 1 mm): key soft box
+
+
 def build_smile(scene, workdir: str) -> None:
     _ensure_registered()
     ts = smile_scene()
     build_teeth_scene(ts, scene.collection, mm_per_unit=1.0, smooth=True)
-    w, h = scene.render.resolution_x, scene.render.resolution_y
-    _light_and_camera(scene, scene_target(ts) + np.array([0.0, 0.0, 2.0]), w, h, 52.0,
-                      [((70.0, 160.0, 60.0), 6.0e4), ((-90.0, 120.0, -20.0), 2.0e4)])
+    _smile_camera_and_lights(scene, scene.render.resolution_x, scene.render.resolution_y)
     configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)
 
 
@@ -162,16 +163,18 @@ def _shade_material(name: str):
 
 
 def shade_preview(scene, material) -> None:
-    """An incisor (generic enamel) whose dentin wears ``material``, on a dark stage (mm units)."""
-    geo = make_tooth("incisor", resolution=24)
+    """An upper central incisor (``core.teeth.anatomy``, generic enamel) whose dentin wears ``material``, crown
+    up on a dark stage (mm units): the shade shows in the dentin-backed body, the enamel-only incisal third
+    stays translucent."""
+    geo = make_anatomical_tooth("upper_central", resolution=48)
     tooth = Tooth("shade", geo.enamel, geo.dentin, GROUND_TRUTH["enamel"], GROUND_TRUTH["dentin"],
-                  np.full((1, 1, 3), 0.95), np.array([0.2, 0.0, 0.2]), kind="incisor")
+                  np.full((1, 1, 3), 0.95), np.zeros(3), kind="incisor")
     ts = TeethScene([tooth], None, None)
     objs = build_teeth_scene(ts, scene.collection, mm_per_unit=1.0, smooth=True)
     group_node(material).inputs["mm per Unit"].default_value = 1.0  # the preview stage is in mm
     objs["teeth"][0][1].data.materials[0] = material
     w, h = scene.render.resolution_x, scene.render.resolution_y
-    _light_and_camera(scene, scene_target(ts), w, h, 16.0, [((60.0, 150.0, 60.0), 5.0e4)])
+    _light_and_camera(scene, np.array([0.0, 0.0, 4.0]), w, h, 18.0, [((60.0, 150.0, 60.0), 5.0e4)])
     configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)
 
 

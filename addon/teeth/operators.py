@@ -6,6 +6,8 @@ import os
 
 import bpy
 
+from ...core.teeth.anatomy import SPECS as ANATOMY_SPECS
+from ...core.teeth.anatomy import make_anatomical_tooth
 from ..common import AddGroupNode, FilePicker, end_modal_progress
 from .fit_job import FitJob, current_job, job_running, set_current_job, usable_cores
 from .geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
@@ -21,7 +23,9 @@ from .scene_build import (
 )
 
 TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar", "Premolar", ""),
-               ("molar", "Molar", "")]
+               ("molar", "Molar", "")] + [
+    (key, spec.name.title(), "dental-atlas anatomy: labial convexity, cervical constriction, incisal edge or cusps, "
+     "root; the dentin stops short of the edge") for key, spec in ANATOMY_SPECS.items()]
 
 
 def _mm_per_unit(scene) -> float:
@@ -89,9 +93,13 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
                 placement = placement_from_mesh_object(src, mm_per_unit=mm)
                 name, kind = src.name, "custom"
             else:
-                geo = make_tooth(self.kind, resolution=self.resolution)
+                if self.kind in ANATOMY_SPECS:
+                    geo = make_anatomical_tooth(self.kind, resolution=max(12, self.resolution))
+                    name, kind = ANATOMY_SPECS[self.kind].name.title(), ANATOMY_SPECS[self.kind].kind
+                else:
+                    geo = make_tooth(self.kind, resolution=self.resolution)
+                    name, kind = self.kind.title(), self.kind
                 enamel, dentin = geo.enamel, geo.dentin
-                name, kind = self.kind.title(), self.kind
             em = new_teeth_material("Enamel", f"Enamel {name}", scene=scene, mm_per_unit=mm)
             dm = new_teeth_material("Dentin", f"Dentin {name}", scene=scene, mm_per_unit=mm)
             e_obj, d_obj = build_tooth_pair(name, enamel, dentin, (0.0, 0.0, 0.0), em, dm,

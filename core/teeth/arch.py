@@ -193,7 +193,7 @@ def build_arch(jaw: str = "upper", templates: tuple | None = None, resolution: i
 # -- gums -------------------------------------------------------------------------------------------
 
 def margin_curve(teeth: list[PlacedTooth], arch: Arch, s: np.ndarray, margin_above_cej: float = 1.0,
-                 papilla_extra: float = 1.0, ramp: float = 0.75) -> np.ndarray:
+                 papilla_extra: float = 1.8, ramp: float = 0.75) -> np.ndarray:
     """Scene z of the gingival margin along the arch (arc lengths ``s``). Each tooth's scallop is the labial
     half of its CEJ moved ``margin_above_cej`` mm crownward (zenith at the labial centre); past the
     proximal ends of the CEJ it keeps falling crownward (``papilla_extra`` mm over ``ramp`` mm, then
@@ -240,7 +240,7 @@ def _envelope(points_sn_z: np.ndarray, s_grid: np.ndarray, z_grid: np.ndarray, o
         if not np.isfinite(env[:, jj]).all():
             env[:, jj] = env[:, rows[np.argmin(np.abs(rows - jj))]]
     env = maximum_filter(env, size=(5, 3))
-    env = gaussian_filter(env, sigma=(3.0, 3.0), mode="nearest")
+    env = gaussian_filter(env, sigma=(4.0, 4.0), mode="nearest")
     del minimum_filter
     return sign * env
 
@@ -248,7 +248,7 @@ def _envelope(points_sn_z: np.ndarray, s_grid: np.ndarray, z_grid: np.ndarray, o
 def gum_mesh(teeth: list[PlacedTooth], arch: Arch, margin_above_cej: float = 1.0, extend: float = 6.0,
              height: float | None = None, n_s: int = 240) -> TriMesh:
     """Closed gum volume of one jaw (module doc): swept along the arch, labial face over the teeth's labial
-    envelope (0.25 mm at the margin, 1.3 mm over the roots), lingual face behind the teeth, scalloped
+    envelope (0.6 mm at the margin, 1.6 mm over the roots), lingual face behind the teeth, scalloped
     margin with papillae (``margin_curve``). UVs: u along the arch, v around the cross-section."""
     jaw_sign = 1.0 if teeth[0].spec.jaw == "upper" else -1.0  # +1: the gum lies at +z of the margin
     allv = np.concatenate([t.geometry.enamel.vertices for t in teeth])
@@ -276,7 +276,7 @@ def gum_mesh(teeth: list[PlacedTooth], arch: Arch, margin_above_cej: float = 1.0
     for k in range(n_s):
         g_face = gm[k] + (gt - gm[k]) * (np.linspace(0.0, 1.0, n_face) ** 1.6)
         d = g_face - gm[k]
-        thick = 0.25 + 1.05 * np.clip(d / 3.0, 0.0, 1.0) ** 1.5
+        thick = 0.6 + 1.0 * np.clip(d / 3.0, 0.0, 1.0) ** 1.5
         nl = f_lab(np.stack([np.full(n_face, s[k]), g_face], axis=1)) + thick
         # rounded margin: a quarter circle of radius r from the labial face into the tooth
         r = 0.45

@@ -13,7 +13,7 @@ def test_smile_scene_builds_and_renders(addon_module, tmp_path):
 
     rgba = render_library_scene("teeth-smile", str(tmp_path), resolution=(40, 24), samples=4)
     roles = [o.ms_tooth.role for o in bpy.context.scene.objects]
-    assert roles.count("ENAMEL") == 6 and roles.count("DENTIN") == 6
+    assert roles.count("ENAMEL") == 16 and roles.count("DENTIN") == 16  # 8 upper + 8 lower front teeth
     assert roles.count("GUMS") == 1 and roles.count("CAVITY") == 1
     enamel = [o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL"]
     assert all(o.data.shape_keys is not None and o.ms_tooth.partner is not None for o in enamel)
