@@ -8,30 +8,33 @@ costs a few milliseconds plus the upload. Every stroke records the windows it ov
 :meth:`BrushSession.undo_stroke` restores the maps exactly. The sessions of this Blender session are kept
 by material name (:func:`session_for`); the save handler packs them, loading another file drops them.
 
-Fitted closure maps (what world and indirect light see, ``core.fabric.closure_fit``) are not refitted
-per segment: a refit costs about 30 ms per distinct fibre geometry, and one combing segment creates
-tens to hundreds of them, far over the 100 ms budget of an update. Segments that change sigma or the
-basis mark their texels stale; :meth:`BrushSession.end_stroke` refits the stale texels (each distinct
-geometry once, remembered for the session) and the stroke's undo restores the closures as well.
-Colour strokes (k_d, k_s) leave the closures as they are: the fit is of the k_s = 1 term.
+Fitted closure maps (what world and indirect light see, ``core.fabric.closure_fit``) follow the painted
+maps segment by segment: a segment that changes sigma or the basis looks the closures of its changed
+texels up in the precomputed table (``core.fabric.closure_table``, multilinear in the fibre geometry,
+about 1 us per texel instead of 0.1-0.2 s per distinct geometry for the optimisation) and records the
+closure windows it overwrote, so the stroke's undo restores them. The closure images are uploaded
+with the maps at most every half second during a stroke (six more 2048 x 2048 uploads per segment
+would double an update) and at its end. Colour strokes (k_d, k_s) leave the closures as they are:
+the fit is of the k_s = 1 term.
 """
 
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ...core.fabric import brushing as core_brush
-from ...core.fabric.closure_fit import fit_closure_texels
+from ...core.fabric.closure_table import lookup_closure_texels
 from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps, load_params
 from .maps import CLOSURE_CHANNELS, CLOSURE_KEYS, btf_quat_to_mesh
 from .material import material_closure_images, material_map_images
 
 MODES = ("COMB", "RECOLOR", "SMOOTH", "ANISOTROPY", "DATA_DRIVEN")
 MAX_UNDO = 32
-REFIT_KEY_BUDGET = 128  # distinct fibre geometries refitted at a stroke's end (~30 ms each, cached)
+CLOSURE_UPLOAD_S = 0.5  # during a stroke the closure images are uploaded at most this often
 
 
 @dataclass
@@ -49,8 +52,7 @@ class BrushSettings:
 
 @dataclass
 class _Stroke:
-    saved: list = field(default_factory=list)  # (key, r0, r1, c0, c1, old array)
-    closures: tuple | None = None  # (rows, cols, {key: old closure values}) of the refit at its end
+    saved: list = field(default_factory=list)  # (key, r0, r1, c0, c1, old array); "fit KEY" = closures
 
 
 class BrushSession:
@@ -84,12 +86,11 @@ class BrushSession:
                 buf = np.empty(h * w * 4, dtype=np.float32)
                 self.closures[key].pixels.foreach_get(buf)
                 self.closure_buffers[key] = buf.reshape(h, w, 4)
-        self.stale = np.zeros((h, w), dtype=bool)  # texels whose closures need a refit (rows from the top)
-        self.fit_cache: dict = {}  # canonical fibre geometry -> fitted closure parameters
         self.undo_stack: list[_Stroke] = []
         self._stroke: _Stroke | None = None
         self._dirty: set[str] = set()  # changed, not uploaded to the images yet
         self._unpacked: set[str] = set()  # uploaded, not packed into the .blend yet
+        self._closure_upload = 0.0  # perf_counter of the last closure upload
 
     # -- coordinates -------------------------------------------------------------------------
     def uv_to_pixel(self, uv) -> np.ndarray:
@@ -106,16 +107,12 @@ class BrushSession:
         self._stroke = _Stroke()
 
     def end_stroke(self) -> None:
-        """Close the stroke (one undo step), refit the closures of the texels whose fibres it changed,
-        upload and pack what it changed: saving is safe after it."""
-        refit = self.refit_closures()
-        if self._stroke is not None and refit is not None:
-            self._stroke.closures = refit
+        """Close the stroke (one undo step), upload and pack what it changed: saving is safe after it."""
         if self._stroke is not None and self._stroke.saved:
             self.undo_stack.append(self._stroke)
             del self.undo_stack[:-MAX_UNDO]
         self._stroke = None
-        self.flush()
+        self.flush(closures=True)
         self.pack()
 
     def segment(self, uv0, uv1, settings: BrushSettings, pressure: float = 1.0) -> bool:
@@ -147,6 +144,7 @@ class BrushSession:
         else:
             raise ValueError(f"unknown brush mode {mode!r}; one of {MODES}")
         changed = False
+        fibres = np.zeros((r1 - r0, c1 - c0), dtype=bool)
         for key, (_, c) in MAP_FILES.items():
             old_sub, new_sub = getattr(sub, key), getattr(new, key)
             if new_sub is old_sub:
@@ -155,37 +153,32 @@ class BrushSession:
                 self._stroke.saved.append((key, r0, r1, c0, c1, old_sub.copy()))
             new_sub = np.asarray(new_sub, dtype=np.float32)
             if key in ("sigma", "basis") and self.closures:
-                self.stale[r0:r1, c0:c1] |= np.any(new_sub != old_sub, axis=-1)
+                fibres |= np.any(new_sub != old_sub, axis=-1)
             self._write(key, r0, r1, c0, c1, new_sub, c)
             changed = True
+        if fibres.any():
+            self._refit_window(r0, r1, c0, c1, fibres)
         return changed
 
-    @property
-    def closures_stale(self) -> bool:
-        """Whether some texels' fitted closures lag behind their painted sigma / basis."""
-        return bool(self.closures) and bool(self.stale.any())
-
-    def refit_closures(self):
-        """Refit the closures of the stale texels now; returns (rows, cols, old values) or None."""
-        if not self.closures_stale:
-            return None
-        rows, cols = np.nonzero(self.stale)
-        self.stale[rows, cols] = False
-        wts, shp, scl = fit_closure_texels(self.top["sigma"][rows, cols], self.top["basis"][rows, cols],
-                                           cache=self.fit_cache, max_keys=REFIT_KEY_BUDGET)
+    def _refit_window(self, r0, r1, c0, c1, mask) -> None:
+        """Closures of the window's texels in ``mask`` (rows from the top) from the table, recording
+        the window's old closure values in the stroke."""
+        rows, cols = np.nonzero(mask)
+        rows, cols = rows + r0, cols + c0
+        wts, shp, scl = lookup_closure_texels(self.top["sigma"][rows, cols], self.top["basis"][rows, cols])
         new = {key: wts[:, j, :] for j, key in enumerate(CLOSURE_KEYS[:4])}
         new["shape"], new["ggx_scale"] = shp, scl
-        old = {key: self._closure_write(key, rows, cols, new[key]) for key in CLOSURE_KEYS}
-        return rows, cols, old
+        h = self.height
+        for key in CLOSURE_KEYS:
+            if self._stroke is not None:
+                self._stroke.saved.append(("fit " + key, r0, r1, c0, c1,
+                                           self.closure_buffers[key][h - r1:h - r0, c0:c1].copy()))
+            self._closure_write(key, rows, cols, new[key])
 
-    def _closure_write(self, key, rows, cols, values):
-        """Write closure values of texels (rows from the top); returns the values they replace."""
-        c = CLOSURE_CHANNELS[key]
-        brow = self.height - 1 - rows
-        old = self.closure_buffers[key][brow, cols, :c].copy()
-        self.closure_buffers[key][brow, cols, :c] = values
+    def _closure_write(self, key, rows, cols, values) -> None:
+        """Write closure values of texels (rows from the top)."""
+        self.closure_buffers[key][self.height - 1 - rows, cols, :CLOSURE_CHANNELS[key]] = values
         self._dirty.add("fit " + key)
-        return old
 
     def _window(self, p0, p1, radius, settings):
         lo = np.floor(np.minimum(p0, p1) - radius - 1).astype(int)
@@ -209,24 +202,33 @@ class BrushSession:
         if not self.undo_stack:
             return False
         stroke = self.undo_stack.pop()
+        h = self.height
         for key, r0, r1, c0, c1, old in reversed(stroke.saved):
-            self._write(key, r0, r1, c0, c1, old, MAP_FILES[key][1])
-        if stroke.closures is not None:
-            rows, cols, old = stroke.closures
-            for key in CLOSURE_KEYS:
-                self._closure_write(key, rows, cols, old[key])
-        self.flush()
+            if key.startswith("fit "):
+                self.closure_buffers[key[4:]][h - r1:h - r0, c0:c1] = old
+                self._dirty.add(key)
+            else:
+                self._write(key, r0, r1, c0, c1, old, MAP_FILES[key][1])
+        self.flush(closures=True)
         self.pack()
         return True
 
-    def flush(self) -> None:
-        """Upload the changed images to Blender (what the viewport and renders see)."""
-        for key in sorted(self._dirty):
+    def flush(self, closures: bool | None = None) -> None:
+        """Upload the changed images to Blender (what the viewport and renders see). The six closure
+        images (about 10 ms each at 2048 x 2048) go up with the maps at most every
+        ``CLOSURE_UPLOAD_S`` during a stroke, and always when ``closures`` is True (stroke end, undo)."""
+        now = time.perf_counter()
+        if closures is None:
+            closures = now - self._closure_upload >= CLOSURE_UPLOAD_S
+        keys = sorted(k for k in self._dirty if closures or not k.startswith("fit "))
+        for key in keys:
             image = self._image(key)
             image.pixels.foreach_set(self._buffer(key).ravel())
             image.update()
-        self._unpacked |= self._dirty
-        self._dirty.clear()
+        if closures and any(k.startswith("fit ") for k in keys):
+            self._closure_upload = now
+        self._unpacked |= set(keys)
+        self._dirty -= set(keys)
 
     def pack(self) -> None:
         """Store the uploaded pixels of the changed maps in the .blend (packed images): what save,
@@ -273,7 +275,7 @@ def drop_sessions() -> None:
 def pack_sessions() -> None:
     """Upload and pack whatever the brush sessions changed and have not packed yet."""
     for session in _SESSIONS.values():
-        session.flush()
+        session.flush(closures=True)
         session.pack()
 
 

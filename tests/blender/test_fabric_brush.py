@@ -17,7 +17,6 @@ def _small_fit_budget(monkeypatch, addon_module):
     import importlib
 
     monkeypatch.setattr(importlib.import_module(f"{addon_module}.addon.fabric.material"), "FIT_KEY_BUDGET", 24)
-    monkeypatch.setattr(importlib.import_module(f"{addon_module}.addon.fabric.brushing"), "REFIT_KEY_BUDGET", 24)
 
 
 def _closures(obj):
@@ -89,7 +88,7 @@ def test_replayed_comb_stroke_matches_core_and_undo_restores(addon_module, tmp_p
 
 
 def test_comb_stroke_refits_the_closures_of_its_texels_and_undo_restores_them(addon_module, tmp_path):
-    from material_structures.core.fabric.closure_fit import fit_closure_texels
+    from material_structures.core.fabric.closure_table import lookup_closure_texels
 
     scene, obj, _ = _setup(tmp_path)
     brush = scene.material_structures.fabric_brush
@@ -99,8 +98,8 @@ def test_comb_stroke_refits_the_closures_of_its_texels_and_undo_restores_them(ad
     after, cm_after = _current(obj), _closures(obj)
     changed = np.any(after.basis != before.basis, axis=-1)
     assert changed.sum() > 50
-    # the stroke's texels hold the fit of their new geometry (the same key budget), the others are untouched
-    wts, shp, scl = fit_closure_texels(after.sigma[changed], after.basis[changed], max_keys=24)
+    # the stroke's texels hold the table's closures of their new geometry, the others are untouched
+    wts, shp, scl = lookup_closure_texels(after.sigma[changed], after.basis[changed])
     np.testing.assert_allclose(cm_after.weights[changed], wts, atol=1e-6)
     np.testing.assert_allclose(cm_after.shape[changed], shp, atol=1e-6)
     np.testing.assert_allclose(cm_after.ggx_scale[changed], scl, atol=1e-6)
