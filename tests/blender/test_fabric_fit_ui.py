@@ -1,0 +1,65 @@
+"""Fit BTF from the fabric panel: the fit runs in a background process (JSON progress per tile), its maps
+become a new fabric material on the active mesh; cancel stops it; a folder without a BTF is one line."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import bpy
+import pytest
+
+from material_structures.cli import main
+
+
+@pytest.fixture(scope="module")
+def btf_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("btf") / "velvet"
+    assert main(["fabric", "synth", "--out", str(d), "--width", "16", "--height", "16", "--lights", "8",
+                 "--views", "8"]) == 0
+    return str(d)
+
+
+def _plane():
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.mesh.primitive_plane_add(size=1.0)
+    return bpy.context.active_object
+
+
+def test_fit_btf_makes_a_fabric_material(addon_module, btf_dir, tmp_path):
+    fit_job = sys.modules[f"{addon_module}.addon.fabric.fit_job"]  # the enabled add-on's (its current job)
+    obj = _plane()
+    out = str(tmp_path / "fit")
+    assert bpy.ops.material_structures.fabric_fit_btf(directory=btf_dir, out_dir=out) == {"FINISHED"}
+    mat = obj.active_material
+    assert mat is not None and mat.get("material_structures_fabric") and mat.name == "Fabric fit"
+    job = fit_job.current_job()
+    assert job.state() == "FINISHED" and job.done_iterations == job.iterations == 1  # 16 x 16 texels: one tile
+    assert os.path.isfile(os.path.join(out, "params.json")) and os.path.isfile(job.log_path)
+    assert "tile 1/1" in job.status_text()
+
+
+def test_fit_btf_default_output_is_beside_the_btf(addon_module, btf_dir):
+    from material_structures.addon.fabric import fit_job
+
+    assert fit_job.default_out_dir(btf_dir + os.sep) == btf_dir + "_fit"
+    assert fit_job.fit_command(btf_dir, "/o", workers=3)[-4:] == ["/o", "--no-dask", "--workers", "3"]
+
+
+def test_fit_btf_cancel_and_errors(addon_module, btf_dir, tmp_path):
+    fit_job = sys.modules[f"{addon_module}.addon.fabric.fit_job"]
+    _plane()
+    with pytest.raises(RuntimeError, match="no btf.json"):
+        bpy.ops.material_structures.fabric_fit_btf(directory=str(tmp_path))
+    assert bpy.ops.material_structures.fabric_fit_cancel() == {"CANCELLED"}  # a warning: nothing runs
+    job = fit_job.FabricFitJob(btf_dir, str(tmp_path / "cancelled"), workers=1).start()
+    fit_job.set_current_job(job)
+    t0 = time.perf_counter()
+    while not job.message and job.is_alive() and time.perf_counter() - t0 < 60:
+        time.sleep(0.05)
+    assert job.is_alive(), job.last_line
+    assert not bpy.ops.material_structures.fabric_fit_btf.poll()  # one fit at a time
+    assert bpy.ops.material_structures.fabric_fit_cancel() == {"FINISHED"}
+    assert job.poll() == "CANCELLED"
+    assert "cancelled" in job.ended_text()
