@@ -63,3 +63,14 @@ def test_fit_btf_cancel_and_errors(addon_module, btf_dir, tmp_path):
     assert bpy.ops.material_structures.fabric_fit_cancel() == {"FINISHED"}
     assert job.poll() == "CANCELLED"
     assert "cancelled" in job.ended_text()
+
+
+def test_background_process_sees_blender_site_packages(addon_module):
+    """The fits' process gets this process's paths (the extension's wheels) and Blender's own site-packages
+    (OpenImageIO reads the EXRs where the OpenEXR package is missing)."""
+    bj = sys.modules[f"{addon_module}.addon.background_job"]
+    paths = bj.child_path()
+    assert paths[0] == bj.package_parent()
+    assert any(os.path.isdir(os.path.join(p, "OpenImageIO")) for p in paths), paths
+    assert bj.progress_event('{"progress": "fit", "iteration": 3}') == {"progress": "fit", "iteration": 3}
+    assert bj.progress_event('{"loss": 1}') is None and bj.progress_event("fit tiles: 50%") is None
