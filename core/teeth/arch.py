@@ -1,14 +1,15 @@
 """Dental arches of anatomical teeth (``anatomy``) with scalloped gums and an oral-cavity dome.
 
-Pure numpy/scipy. Scene space: millimetres, x to the viewer's right, y out of the mouth (towards a
+Pure numpy/scipy. Scene space: millimetres, x towards the patient's right, y out of the mouth (towards a
 frontal camera), z up; upper crowns point down (incisal edges at z = ``upper_edge``), lower crowns up.
 
 * **arch**: the labial surfaces of the crowns follow the parabola y = y0 - k x^2 (``k`` 0.0275 / mm for
-  the upper, 0.034 / mm for the lower arch: intercanine labial width about 33 / 27 mm); each tooth is
+  the upper, 0.034 / mm for the lower arch: canine cusp tips 31.7 / 24.2 mm apart, adults about 34 / 26
+  mm; the front teeth span 48.7 / 40.5 mm); each tooth is
   placed along it with its mesiodistal axis on the tangent, labial crown inclination and mesial crown tip
   of its ``ToothSpec`` and its incisal edge / cusp tip on the smile line (``edge_level``); neighbours are
   slid together until their enamel is ``gap`` mm apart at the contact areas (the central incisors meet at
-  the midline). The patient's left side (x > 0) is placed, the right side is its mirror image.
+  the midline). The patient's right side (x > 0) is placed, the left side is its mirror image.
 * **gums**: one closed volume per jaw, swept along the arch: the labial face lies ``thickness`` mm outside
   the teeth's labial envelope (thin at the margin, thicker over the roots: root eminences), the palatal /
   lingual face behind the teeth; the **gingival margin** follows each tooth's CEJ ``margin_above_cej`` mm
@@ -31,12 +32,12 @@ from .tooth_mesh import ToothGeometry
 
 UPPER_FRONT = ("upper_central", "upper_lateral", "upper_canine", "upper_premolar")
 LOWER_FRONT = ("lower_central", "lower_lateral", "lower_canine", "lower_premolar")
-SIDE_NAMES = {1: "left", -1: "right"}  # the patient's left is the viewer's right (x > 0)
+SIDE_NAMES = {1: "right", -1: "left"}  # x > 0: the patient's right (on the left of a frontal camera's image)
 
 
 @dataclass
 class PlacedTooth:
-    """One tooth of an arch: its template, side (+1 patient's left, x > 0), 4 x 4 placement of canonical tooth
+    """One tooth of an arch: its template, side (+1 patient's right, x > 0), 4 x 4 placement of canonical tooth
     space into the scene (a reflection on the mirrored side) and the placed geometry."""
 
     template: str
@@ -121,7 +122,7 @@ def place_geometry(geo: ToothGeometry, matrix: np.ndarray) -> ToothGeometry:
 
 def _tooth_matrix(spec: ToothSpec, canon: np.ndarray, arch: Arch, s: float, jaw_sign: float,
                   edge_z: float) -> np.ndarray:
-    """Placement of canonical tooth space at arc length s (patient's left side, x > 0)."""
+    """Placement of canonical tooth space at arc length s (patient's right side, x > 0)."""
     incl = _rot(0, -spec.inclination) @ _rot(1, spec.tip)  # crown tipped labially, then mesially
     v = canon @ incl[:3, :3].T
     crown = v[(canon[:, 2] > 0.3 * spec.crown) & (canon[:, 2] < 0.8 * spec.crown)]
@@ -186,8 +187,8 @@ def build_arch(jaw: str = "upper", templates: tuple | None = None, resolution: i
         prev_tree = cKDTree(v)
         placed.append(PlacedTooth(name, 1, m, place_geometry(tooth_from_spec(spec, resolution), m)))
     mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
-    right = [PlacedTooth(p.template, -1, mirror @ p.matrix, place_geometry(p.geometry, mirror)) for p in placed]
-    return right[::-1] + placed, arch
+    mirrored = [PlacedTooth(p.template, -1, mirror @ p.matrix, place_geometry(p.geometry, mirror)) for p in placed]
+    return mirrored[::-1] + placed, arch  # from the patient's left (x < 0) to the right
 
 
 # -- gums -------------------------------------------------------------------------------------------

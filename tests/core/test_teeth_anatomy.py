@@ -147,8 +147,9 @@ def test_arch_neighbours_do_not_intersect(jaw, arches):
         d = np.linalg.norm(a.geometry.enamel.vertices[:, None] - b.geometry.enamel.vertices[None], axis=-1).min()
         assert d < 0.6
     # mirror-symmetric about the midline, crown tips on the smile line
-    left, right = teeth[4:], teeth[3::-1]
-    for lt, rt in zip(left, right, strict=True):
+    right, left = teeth[4:], teeth[3::-1]
+    for rt, lt in zip(right, left, strict=True):
+        assert rt.name.replace("right", "left") == lt.name and rt.geometry.enamel.vertices[:, 0].min() > 0
         np.testing.assert_allclose(lt.geometry.enamel.vertices[:, 1:], rt.geometry.enamel.vertices[:, 1:], atol=1e-9)
     centrals = teeth[3:5]
     edge = [t.geometry.enamel.vertices[:, 2].min() if jaw == "upper" else t.geometry.enamel.vertices[:, 2].max()
