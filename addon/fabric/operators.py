@@ -23,7 +23,6 @@ from ..common import (
     MeshUVLookup,
     SyncLamps,
     assign_material,
-    end_modal_progress,
     require_uv_mesh,
     stroke_property,
     stroke_space_property,
@@ -132,6 +131,48 @@ class MS_OT_fabric_save_maps(FolderPicker, bpy.types.Operator):
         return {"FINISHED"}
 
 
+def finish_fabric_fit(job, scene, obj, state: str) -> tuple[str, str]:
+    """What an ended fabric fit becomes: its maps as a new fabric material on ``obj`` (when it is a mesh with
+    a UV map; else the material is kept with a fake user). Returns (report level, message); ``job.outcome``
+    says the same in the panel."""
+    job.settled = True
+    if state != "FINISHED":
+        job.outcome = f"{state.lower()}: see {job.log_path}"
+        return ("WARNING" if state == "CANCELLED" else "ERROR"), f"Fabric fit {state.lower()}: {job.last_line}"
+    try:
+        mat = import_fit_material(job.out_dir, scene)
+    except (OSError, ValueError) as exc:
+        job.outcome = f"finished, not imported: {exc}"
+        return "ERROR", f"Fabric fit finished but its maps cannot be imported: {exc}"
+    if obj is not None and obj.type == "MESH" and obj.data.uv_layers:
+        assign_material(obj, mat)
+        sync_fabric_lamps(scene)
+        where = f" on {obj.name}"
+    else:
+        mat.use_fake_user = True  # kept for the next mesh, although nothing uses it yet
+        where = " (select a mesh with a UV map and pick it in its material slot)"
+    job.outcome = f"done: {mat.name}{where}"
+    return "INFO", f"Fabric fit finished: {mat.name}{where}"
+
+
+def _watch(job, scene_name: str, obj_name: str | None):
+    """A timer that redraws the panels while ``job`` runs and makes its material when it ends (the operator
+    has returned by then: Blender stays usable while the fit runs)."""
+
+    def tick():
+        for window in bpy.context.window_manager.windows:
+            for area in window.screen.areas:
+                area.tag_redraw()
+        if job.is_alive():
+            return 0.5
+        scene = bpy.data.scenes.get(scene_name)
+        if scene is not None and not job.settled:
+            finish_fabric_fit(job, scene, bpy.data.objects.get(obj_name) if obj_name else None, job.poll())
+        return None
+
+    return tick
+
+
 class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
     """Fit the pile-fabric model to a measured BTF folder in the background, then give the active mesh a new
     fabric material with the fitted maps"""
@@ -144,9 +185,6 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
                                       description="Where the fitted maps are written (default: beside the BTF "
                                                   "folder, its name + _fit)")
 
-    _timer = None
-    _job = None  # the job this (modal) operator watches
-
     @classmethod
     def poll(cls, context):
         if fit_job.job_running():
@@ -154,76 +192,27 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
             return False
         return True
 
-    def _start(self, context):
+    def execute(self, context):
         btf = os.path.normpath(bpy.path.abspath(self.directory))
         out = bpy.path.abspath(self.out_dir) if self.out_dir else fit_job.default_out_dir(btf)
         if fit_job.job_running():
             self.report({"ERROR"}, "A fabric fit is already running")
-            return None
+            return {"CANCELLED"}
         try:
             job = fit_job.FabricFitJob(btf, out, workers=usable_cores()).start()
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
-            return None
+            return {"CANCELLED"}
         fit_job.set_current_job(job)
-        return job
-
-    def _finish(self, context, job, state):
-        job.settled = True
-        if state != "FINISHED":
-            job.outcome = f"{state.lower()}: see {job.log_path}"
-            self.report({"WARNING" if state == "CANCELLED" else "ERROR"}, f"Fabric fit {state.lower()}: "
-                        f"{job.last_line}")
-            return {"CANCELLED"}
-        try:
-            mat = import_fit_material(job.out_dir, context.scene)
-        except (OSError, ValueError) as exc:
-            job.outcome = f"finished, not imported: {exc}"
-            self.report({"ERROR"}, f"Fabric fit finished but its maps cannot be imported: {exc}")
-            return {"CANCELLED"}
         obj = context.active_object
-        if obj is not None and obj.type == "MESH" and obj.data.uv_layers:
-            assign_material(obj, mat)
-            sync_fabric_lamps(context.scene)
-            where = f" on {obj.name}"
-        else:
-            mat.use_fake_user = True  # kept for the next mesh, although nothing uses it yet
-            where = " (select a mesh with a UV map and pick it in its material slot)"
-        job.outcome = f"done: {mat.name}{where}"
-        self.report({"INFO"}, f"Fabric fit finished: {mat.name}{where}")
+        if bpy.app.background:  # scripts, tests, headless: wait for the fit
+            level, message = finish_fabric_fit(job, context.scene, obj, job.wait())
+            self.report({level}, message)
+            return {"FINISHED"} if level == "INFO" else {"CANCELLED"}
+        # from the file browser: the fit runs beside Blender; the panel shows its progress and Cancel
+        bpy.app.timers.register(_watch(job, context.scene.name, obj.name if obj else None), first_interval=0.5)
+        self.report({"INFO"}, f"Fabric fit started: {job.log_path}")
         return {"FINISHED"}
-
-    def execute(self, context):
-        job = self._start(context)
-        if job is None:
-            return {"CANCELLED"}
-        if bpy.app.background or context.window is None:  # scripts, tests, headless: wait for the fit
-            return self._finish(context, job, job.wait())
-        self._job = job  # from the file browser: watch the fit while Blender keeps running
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.5, window=context.window)
-        wm.modal_handler_add(self)
-        wm.progress_begin(0, 1000)
-        return {"RUNNING_MODAL"}
-
-    def modal(self, context, event):
-        job = self._job or fit_job.current_job()
-        if job is None:
-            end_modal_progress(context, self._timer)
-            return {"CANCELLED"}
-        if event.type == "ESC":
-            job.cancel()
-        if event.type in {"TIMER", "ESC"}:
-            state = job.poll()
-            context.window_manager.progress_update(int(1000 * job.progress))
-            if context.workspace is not None:
-                context.workspace.status_text_set(job.status_text())
-            for area in context.screen.areas if context.screen else ():
-                area.tag_redraw()
-            if state != "RUNNING":
-                end_modal_progress(context, self._timer)
-                return self._finish(context, job, state)
-        return {"PASS_THROUGH"}
 
 
 class MS_OT_fabric_fit_cancel(bpy.types.Operator):

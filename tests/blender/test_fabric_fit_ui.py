@@ -74,3 +74,17 @@ def test_background_process_sees_blender_site_packages(addon_module):
     assert any(os.path.isdir(os.path.join(p, "OpenImageIO")) for p in paths), paths
     assert bj.progress_event('{"progress": "fit", "iteration": 3}') == {"progress": "fit", "iteration": 3}
     assert bj.progress_event('{"loss": 1}') is None and bj.progress_event("fit tiles: 50%") is None
+
+
+def test_fit_btf_from_the_file_browser_ends_in_a_timer(addon_module, btf_dir, tmp_path):
+    """In a desktop Blender the operator returns at once; a timer redraws the panel while the fit runs and
+    makes the material when it ends (here the timer's function is called as Blender would)."""
+    ops = sys.modules[f"{addon_module}.addon.fabric.operators"]
+    fit_job = sys.modules[f"{addon_module}.addon.fabric.fit_job"]
+    obj = _plane()
+    job = fit_job.FabricFitJob(btf_dir, str(tmp_path / "fit"), workers=1).start()
+    tick = ops._watch(job, bpy.context.scene.name, obj.name)
+    assert tick() == 0.5  # running: call again in half a second
+    job.wait()
+    assert tick() is None and job.settled and job.outcome.startswith("done: Fabric fit")
+    assert obj.active_material is not None and obj.active_material.get("material_structures_fabric")
