@@ -211,3 +211,38 @@ def test_a_mesh_that_cannot_be_traced_is_refused_naming_the_file(tmp_path, text,
     with pytest.raises(ValueError, match=said) as info:
         load_mesh(tmp_path / name)
     assert name in str(info.value)
+
+
+def test_sigterm_stops_a_dask_teeth_fit_with_its_workers_and_it_resumes(capture_dir, tmp_path):
+    """Ctrl-C (SIGTERM here: a background shell ignores SIGINT) on a fit rendering on a local Dask cluster:
+    exit 130 with one line, no worker process left, and --resume finishes the fit from its checkpoint."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from .test_bad_inputs_fabric_scratch import _children
+
+    out = tmp_path / "fit"
+    argv = [sys.executable, "-m", "material_structures", "teeth", "fit", str(capture_dir), "--out", str(out),
+            "--init", "scene", "--iterations", "8", "--held-out-lights", "0", "--dask-workers", "1",
+            "--no-progress"]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ckpt = out / "checkpoint.json"
+    t0 = time.monotonic()
+    while not ckpt.exists() and time.monotonic() - t0 < 240:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    kids = _children(proc.pid)
+    assert kids  # the local cluster's processes
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err[-2000:]
+    time.sleep(1.0)
+    alive = [k for k in kids if os.path.exists(f"/proc/{k}") and open(f"/proc/{k}/stat").read().split()[2] != "Z"]
+    assert alive == []
+    done = len(json.loads(ckpt.read_text())["log"])
+    assert 5 <= done < 8
+    r = subprocess.run(argv + ["--resume"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert len(json.loads((out / "loss.json").read_text())["log"]) == 8
