@@ -174,7 +174,7 @@ def shade_preview(scene, material) -> None:
     group_node(material).inputs["mm per Unit"].default_value = 1.0  # the preview stage is in mm
     objs["teeth"][0][1].data.materials[0] = material
     w, h = scene.render.resolution_x, scene.render.resolution_y
-    _light_and_camera(scene, np.array([0.0, 0.0, 4.0]), w, h, 18.0, [((60.0, 150.0, 60.0), 5.0e4)])
+    _light_and_camera(scene, np.array([0.0, 0.0, 3.5]), w, h, 24.0, [((60.0, 150.0, 60.0), 5.0e4)])
     configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)
 
 
