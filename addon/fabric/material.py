@@ -314,16 +314,16 @@ def material_closure_images(mat) -> dict:
     return out
 
 
-FIT_KEY_BUDGET = 512  # distinct fibre geometries fitted per map (about 30 ms each): an import stays < ~20 s
+FIT_KEY_BUDGET = 128  # distinct fibre geometries fitted per map (70-230 ms each); beyond: the closure table
 
 
 def fit_closure_images(maps, prefix: str, progress=None, cache: dict | None = None, info: dict | None = None) -> dict:
     """Fit the closure mix to core ``maps`` (``closure_fit.fit_closure_maps``) and make its images.
 
     Each distinct fibre geometry is fitted once: a 256 x 256 preset takes well under a second. Maps
-    with more than ``FIT_KEY_BUDGET`` distinct geometries (a measured fit varies per texel) are fitted
-    on a coarser grid of geometries (``info["coarsening"]`` > 1). ``progress(done, total)`` reports the
-    geometries fitted."""
+    with more than ``FIT_KEY_BUDGET`` distinct geometries (a measured fit varies per texel) take every
+    texel's closures from the precomputed table (``info["table"]``). ``progress(done, total)`` reports
+    the geometries fitted (or texels looked up)."""
     cm = fit_closure_maps(maps.sigma, maps.basis, cache=cache, progress=progress, max_keys=FIT_KEY_BUDGET, info=info)
     return closure_maps_to_images(cm, prefix)
 

@@ -312,25 +312,31 @@ def fit_closure_texels(sigma, basis, cache: dict | None = None, progress=None, m
     shape (N, 4), ggx_scale (N, 1)) float32.
 
     Texels are reduced to canonical quantised keys (``canonical_keys``) and each distinct key is fitted
-    once (``fit_keys``, about 30 ms per key on one core). ``max_keys``: when the texels hold more
-    distinct keys, the quantum is doubled (all three steps) until they hold at most that many (a
-    measured map varies continuously: every texel would be its own key), and ``info["coarsening"]``
-    says by which factor. ``cache``: a dict of key -> fitted row kept by the caller (the brush keeps one
-    per material), so keys fitted before cost nothing. ``progress(done, total)`` is called between
-    chunks of keys (an import shows it).
+    once (``fit_keys``, 70-230 ms per key on one core). ``max_keys``: when the texels hold more
+    distinct keys (a measured map varies continuously: every texel would be its own key), every texel's
+    closures come from the precomputed table instead (``closure_table.lookup_closure_texels``, about
+    3 us per texel, interpolated between fitted geometries), and ``info["table"]`` is True.
+    ``cache``: a dict of key -> fitted row kept by the caller, so keys fitted before cost nothing.
+    ``progress(done, total)`` is called between chunks of keys (or of texels, for the table; an
+    import shows it).
     """
     sigma = np.asarray(sigma, float).reshape(-1, 2)
     basis = np.asarray(basis, float).reshape(-1, 4)
-    factor = 1
-    while True:
-        quantum = tuple(q * factor for q in KEY_QUANTUM)
-        keys = canonical_keys(sigma, basis, quantum)
-        uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
-        if max_keys is None or len(uniq) <= max_keys or factor >= 4096:
-            break
-        factor *= 2
+    keys = canonical_keys(sigma, basis, KEY_QUANTUM)
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
     if info is not None:
-        info.update(keys=len(uniq), coarsening=factor)
+        info.update(keys=len(uniq), table=max_keys is not None and len(uniq) > max_keys)
+    if max_keys is not None and len(uniq) > max_keys:
+        from .closure_table import lookup_closure_texels
+
+        n, step = len(sigma), 1 << 16
+        out = (np.zeros((n, 4, 4), np.float32), np.zeros((n, 4), np.float32), np.zeros((n, 1), np.float32))
+        for c0 in range(0, n, step):
+            for dst, src in zip(out, lookup_closure_texels(sigma[c0:c0 + step], basis[c0:c0 + step]), strict=True):
+                dst[c0:c0 + step] = src
+            if progress is not None:
+                progress(min(c0 + step, n), n)
+        return out
     inverse = inverse.reshape(-1)
     k = len(uniq)
     wts = np.zeros((k, 4, 4))
