@@ -11,7 +11,7 @@ by material name (:func:`session_for`); the save handler packs them, loading ano
 Fitted closure maps (what world and indirect light see, ``core.fabric.closure_fit``) follow the painted
 maps segment by segment: a segment that changes sigma or the basis looks the closures of its changed
 texels up in the precomputed table (``core.fabric.closure_table``, multilinear in the fibre geometry,
-about 1 us per texel instead of 0.1-0.2 s per distinct geometry for the optimisation) and records the
+about 3 us per texel instead of 0.1-0.2 s per distinct geometry for the optimisation) and records the
 closure windows it overwrote, so the stroke's undo restores them. The closure images are uploaded
 with the maps at most every half second during a stroke (six more 2048 x 2048 uploads per segment
 would double an update) and at its end. Colour strokes (k_d, k_s) leave the closures as they are:

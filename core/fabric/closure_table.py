@@ -4,7 +4,7 @@
 whose segments create hundreds of geometries. The fit depends only on the canonical key of a texel
 (``closure_fit.canonical_keys``: sigma_x, sigma_y, tilt of the fibre axis, twist of a0 about it), so it
 is tabulated once on a grid of that key and looked up by multilinear interpolation of the fitted
-parameters (16 corners): smooth in the key and about 1 us per texel.
+parameters (16 corners): smooth in the key and about 3 us per texel.
 
 Grid (``NODES``): log sigma at 12 nodes over [log 0.05, log 4] (steps of 49 %, clamped outside), tilt
 0-90 degrees every 10, twist 0-90 degrees every 22.5. Two symmetries of eq. 3.9 and of the closure mix
