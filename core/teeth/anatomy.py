@@ -26,9 +26,9 @@ adult sizes after Wheeler's / Ash & Nelson's tables):
 * **dentin core**: the crown's inset (enamel ``enamel_labial`` / ``enamel_proximal`` mm thick at
   mid-crown, thinning to ``enamel_cervical`` at the CEJ) that stops ``incisal_enamel`` short of the
   incisal edge or cusp tips, so the **incisal third is enamel only** (translucent, thesis Sec. 5.1:
-  enamel thicker towards the tip); on incisors the dentin's top carries three **mamelons**. Each dentin
-  point lies on the segment between the crown's axis and the enamel point of the same height and
-  azimuth, which keeps it inside the enamel.
+  enamel thicker towards the tip); on incisors the dentin's top carries three **mamelons**. A dentin
+  point's mesiodistal and labiolingual offsets from the crown's axis are at most those of the enamel
+  point of the same height and azimuth, which keeps it inside the enamel (tested with trimesh).
 
 Surface parameterisation: rows from the top (incisal edge line, or the premolar's central fossa as a
 pole) down the crown to the CEJ and the root to the apex (a pole); ``n_u`` azimuthal samples per row
