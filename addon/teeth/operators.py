@@ -24,7 +24,7 @@ from .scene_build import (
 
 TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar", "Premolar", ""),
                ("molar", "Molar", "")] + [
-    (key, spec.name.title(), "dental-atlas anatomy: labial convexity, cervical constriction, incisal edge or cusps, "
+    (key, spec.name.title(), "Dental-atlas anatomy: labial convexity, cervical constriction, incisal edge or cusps, "
      "root; the dentin stops short of the edge") for key, spec in ANATOMY_SPECS.items()]
 
 
