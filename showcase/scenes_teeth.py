@@ -1,4 +1,5 @@
-"""Teeth showcase scenes (thesis chapter 5): a smile (a row of teeth on gums before an oral-cavity proxy)
+"""Teeth showcase scenes (thesis chapter 5): a smile (the upper and lower front teeth of
+``core.teeth.anatomy`` on arches with scalloped gums, before an oral-cavity dome; docs/teeth-showcase.md)
 and a fitting demo (a synthetic capture fitted by the core; start, fit and ground truth side by side).
 
 Both are built as core ``TeethScene`` models and brought into Blender by ``addon.teeth.scene_build``
