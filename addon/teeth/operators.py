@@ -22,10 +22,11 @@ from .scene_build import (
     no_mapping_message,
 )
 
-TOOTH_KINDS = [("incisor", "Incisor", ""), ("canine", "Canine", ""), ("premolar", "Premolar", ""),
-               ("molar", "Molar", "")] + [
-    (key, spec.name.title(), "Dental-atlas anatomy: labial convexity, cervical constriction, incisal edge or cusps, "
-     "root; the dentin stops short of the edge") for key, spec in ANATOMY_SPECS.items()]
+# enum identifiers are the core's template names upper-cased (execute() lower-cases them back)
+TOOTH_KINDS = [("INCISOR", "Incisor", ""), ("CANINE", "Canine", ""), ("PREMOLAR", "Premolar", ""),
+               ("MOLAR", "Molar", "")] + [
+    (key.upper(), spec.name.title(), "Dental-atlas anatomy: labial convexity, cervical constriction, incisal edge "
+     "or cusps, root; the dentin stops short of the edge") for key, spec in ANATOMY_SPECS.items()]
 
 
 def _mm_per_unit(scene) -> float:
@@ -71,7 +72,7 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
         ("TEMPLATE", "Template", "A procedural tooth template"),
         ("MESH", "Active Mesh", "The active closed mesh is the enamel surface (z = tooth axis, crown up)")],
         default="TEMPLATE")
-    kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="incisor")
+    kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="INCISOR")
     resolution: bpy.props.IntProperty(name="Resolution", default=40, min=8, max=256)
     smooth: bpy.props.BoolProperty(name="Smooth Shading", default=True)
 
@@ -93,12 +94,13 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
                 placement = placement_from_mesh_object(src, mm_per_unit=mm)
                 name, kind = src.name, "custom"
             else:
-                if self.kind in ANATOMY_SPECS:
-                    geo = make_anatomical_tooth(self.kind, resolution=max(12, self.resolution))
-                    name, kind = ANATOMY_SPECS[self.kind].name.title(), ANATOMY_SPECS[self.kind].kind
+                key = self.kind.lower()  # the core's template name
+                if key in ANATOMY_SPECS:
+                    geo = make_anatomical_tooth(key, resolution=max(12, self.resolution))
+                    name, kind = ANATOMY_SPECS[key].name.title(), ANATOMY_SPECS[key].kind
                 else:
-                    geo = make_tooth(self.kind, resolution=self.resolution)
-                    name, kind = self.kind.title(), self.kind
+                    geo = make_tooth(key, resolution=self.resolution)
+                    name, kind = key.title(), key
                 enamel, dentin = geo.enamel, geo.dentin
             em = new_teeth_material("Enamel", f"Enamel {name}", scene=scene, mm_per_unit=mm)
             dm = new_teeth_material("Dentin", f"Dentin {name}", scene=scene, mm_per_unit=mm)

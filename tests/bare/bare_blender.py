@@ -262,7 +262,7 @@ def use(zip_path: str, data: str, work: str) -> None:
     # -- teeth --------------------------------------------------------------------------------------------
     t = time.perf_counter()
     teeth = []
-    for i, kind in enumerate(("incisor", "canine", "premolar", "molar")):
+    for i, kind in enumerate(("INCISOR", "CANINE", "PREMOLAR", "MOLAR")):
         scene.cursor.location = (1.2 * i, 2.4, 0.0)
         op("teeth_add_tooth", source="TEMPLATE", kind=kind, resolution=16)
         teeth.append(bpy.context.active_object)

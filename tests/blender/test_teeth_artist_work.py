@@ -222,7 +222,7 @@ def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_pat
 
 def _add_incisor():
     bpy.ops.wm.read_homefile(use_empty=True)
-    assert bpy.ops.material_structures.teeth_add_tooth(kind="incisor", resolution=12) == {"FINISHED"}
+    assert bpy.ops.material_structures.teeth_add_tooth(kind="INCISOR", resolution=12) == {"FINISHED"}
     enamel = bpy.data.objects["Incisor Enamel"]
     assert enamel.ms_tooth.tooth_name == "Incisor"
     return enamel
@@ -295,7 +295,7 @@ def test_apply_fit_result_uses_the_mapping_and_refuses_nothing(addon_module, cap
 
 def test_mapping_is_prefilled_where_names_match(addon_module, capture_dir):
     enamel = _import(capture_dir)  # tooth name "tooth0", as in the capture
-    assert bpy.ops.material_structures.teeth_add_tooth(kind="molar", resolution=8) == {"FINISHED"}
+    assert bpy.ops.material_structures.teeth_add_tooth(kind="MOLAR", resolution=8) == {"FINISHED"}
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = capture_dir
     assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [("tooth0", enamel)]

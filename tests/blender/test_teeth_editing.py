@@ -18,7 +18,7 @@ def _geometry():
     return G
 
 
-def _add(kind="canine", resolution=16):
+def _add(kind="CANINE", resolution=16):
     bpy.ops.wm.read_homefile(use_empty=True)
     assert bpy.ops.material_structures.teeth_add_tooth(kind=kind, resolution=resolution, smooth=False) == {"FINISHED"}
     enamel = bpy.context.active_object
@@ -63,7 +63,7 @@ def test_pair_structure_matches_core(addon_module):
 
 def test_sliders_drive_both_meshes_eq_5_5(addon_module):
     G = _geometry()
-    enamel, dentin = _add("incisor", 16)
+    enamel, dentin = _add("INCISOR", 16)
     c = (0.3, -0.25, 0.6)
     st = enamel.ms_tooth
     st.buccal, st.proximal, st.occlusal = c
@@ -84,7 +84,7 @@ def test_sliders_drive_both_meshes_eq_5_5(addon_module):
 
 def test_undo_restores_mesh(addon_module):
     G = _geometry()
-    enamel, dentin = _add("premolar", 12)
+    enamel, dentin = _add("PREMOLAR", 12)
     before = G.evaluated_vertices(dentin)
     bpy.ops.ed.undo_push(message="before edit")
     enamel.ms_tooth.occlusal = 0.5
