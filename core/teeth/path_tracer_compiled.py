@@ -27,12 +27,15 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from .bvh import (
+    PACKET,
     STACK_SIZE,
+    WIDTH,
     TriangleBVH,
     closest_point_triangle,
     closest_triangle,
     first_hit,
     hits_until_stop,
+    packet_hits,
     ray_triangle,
 )
 from .compiled_scene import KIND_DIELECTRIC, KIND_INDEX_MATCHED, KIND_OPAQUE, MED_AIR, MED_DENTIN, CompiledScene
@@ -42,6 +45,7 @@ from .ray_queries import RAY_EPS
 # l(q) = (1 + tanh(q / 2 s)) / 2 is 1 in float64 from q / s = 38.2 on (tanh rounds to 1 beyond 19.1):
 # the dentin distance is searched only this many spreads far
 BLEND_REACH = 40.0
+PACKET_MIN = 4  # lights from which a vertex's shadow rays are traced as packets
 HIT_BUFFER = 32  # hits gathered per traversal (more: one cast per crossing)
 INV_4PI = 1.0 / (4.0 * np.pi)
 N_BLOCKS = 64  # row blocks traced in parallel; fixed so that sums do not depend on the thread count
@@ -214,20 +218,27 @@ def _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds) -> int:
 
 
 @njit(cache=True, inline="always")
-def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t):
+def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, wdist, buf_tri, buf_t):
     """Crossings along o + t d (see ``path_tracer._Tracer.through``): path mode passes index-matched
     surfaces and stops at the first other one; shadow mode passes every non-opaque surface up to tmax.
     Each hit must lie RAY_EPS beyond the previous one, as when every crossing casts a new ray from there.
     Fills tri_x, t_x (crossings), meds (medium of each piece); returns (k, end_tri, end_t, blocked, casts).
     One traversal gathers the hits up to the first stopping surface; where that cannot decide (buffer
     overflow, a stopping hit within RAY_EPS of a crossing) the walk goes on one ray cast per crossing."""
+    stops = geo[22] if shadow else geo[23]
+    n = hits_until_stop(geo[11:15], stops, o, d, RAY_EPS, tmax, stack, wdist, buf_tri, buf_t)
+    return _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist)
+
+
+@njit(cache=True, inline="always")
+def _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist):
+    """``_walk`` from the n hits gathered by ``hits_until_stop`` (or ``packet_hits``) in buf_tri, buf_t."""
     normal_s, kind, inside, outside = geo[2], geo[3], geo[4], geo[5]
     nodes, stops = geo[11:15], (geo[22] if shadow else geo[23])
     k = 0
     tcur = 0.0
     meds[0] = med0
     casts = 1
-    n = hits_until_stop(nodes, stops, o, d, RAY_EPS, tmax, stack, buf_tri, buf_t)
     if n <= buf_t.shape[0]:
         for i in range(1, n):  # insertion sort by distance
             ti, ki = buf_t[i], buf_tri[i]
@@ -255,7 +266,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
         if decided:
             return k, -1, np.inf, False, casts
     while True:
-        tri, t = first_hit(nodes, o, d, tcur + RAY_EPS, tmax, stack)
+        tri, t = first_hit(nodes, o, d, tcur + RAY_EPS, tmax, stack, wdist)
         casts += 1
         if tri < 0:
             return k, -1, np.inf, False, casts
@@ -272,7 +283,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, buf_tri, buf_t
 
 
 @njit(cache=True, inline="always")
-def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, tau_cum, stack):
+def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, tau_cum, stack, wdist):
     """The free flight of a path in a medium, walked lazily: the crossings of index-matched surfaces along
     o + t d up to the distance where the hero channel's optical depth reaches ``tau_star`` (a scattering
     vertex there) or the first other surface before it. Each ray cast reaches only as far as the optical
@@ -292,7 +303,7 @@ def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, 
     while True:
         sig = sigma_s[meds[k], hero]
         t_sc = tcur + (tau_star - tau_cum[hero]) / max(sig, 1e-300) if sig > 0.0 else np.inf
-        tri, t = first_hit(nodes, o, d, tmin, t_sc, stack)
+        tri, t = first_hit(nodes, o, d, tmin, t_sc, stack, wdist)
         casts += 1
         if tri < 0:
             return k, -1, np.inf, t_sc < np.inf, casts
@@ -452,6 +463,38 @@ def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     return sign * dist, sign * dist_e
 
 
+@njit(cache=True, _nrt=False)
+def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
+    """``_nee``'s shadow rays from x as packets (``bvh.packet_hits``): every light's direction, distance, mu and
+    f (phase function or cosine / pi) into pk, and the hits of the rays with f > 0 (a function of its own,
+    so that ``_nee``'s one-light code is compiled as before)."""
+    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n, pinv, pstack, pdiff, pmask = pk
+    n_l = lp.shape[0]
+    for lt in range(n_l):
+        r2 = 0.0
+        for c in range(3):
+            ldir[lt, c] = lp[lt, c] - x[c]
+            r2 += ldir[lt, c] * ldir[lt, c]
+        r = np.sqrt(r2)
+        lr[lt] = r
+        for c in range(3):
+            ldir[lt, c] /= r
+        mu = ldir[lt, 0] * d[0] + ldir[lt, 1] * d[1] + ldir[lt, 2] * d[2]
+        lmu[lt] = mu
+        if is_phase:
+            lgeo[lt] = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+        else:
+            lgeo[lt] = max(ldir[lt, 0] * nrm[0] + ldir[lt, 1] * nrm[1] + ldir[lt, 2] * nrm[2], 0.0) / np.pi
+    for l0 in range(0, n_l, PACKET):
+        mask = np.int64(0)
+        for b in range(min(PACKET, n_l - l0)):
+            if lgeo[l0 + b] > 0.0:
+                mask |= np.int64(1) << b
+        if mask != 0:
+            packet_hits(geo[11:15], geo[22], x, ldir, lr, l0, mask, RAY_EPS, pinv, pstack, pdiff, pmask, pk_tri, pk_t,
+                        pk_n)
+
+
 # ------------------------------------------------------------------------------------------ one path
 @njit(cache=True, _nrt=False)
 def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li, inv_spp, row, cam, pix, b,
@@ -460,27 +503,45 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
     Returns (shadow rays, ray casts)."""
     sigma_e, col_sigma = med[1], med[4]
     kind, normal_s, eta = geo[3], geo[2], geo[6]
-    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t = scratch
+    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t, wdist, pk = scratch
+    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n = pk[:7]
     w, contrib, trans = vec[0], vec[1], vec[2]
     n_shadow = 0
     casts = 0
-    for lt in range(lp.shape[0]):
-        r2 = 0.0
-        for c in range(3):
-            w[c] = lp[lt, c] - x[c]
-            r2 += w[c] * w[c]
-        r = np.sqrt(r2)
-        for c in range(3):
-            w[c] /= r
-        mu = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]
-        if is_phase:
-            geo_f = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+    n_l = lp.shape[0]
+    packet = n_l >= PACKET_MIN
+    if packet:
+        _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk)
+    for lt in range(n_l):
+        if packet:
+            geo_f = lgeo[lt]
+            r = lr[lt]
+            r2 = r * r
+            mu = lmu[lt]
+            for c in range(3):
+                w[c] = ldir[lt, c]
         else:
-            geo_f = max(w[0] * nrm[0] + w[1] * nrm[1] + w[2] * nrm[2], 0.0) / np.pi
+            r2 = 0.0
+            for c in range(3):
+                w[c] = lp[lt, c] - x[c]
+                r2 += w[c] * w[c]
+            r = np.sqrt(r2)
+            for c in range(3):
+                w[c] /= r
+            mu = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]
+            if is_phase:
+                geo_f = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+            else:
+                geo_f = max(w[0] * nrm[0] + w[1] * nrm[1] + w[2] * nrm[2], 0.0) / np.pi
         if geo_f <= 0.0:
             continue
         n_shadow += 1
-        k, _, _, blocked, nc = _walk(geo, x, w, mv, True, r, tri_x, t_x, meds, stack, buf_tri, buf_t)
+        if packet:
+            hb_n, hb_tri, hb_t = pk_n[lt], pk_tri[lt], pk_t[lt]
+        else:
+            hb_n = hits_until_stop(geo[11:15], geo[22], x, w, RAY_EPS, r, stack, wdist, buf_tri, buf_t)
+            hb_tri, hb_t = buf_tri, buf_t
+        k, _, _, blocked, nc = _walk_hits(geo, x, w, mv, True, r, hb_n, hb_tri, hb_t, tri_x, t_x, meds, stack, wdist)
         casts += nc
         if blocked:
             continue
@@ -561,7 +622,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
     col_alb_e, col_alb_d, c_col, rho_s, rho_e, col_rho, spread = med[15], med[16], med[19], med[20], med[21], \
         med[22], med[23]
     kind, normal_s, eta = geo[3], geo[2], geo[6]
-    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t = scratch
+    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t, wdist, _ = scratch
     s_run, vecs = path_vecs
     o, d, x, nd, nrm, logf, logp, logfs, wv, dqdc, mix_e, mix_s, tau_cum, tau_at, sig_k, tmp, ones = vecs
     s_run[:] = 0.0
@@ -590,9 +651,10 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
         tau_star = -np.log1p(-u0)
         if in_medium:  # tau_cum: the optical depth before piece kstar
             k, end_tri, end_t, scatter, nc = _walk_to_flight(geo, o, d, m, sigma_s, hero, tau_star, tri_x, t_x,
-                                                             meds, tau_cum, stack)
+                                                             meds, tau_cum, stack, wdist)
         else:
-            k, end_tri, end_t, _, nc = _walk(geo, o, d, m, False, np.inf, tri_x, t_x, meds, stack, buf_tri, buf_t)
+            k, end_tri, end_t, _, nc = _walk(geo, o, d, m, False, np.inf, tri_x, t_x, meds, stack, wdist, buf_tri,
+                                             buf_t)
             scatter = False
             for c in range(3):
                 tau_cum[c] = 0.0
@@ -697,11 +759,12 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             _direction_from_mu(d, mu, 2.0 * np.pi * u3, nd)
             f_e = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
             f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
+            lf_e, lf_s = np.log(f_e), np.log(f_s)
             for c in range(3):
-                logf[c] += np.log(f_e)
-                logp[c] += np.log(f_s)
+                logf[c] += lf_e
+                logp[c] += lf_s
                 if roulette:
-                    logfs[c] += np.log(f_s)
+                    logfs[c] += lf_s
             if use_g or use_s:  # pushed at level b + 1: weight R_{b+1}
                 _phase_records(med, mv, mu, mix_e, lw_e, dl, dqdc, ab[b + 1], g_lvl, sx_lvl, jmap)
         elif end_tri >= 0:
@@ -781,6 +844,7 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
     """Trace every row (traced pixel) x spp in N_BLOCKS row blocks in parallel."""
     fxy, rot, center, width = cams
     n_rows = cam_of.shape[0]
+    n_l = lp.shape[0]
     inv_spp = 1.0 / spp
     for blk in prange(counters.shape[0]):
         r0 = blk * n_rows // counters.shape[0]
@@ -790,7 +854,11 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                    np.empty(MAX_CROSSINGS + 1, dtype=np.bool_), np.empty(3), np.empty(4, dtype=np.int64),
                    np.empty(4), np.empty(3), np.empty((n_j, 3)), np.empty((0, 3)), np.empty(0),
                    np.empty(STACK_SIZE, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
-                   np.empty(HIT_BUFFER))
+                   np.empty(HIT_BUFFER), np.empty(WIDTH),
+                   (np.empty((n_l, 3)), np.empty(n_l), np.empty(n_l), np.empty(n_l),
+                    np.empty((n_l, HIT_BUFFER), dtype=np.int64), np.empty((n_l, HIT_BUFFER)),
+                    np.empty(n_l, dtype=np.int64), np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64),
+                    np.empty((6, WIDTH)), np.empty(WIDTH, dtype=np.int64)))
         vecs = np.empty((17, 3))
         path_vecs = (np.empty((n_j, 3)), (vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5], vecs[6], vecs[7],
                                           vecs[8], vecs[9], vecs[10], vecs[11], vecs[12], vecs[13], vecs[14],

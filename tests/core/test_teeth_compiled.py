@@ -35,12 +35,12 @@ def test_bvh_first_hit_and_gathered_hits_match_brute_force():
     nodes = TriangleBVH(tris).ray_arrays(tris)
     o, d = _rays(tris, 1000)
     ref_tri = cs.caster._brute(o, d, None)
-    stack = np.empty(64, dtype=np.int64)
+    stack, dist = np.empty(64, dtype=np.int64), np.empty(8)
     stops = cs.kind != KIND_INDEX_MATCHED
     buf_tri, buf_t = np.empty(64, dtype=np.int64), np.empty(64)
     n_multi = 0
     for i in range(len(o)):
-        tri, t = first_hit(nodes, o[i], d[i], 0.0, np.inf, stack)
+        tri, t = first_hit(nodes, o[i], d[i], 0.0, np.inf, stack, dist)
         assert tri == ref_tri[i]
         # brute force: all hits along the ray, sorted
         e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
@@ -58,7 +58,7 @@ def test_bvh_first_hit_and_gathered_hits_match_brute_force():
         first_stop = next((k for k in order if stops[k]), None)
         t_stop = np.inf if first_stop is None else tt[first_stop]
         want = {int(k) for k in order if tt[k] <= t_stop}
-        n = hits_until_stop(nodes, stops, o[i], d[i], 0.0, np.inf, stack, buf_tri, buf_t)
+        n = hits_until_stop(nodes, stops, o[i], d[i], 0.0, np.inf, stack, dist, buf_tri, buf_t)
         got = {int(k) for k, tk in zip(buf_tri[:n], buf_t[:n], strict=True) if tk <= t_stop + 1e-9}
         assert got == want
         n_multi += len(want) > 1
@@ -118,3 +118,67 @@ def test_compiled_render_does_not_depend_on_the_thread_count():
         numba.set_num_threads(n0)
     np.testing.assert_array_equal(one.images, many.images)
     np.testing.assert_array_equal(one.grad, many.grad)
+
+
+def test_packet_shadow_rays_hit_what_single_rays_hit():
+    """``packet_hits`` (a vertex's shadow rays to many lights in one traversal) gathers, per ray, exactly the
+    hits ``hits_until_stop`` gathers for that ray alone (same triangles, same distances to the last bit)."""
+    from material_structures.core.teeth.bvh import PACKET, STACK_SIZE, WIDTH, packet_hits
+
+    cs = CompiledScene(make_scene(n_teeth=2, resolution=12))
+    tris = cs.tris_s
+    nodes = TriangleBVH(tris).ray_arrays(tris)
+    stops = cs.kind == 2  # the shadow rays' stopping surfaces: opaque
+    rng = np.random.default_rng(5)
+    n_l = 54
+    stack, dist = np.empty(STACK_SIZE, dtype=np.int64), np.empty(WIDTH)
+    b_tri, b_t = np.empty(32, dtype=np.int64), np.empty(32)
+    p_tri, p_t, p_n = np.empty((n_l, 32), dtype=np.int64), np.empty((n_l, 32)), np.empty(n_l, dtype=np.int64)
+    scratch = (np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64), np.empty((6, WIDTH)),
+               np.empty(WIDTH, dtype=np.int64))
+    o_all, _ = _rays(tris, 40, seed=6)
+    n_hits = 0
+    for o in o_all:
+        far = rng.normal(size=(n_l, 3))
+        far = o + 300.0 * far / np.linalg.norm(far, axis=1, keepdims=True)
+        far[::7] = o + rng.uniform(-5, 5, size=(len(far[::7]), 3))  # some short rays too
+        dirs = far - o
+        tmax = np.linalg.norm(dirs, axis=1)
+        dirs /= tmax[:, None]
+        mask = np.int64(0)
+        for b in range(n_l):
+            if b % 5 != 3:  # some rays left out of the packet
+                mask |= np.int64(1) << b
+        packet_hits(nodes, stops, o, dirs, tmax, 0, mask, 1e-4, *scratch, p_tri, p_t, p_n)
+        for b in range(n_l):
+            if b % 5 == 3:
+                continue
+            n = hits_until_stop(nodes, stops, o, dirs[b], 1e-4, tmax[b], stack, dist, b_tri, b_t)
+            assert p_n[b] == n
+            got = sorted(zip(p_t[b, :n].tolist(), p_tri[b, :n].tolist(), strict=True))
+            assert got == sorted(zip(b_t[:n].tolist(), b_tri[:n].tolist(), strict=True))
+            n_hits += n
+    assert n_hits > 500
+
+
+def test_packet_light_connections_equal_one_light_at_a_time():
+    """With PACKET_MIN lights or more the compiled tracer traces a vertex's shadow rays as packets; the paths do
+    not depend on the lights, so each light's image and the gradient of the image sum equal those of renders
+    with that light alone (one shadow ray at a time) to rounding."""
+    from material_structures.core.teeth.capture import PointLight
+    from material_structures.core.teeth.path_tracer_compiled import PACKET_MIN
+
+    sc, cams, lights = fd_test_scene()
+    extra = [PointLight(position=lights[i % len(lights)].position * (1.1 + 0.1 * i),
+                        intensity=lights[i % len(lights)].intensity) for i in range(PACKET_MIN + 1 - len(lights))]
+    lights = list(lights) + extra
+    assert len(lights) > PACKET_MIN
+    st = RenderSettings(spp=4, seed=12)
+    adj = np.random.default_rng(3).random((1, len(lights), cams[0].height, cams[0].width, 3))
+    every = render(sc, cams, lights, st, adjoint=adj)
+    grad = np.zeros_like(every.grad)
+    for lt in range(len(lights)):
+        one = render(sc, cams, lights, st, adjoint=adj[:, lt:lt + 1], light_ids=[lt])
+        np.testing.assert_allclose(every.images[0, lt], one.images[0, 0], rtol=1e-12, atol=1e-15)
+        grad += one.grad
+    np.testing.assert_allclose(every.grad, grad, rtol=1e-9, atol=1e-12 * np.abs(grad).max())
