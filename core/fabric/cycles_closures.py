@@ -161,21 +161,28 @@ def ggx_eval(wi, wo, n, t, alpha_x, alpha_y, ng=(0.0, 0.0, 1.0), bump_correction
     return np.where(valid, val, 0.0)
 
 
-def velvet_eval(wi, wo, sigma, n=(0.0, 0.0, 1.0)):
+def velvet_eval(wi, wo, sigma, n=(0.0, 0.0, 1.0), ng=(0.0, 0.0, 1.0), bump_correction=True):
     """Cycles ``ashikhmin_velvet(N, sigma)`` of unit weight (``closure/bsdf_ashikhmin_velvet.h``).
 
     ``sigma`` clamped below at 0.01; ``D = exp(-cot^2(theta_h) / sigma^2) / (pi sigma^2 sin^4(theta_h))``,
     ``G = min(1, 2 <N,h> <N,wo> / <wo,h>, 2 <N,h> <N,wi> / <wo,h>)``, ``eval = D G / (4 <N, wo>)``.
+    Like the GGX closure, the OSL setup passes N through ``maybe_ensure_valid_specular_reflection``
+    (``bump_correction``, the material's default; ``osl/closures_setup.h``) and ``bump_shadowing_term``
+    drops light below the shading normal ``ng`` while above N.
     """
     wi = np.asarray(wi, float)
     wo = np.asarray(wo, float)
-    n = np.asarray(n, float)
+    ng = np.asarray(ng, float)
+    n = _normalize(np.asarray(n, float))
+    if bump_correction:
+        n = ensure_valid_specular_reflection(ng, wo, n)
     inv_s2 = 1.0 / np.maximum(np.asarray(sigma, float), 0.01) ** 2
     cos_v, cos_l = _dot(n, wo), _dot(n, wi)
     h = _normalize(wi + wo)
     cos_nh = _dot(n, h)
     cos_hv = np.abs(_dot(wo, h))
-    ok = (cos_v > 0) & (cos_l > 0) & (np.abs(cos_nh) < 1.0 - 1e-5) & (cos_hv > 1e-5)
+    shadow = (_dot(ng, wi) * _dot(ng, n) * cos_l) < 0.0
+    ok = (cos_v > 0) & (cos_l > 0) & (np.abs(cos_nh) < 1.0 - 1e-5) & (cos_hv > 1e-5) & ~shadow
     ratio = np.maximum(cos_nh / np.maximum(cos_hv, 1e-30), 1e-5)
     g = np.minimum(1.0, np.minimum(2.0 * np.abs(ratio * cos_v), 2.0 * np.abs(ratio * cos_l)))
     sin2 = np.maximum(1.0 - cos_nh * cos_nh, 1e-30)

@@ -68,7 +68,7 @@ def test_reciprocity(fn):
     def f(a, b):
         if fn == "ggx":
             return ggx_eval(a, b, n, [1, 0, 0], 0.4, 0.7, ng=n, bump_correction=False) / np.sum(a * n, -1)
-        return velvet_eval(a, b, 0.4, n) / np.sum(a * n, -1)
+        return velvet_eval(a, b, 0.4, n, ng=n, bump_correction=False) / np.sum(a * n, -1)
 
     ok = (np.sum(wi * n, -1) > 0.05) & (np.sum(wo * n, -1) > 0.05)
     np.testing.assert_allclose(f(wi, wo)[ok], f(wo, wi)[ok], rtol=1e-9)
@@ -181,7 +181,7 @@ def test_fit_is_invariant_to_rotation_about_the_normal():
 @pytest.mark.parametrize(("sigma", "tilt"), [((0.3, 0.8), 20.0), ((2.5, 2.5), 0.0), ((2.5, 2.5), 30.0)])
 def test_fitted_mix_beats_the_fixed_approximation_under_the_point_lamp(sigma, tilt):
     """Benchmark geometry, point lamp: fitted mix within 5 % median, 10 % p90 of eq. 3.9 (measured
-    0.045/0.068, 0.021/0.040, 0.058/0.075 with the per-view weighting of the fit: the last is over
+    0.045/0.068, 0.021/0.040, 0.055/0.072 with the per-view weighting of the fit: the last is over
     target, bounded at 0.07 median here)."""
     pts, wo = A.patch_points()
     kd, ks = np.array([0.05, 0.03, 0.02]), np.array([0.7, 0.4, 0.3])
