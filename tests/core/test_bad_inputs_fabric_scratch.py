@@ -68,23 +68,13 @@ def test_work_larger_than_memory_is_refused_before_allocating():
     check_memory(1024, "a test")  # a small allocation passes
 
 
-def _children(pid: int) -> list[int]:
-    import glob
-
-    kids = []
-    for f in glob.glob(f"/proc/{pid}/task/*/children"):
-        kids += [int(k) for k in open(f).read().split()]
-    return kids
-
-
 @pytest.mark.heavy  # 20 s each: outside `make test-fast`
 @pytest.mark.parametrize("pool", ["--no-dask", "dask"])
 def test_sigterm_stops_a_fabric_fit_with_its_workers_and_it_resumes(tmp_path, pool):
-    import os
-    import signal
     import subprocess
     import sys
-    import time
+
+    from ._interrupt import interrupt_when
 
     btf, out = tmp_path / "btf", tmp_path / "fit"
     assert main(["fabric", "synth", "--out", str(btf), "--width", "64", "--height", "64"]) == 0
@@ -92,18 +82,7 @@ def test_sigterm_stops_a_fabric_fit_with_its_workers_and_it_resumes(tmp_path, po
             "--tile", "4", "--no-progress"] + (["--no-dask"] if pool == "--no-dask" else [])
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     tiles = out / ".fit_cache" / "tiles"
-    t0 = time.monotonic()
-    while not (tiles.is_dir() and len(list(tiles.rglob("*.npz"))) >= 4) and time.monotonic() - t0 < 120:
-        assert proc.poll() is None, proc.communicate()
-        time.sleep(0.2)
-    kids = _children(proc.pid)
-    assert kids  # the worker processes
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err[-2000:]
-    time.sleep(1.0)
-    alive = [k for k in kids if os.path.exists(f"/proc/{k}") and open(f"/proc/{k}/stat").read().split()[2] != "Z"]
-    assert alive == []
+    interrupt_when(proc, lambda: tiles.is_dir() and len(list(tiles.rglob("*.npz"))) >= 4, 120)
     done = len(list(tiles.rglob("*.npz")))
     assert 4 <= done < 256
     r = subprocess.run(argv, capture_output=True, text=True, timeout=600)

@@ -216,12 +216,10 @@ def test_a_mesh_that_cannot_be_traced_is_refused_naming_the_file(tmp_path, text,
 def test_sigterm_stops_a_dask_teeth_fit_with_its_workers_and_it_resumes(capture_dir, tmp_path):
     """Ctrl-C (SIGTERM here: a background shell ignores SIGINT) on a fit rendering on a local Dask cluster:
     exit 130 with one line, no worker process left, and --resume finishes the fit from its checkpoint."""
-    import signal
     import subprocess
     import sys
-    import time
 
-    from .test_bad_inputs_fabric_scratch import _children
+    from ._interrupt import interrupt_when
 
     out = tmp_path / "fit"
     argv = [sys.executable, "-m", "material_structures", "teeth", "fit", str(capture_dir), "--out", str(out),
@@ -229,18 +227,7 @@ def test_sigterm_stops_a_dask_teeth_fit_with_its_workers_and_it_resumes(capture_
             "--no-progress"]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ckpt = out / "checkpoint.json"
-    t0 = time.monotonic()
-    while not ckpt.exists() and time.monotonic() - t0 < 240:
-        assert proc.poll() is None, proc.communicate()
-        time.sleep(0.2)
-    kids = _children(proc.pid)
-    assert kids  # the local cluster's processes
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err[-2000:]
-    time.sleep(1.0)
-    alive = [k for k in kids if os.path.exists(f"/proc/{k}") and open(f"/proc/{k}/stat").read().split()[2] != "Z"]
-    assert alive == []
+    interrupt_when(proc, ckpt.exists, 240)
     done = len(json.loads(ckpt.read_text())["log"])
     assert 5 <= done < 8
     r = subprocess.run(argv + ["--resume"], capture_output=True, text=True, timeout=600)

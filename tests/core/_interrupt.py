@@ -1,0 +1,35 @@
+"""Interrupting a command with its worker processes, as Ctrl-C does (SIGTERM here: a background shell
+ignores SIGINT), and checking that it stopped cleanly."""
+
+from __future__ import annotations
+
+import glob
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Callable
+
+
+def children(pid: int) -> list[int]:
+    kids = []
+    for f in glob.glob(f"/proc/{pid}/task/*/children"):
+        kids += [int(k) for k in open(f).read().split()]
+    return kids
+
+
+def interrupt_when(proc: subprocess.Popen, ready: Callable[[], bool], timeout: float) -> None:
+    """Wait until ``ready()`` (the command is working), then SIGTERM it: it must exit 130 with the one
+    line "interrupted" and leave none of its child processes (workers) running."""
+    t0 = time.monotonic()
+    while not ready() and time.monotonic() - t0 < timeout:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    kids = children(proc.pid)
+    assert kids  # the worker processes
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err[-2000:]
+    time.sleep(1.0)
+    alive = [k for k in kids if os.path.exists(f"/proc/{k}") and open(f"/proc/{k}/stat").read().split()[2] != "Z"]
+    assert alive == []
