@@ -20,7 +20,7 @@ import os
 
 import bpy
 
-from ...core.fabric.closure_fit import CLOSURE_FILES, fit_closure_maps, load_closure_maps
+from ...core.fabric.closure_fit import CLOSURE_FILES, FIT_KEY_BUDGET, fit_closure_maps, load_closure_maps
 from ...render import load_osl_script
 from ..common import add_eevee_fallback, group_material, group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
@@ -312,9 +312,6 @@ def material_closure_images(mat) -> dict:
         if node.type == "TEX_IMAGE" and node.name.startswith(CLOSURE_NODE_PREFIX) and node.image is not None:
             out[node.name[len(CLOSURE_NODE_PREFIX):]] = node.image
     return out
-
-
-FIT_KEY_BUDGET = 128  # distinct fibre geometries fitted per map (70-230 ms each); beyond: the closure table
 
 
 def fit_closure_images(maps, prefix: str, progress=None, cache: dict | None = None, info: dict | None = None) -> dict:

@@ -28,7 +28,7 @@ from ..folder_lock import FolderLock
 from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
 from .btf_io import iter_btf_blocks, read_btf_header
-from .closure_fit import fit_closure_maps, save_closure_maps
+from .closure_fit import FIT_KEY_BUDGET, fit_closure_maps, save_closure_maps
 from .levenberg_marquardt import Samples
 from .ndf_extraction import NdfOperator, check_ndf_coverage, ndf_operator
 from .parameter_maps import FabricMaps, make_maps, save_params
@@ -241,8 +241,10 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
     }
     save_params(out_dir, maps, extra={"fit": stats})
     # The closure mix world and indirect light see in Cycles, beside the maps (issue 38): an import
-    # then reads it instead of fitting it.
-    save_closure_maps(out_dir, fit_closure_maps(maps.sigma, maps.basis))
+    # then reads it instead of fitting it. A fitted map's geometry varies per texel: beyond
+    # FIT_KEY_BUDGET distinct geometries every texel comes from the closure table (3 us each, where
+    # fitting each would take minutes).
+    save_closure_maps(out_dir, fit_closure_maps(maps.sigma, maps.basis, max_keys=FIT_KEY_BUDGET))
     if not keep_cache:
         shutil.rmtree(cache, ignore_errors=True)
     return maps, stats

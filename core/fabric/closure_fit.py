@@ -306,6 +306,9 @@ def fit_keys(sigma, quat, n_light=FIT_LIGHTS, n_view=FIT_VIEWS, chunk=32):
 KEY_QUANTUM = (0.005, 0.25, 1.0)  # canonical_keys' default: log sigma, tilt (deg), twist (deg)
 
 
+FIT_KEY_BUDGET = 128  # distinct fibre geometries fitted per map (70-230 ms each); beyond: the closure table
+
+
 def fit_closure_texels(sigma, basis, cache: dict | None = None, progress=None, max_keys: int | None = None,
                        info: dict | None = None, **kw):
     """Fit the closure mix for N texels (sigma (N, 2), basis (N, 4)); returns (weights (N, 4, 4),
