@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 
 import bpy
 import pytest
@@ -55,9 +54,8 @@ def test_fit_btf_cancel_and_errors(addon_module, btf_dir, tmp_path):
     assert bpy.ops.material_structures.fabric_fit_cancel() == {"CANCELLED"}  # a warning: nothing runs
     job = fit_job.FabricFitJob(btf_dir, str(tmp_path / "cancelled"), workers=1).start()
     fit_job.set_current_job(job)
-    t0 = time.perf_counter()
-    while not job.message and job.is_alive() and time.perf_counter() - t0 < 60:
-        time.sleep(0.05)
+    # at once: the small BTF's fit ends within a second (its closures come from the table), while its
+    # process takes longer than this to start
     assert job.is_alive(), job.last_line
     assert not bpy.ops.material_structures.fabric_fit_btf.poll()  # one fit at a time
     assert bpy.ops.material_structures.fabric_fit_cancel() == {"FINISHED"}
