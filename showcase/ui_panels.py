@@ -80,6 +80,7 @@ class Item:
     emboss: bool = True
     scale_y: float = 1.0
     size: float = 0.0  # templates: side in UI units
+    split: bool = False  # drawn with use_property_split: the label in a column of its own at the left
 
     def texts(self) -> list[str]:
         return [t for t in (self.text, self.value, *self.values, *(o for o, _ in self.options)) if t]
@@ -123,14 +124,13 @@ class Layout:
         d = self.__dict__
         d["kind"], d["align"], d["factor"], d["columns"], d["heading"] = kind, align, factor, columns, heading
         d["children"] = []
-        inherited = parent._attrs if parent is not None else _LAYOUT_ATTRS
-        d["_attrs"] = dict(inherited)
-        for flag in ("enabled", "active"):  # these combine with the parent's (a child cannot re-enable)
-            d["_attrs"][flag] = inherited[flag]
-        d["_attrs"]["alert"] = inherited["alert"]
+        d["_attrs"] = dict(parent._attrs if parent is not None else _LAYOUT_ATTRS)  # a sub-layout inherits
+        d["_parent_flags"] = {k: d["_attrs"][k] for k in ("enabled", "active")}
 
     # attributes ---------------------------------------------------------------------------------------
     def __getattr__(self, name: str) -> Any:
+        if name.startswith("__"):
+            raise AttributeError(name)
         attrs = self.__dict__.get("_attrs", {})
         if name in attrs:
             return attrs[name]
@@ -141,8 +141,8 @@ class Layout:
     def __setattr__(self, name: str, value: Any) -> None:
         if name not in _LAYOUT_ATTRS:
             raise UnknownLayoutCall(f"setting UILayout.{name} is not drawn by the recorder")
-        if name in ("enabled", "active"):
-            value = bool(value) and self._attrs[name]
+        if name in ("enabled", "active"):  # combined with the parent's: a sub-layout cannot re-enable
+            value = bool(value) and self._parent_flags[name]
         self._attrs[name] = value
 
     # sub-layouts ----------------------------------------------------------------------------------------
@@ -200,10 +200,9 @@ class Layout:
         item = describe_prop(data, property, text, expand=expand, slider=slider, toggle=toggle,
                              icon_only=icon_only, index=index)
         item.icon = icon
-        item.emboss = emboss
         self._add(item)
-        if self.use_property_split:
-            item.__dict__["split"] = True
+        item.emboss = emboss and item.emboss
+        item.split = bool(self.use_property_split)
 
     def prop_search(self, data, property: str, search_data, search_property: str, text: str | None = None,
                     text_ctxt: str = "", translate: bool = True, icon: str = "NONE",
@@ -262,7 +261,7 @@ def operator_rna(idname: str):
         raise ValueError(f"unknown operator {idname!r}") from exc
 
 
-def _format_number(value: float, prop, scene=None) -> str:
+def _format_number(value: float, prop) -> str:
     if prop.type == "INT":
         text = str(int(value))
     else:
@@ -484,8 +483,9 @@ def _capture_scene_json() -> str:
 
     from ..core.teeth.synthetic import make_scene
 
-    folder = os.path.join(tempfile.mkdtemp(prefix="ms-ui-docs-"), "capture") + os.sep
-    os.makedirs(folder)
+    # one fixed folder (the same content every run): the path shows in the picture, which then stays the same
+    folder = os.path.join(tempfile.gettempdir(), "ms-ui-docs", "capture") + os.sep
+    os.makedirs(folder, exist_ok=True)
     with open(os.path.join(folder, "scene.json"), "w", encoding="utf-8") as f:
         json.dump(make_scene(n_teeth=2, resolution=8).to_dict(), f)
     return folder
@@ -605,10 +605,11 @@ class Painter:
             return 0.4 * UNIT * item.fraction
         if item.kind == "template":
             return UNIT * item.size
+        label_row = 1 if item.text and not item.split else 0  # split layouts put the label beside it
         if item.style == "vector":
-            return UNIT * (len(item.values) + (1 if item.text else 0))
+            return UNIT * (len(item.values) + label_row)
         if item.style == "expand":
-            return UNIT + (UNIT if item.text else 0)
+            return UNIT * (1 + label_row)
         return UNIT * item.scale_y
 
     def item_width(self, item: Item) -> float:
@@ -857,7 +858,7 @@ class Painter:
             self.text(item.text, sx, y, h, wtext, w=x + w - sx - 4, middle=True)
             return
         if item.kind == "prop":
-            if getattr(item, "split", False) and item.text and item.style not in ("checkbox",):
+            if item.split and item.text and item.style != "checkbox":
                 lw = w * 0.4
                 self.text(item.text, x, y, UNIT, text_col, "right", lw - 6)
                 item = Item(**{**item.__dict__, "text": ""})

@@ -104,3 +104,40 @@ def test_known_templates_are_placeholders(addon_module):
     _Panel.body = staticmethod(lambda layout, ctx: layout.template_icon(icon_value=0, scale=4.0))
     body = ui.record_panel(_Panel, ui.PanelContext())
     assert [(it.kind, it.size) for it in body.items()] == [("template", 4.0)]
+
+
+def test_every_recorded_call_paints(addon_module, tmp_path):
+    """The calls our panels do not use yet record and paint too (split layouts, flows, menus, enums, ...)."""
+    def body(layout, ctx):
+        layout.use_property_split = True
+        layout.prop(ctx.scene.render, "resolution_x")
+        layout.prop(ctx.scene.render, "engine", expand=True)
+        layout.use_property_split = False
+        col = layout.column(heading="Heading")
+        col.enabled = False
+        col.enabled = True  # the layout's own flag can be set back; a parent's cannot be overridden
+        col.prop(ctx.scene.cursor, "location")
+        col.prop(ctx.scene.render, "film_transparent", toggle=1)
+        grid = layout.grid_flow(columns=2, align=True)
+        grid.operator("material_structures.teeth_add_tooth", depress=True)
+        grid.menu("VIEW3D_MT_add")
+        layout.column_flow(columns=2).separator()
+        layout.progress(factor=0.4, text="Fitting")
+        row = layout.row()
+        row.alert = True
+        row.scale_y = 1.5
+        row.prop_search(ctx.scene, "camera", ctx.scene, "objects")
+        sub = layout.row()
+        sub.active = False
+        sub.row().active = True
+        layout.template_icon(icon_value=0, scale=2.0)
+
+    _Panel.body = staticmethod(body)
+    rec = ui.RecordedPanel("VIEW3D_PT_probe", "Probe", True, None, ui.record_panel(_Panel, ui.PanelContext()))
+    items = rec.body.items()
+    assert [it.kind for it in items] == ["prop", "prop", "prop", "prop", "operator", "menu", "separator",
+                                         "progress", "prop", "template"]
+    assert items[0].split and items[1].style == "expand" and items[2].style == "vector"
+    assert items[2].enabled and items[8].alert and items[8].scale_y == 1.5
+    assert rec.body.children[-2].children[0].active is False
+    ui.paint_feature([rec], [rec], str(tmp_path / "probe.png"), scale=1.0)
