@@ -292,6 +292,7 @@ def _fit_and_score(tmp_path, noise, n=24, size=10, workers=2):
     return psnr(pred, ref), ang[aniso], stats
 
 
+@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
 def test_fit_recovers_synthetic_model_noise_free(tmp_path):
     p, ang, stats = _fit_and_score(tmp_path, 0.0)
     assert p >= 30.0
@@ -299,12 +300,14 @@ def test_fit_recovers_synthetic_model_noise_free(tmp_path):
     assert stats["tiles"] == 4 and stats["tiles_fitted_this_run"] == 4
 
 
+@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
 def test_fit_with_five_percent_noise(tmp_path):
     p, ang, _ = _fit_and_score(tmp_path, 0.05)
     assert p >= 20.0
     assert np.percentile(ang, 90) <= 5.0
 
 
+@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
 def test_fit_resumes_from_tile_checkpoints(tmp_path):
     maps = synthetic_maps(8, 8, seed=8)
     wi, wo = light_view_pairs(12, 12)
@@ -319,6 +322,7 @@ def test_fit_resumes_from_tile_checkpoints(tmp_path):
         assert np.allclose(getattr(first, name), getattr(again, name), atol=1e-6)
 
 
+@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
 def test_an_image_rewritten_in_place_invalidates_the_cache(tmp_path):
     """The cache is keyed on every file's size and mtime, not the folder: after one image of the BTF is
     rewritten (same name, same size), the next fit recomputes every tile and its result follows the new
@@ -340,6 +344,7 @@ def test_an_image_rewritten_in_place_invalidates_the_cache(tmp_path):
     assert stats["tiles_fitted_this_run"] == 4
 
 
+@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
 def test_cli_fit_eval_score(tmp_path, capsys):
     from material_structures.cli import main
 
