@@ -29,7 +29,7 @@ import tempfile
 
 import numpy as np
 
-from ...core.scratch.scratch_io import TABLE_WIDTH, save_scratch_set_exr
+from ...core.scratch.scratch_io import save_scratch_set_exr, scratch_set_tables, wrap_table
 from ...core.scratch.scratch_set import ScratchSet, validate_scratch_set
 from ..common import array_to_image, image_to_array
 
@@ -37,25 +37,6 @@ IMAGE_PREFIX = "MS Scratch"
 TABLES = {"segments": 4, "params": 4, "grid": 2, "cells": 1}
 PROP = "ms_scratch_set"  # ID property (dict) on a set's node group: the set's scalars and name
 IMAGES_PROP = "ms_scratch_images"  # ID property on the group: {table: Image} (files from before: absent)
-
-
-def _wrap(table: np.ndarray, fill: float) -> np.ndarray:
-    n, c = table.shape
-    rows = max(1, -(-n // TABLE_WIDTH))
-    out = np.full((rows * TABLE_WIDTH, c), fill, dtype=np.float32)
-    out[:n] = table
-    return out.reshape(rows, TABLE_WIDTH, c)
-
-
-def set_to_arrays(s: ScratchSet) -> dict[str, np.ndarray]:
-    """The four tables as (H, W, C) float32 arrays, row 0 = top (scratch_io layout)."""
-    params = np.stack([s.width_um, s.depth_um, s.profile, s.scratch_id], 1)
-    return {
-        "segments": _wrap(np.asarray(s.segments, np.float64), 0.0),
-        "params": _wrap(params.astype(np.float64), -1.0),
-        "grid": np.stack([s.grid_offset, s.grid_count], -1).astype(np.float32),
-        "cells": _wrap(np.asarray(s.cell_segments, np.float64)[:, None], -1.0),
-    }
 
 
 def set_meta(s: ScratchSet, name: str) -> dict:
@@ -96,7 +77,7 @@ def store_scratch_set(s: ScratchSet, name: str, images: dict | None = None) -> t
 
     validate_scratch_set(s)
     out = {}
-    for table, arr in set_to_arrays(s).items():
+    for table, arr in scratch_set_tables(s).items():
         img = (images or {}).get(table)
         h, w = arr.shape[:2]
         if img is not None and tuple(img.size) == (w, h) and img.is_float:
@@ -163,7 +144,7 @@ def load_stored_set(meta, images: dict | None = None) -> ScratchSet:
 
 def content_hash(s: ScratchSet) -> str:
     h = hashlib.sha1()
-    for arr in set_to_arrays(s).values():
+    for arr in scratch_set_tables(s).values():
         h.update(np.ascontiguousarray(arr).tobytes())
     h.update(repr(set_meta(s, "")).encode())
     h.update(b"cache-layout-3")  # scratch_io tables + cell-major tables; 3: the shader walks tile copies
@@ -201,5 +182,5 @@ def write_cell_major_tables(folder: str, s: ScratchSet) -> None:
     geo = np.asarray(s.segments, np.float64)[cs] if cs.size else np.zeros((0, 4))
     par = (np.stack([s.width_um[cs], s.depth_um[cs], s.profile[cs], cs], 1).astype(np.float64)
            if cs.size else np.zeros((0, 4)))
-    write_exr(os.path.join(folder, "cell_geometry.exr"), _wrap(geo, 0.0), ("R", "G", "B", "A"))
-    write_exr(os.path.join(folder, "cell_params.exr"), _wrap(par, -1.0), ("R", "G", "B", "A"))
+    write_exr(os.path.join(folder, "cell_geometry.exr"), wrap_table(geo, 0.0), ("R", "G", "B", "A"))
+    write_exr(os.path.join(folder, "cell_params.exr"), wrap_table(par, -1.0), ("R", "G", "B", "A"))

@@ -102,13 +102,25 @@ def _load_npz(path: str) -> ScratchSet:
     return s
 
 
-def _wrap(table: np.ndarray, fill: float) -> np.ndarray:
-    """(n, C) -> (rows, TABLE_WIDTH, C) with entry i at (i // W, i % W)."""
+def wrap_table(table: np.ndarray, fill: float) -> np.ndarray:
+    """(n, C) -> float32 (rows, TABLE_WIDTH, C) with entry i at (i // W, i % W); unused texels ``fill``."""
     n, c = table.shape
     rows = max(1, -(-n // TABLE_WIDTH))
     out = np.full((rows * TABLE_WIDTH, c), fill, dtype=np.float32)
     out[:n] = table
     return out.reshape(rows, TABLE_WIDTH, c)
+
+
+def scratch_set_tables(s: ScratchSet) -> dict[str, np.ndarray]:
+    """The four EXR tables of ``s`` as float32 (H, W, C) arrays, row 0 = top: "segments", "params", "grid",
+    "cells" (the files ``segments.exr``, ``segment_params.exr``, ``grid.exr``, ``cell_segments.exr``)."""
+    params = np.stack([s.width_um, s.depth_um, s.profile, s.scratch_id], 1)
+    return {
+        "segments": wrap_table(np.asarray(s.segments, np.float64), 0.0),
+        "params": wrap_table(params.astype(np.float64), -1.0),
+        "grid": np.stack([s.grid_offset, s.grid_count], -1).astype(np.float32),
+        "cells": wrap_table(np.asarray(s.cell_segments, np.float64)[:, None], -1.0),
+    }
 
 
 def _unwrap(img: np.ndarray, n: int, name: str) -> np.ndarray:
@@ -124,17 +136,17 @@ def save_scratch_set_exr(folder: str | os.PathLike, s: ScratchSet) -> list[str]:
     os.makedirs(folder, exist_ok=True)
     m, k = s.n_segments, int(s.cell_segments.size)
     ny, nx = s.grid_shape
-    params = np.stack([s.width_um, s.depth_um, s.profile, s.scratch_id], 1).astype(np.float64)
     meta = np.zeros((1, 16, 1), np.float32)
     meta[0, :11, 0] = [
         VERSION, s.patch_size_um[0], s.patch_size_um[1], nx, ny, s.cell_size_um, s.query_radius_um,
         s.sigma_um, m, k, TABLE_WIDTH,
     ]
     paths = [os.path.join(folder, f) for f in EXR_FILES]
-    write_exr(paths[0], _wrap(s.segments, 0.0), ("R", "G", "B", "A"))
-    write_exr(paths[1], _wrap(params, -1.0), ("R", "G", "B", "A"))
-    write_exr(paths[2], np.stack([s.grid_offset, s.grid_count], -1).astype(np.float32), ("R", "G"))
-    write_exr(paths[3], _wrap(s.cell_segments[:, None].astype(np.float64), -1.0), ("Y",))
+    tables = scratch_set_tables(s)
+    write_exr(paths[0], tables["segments"], ("R", "G", "B", "A"))
+    write_exr(paths[1], tables["params"], ("R", "G", "B", "A"))
+    write_exr(paths[2], tables["grid"], ("R", "G"))
+    write_exr(paths[3], tables["cells"], ("Y",))
     write_exr(paths[4], meta, ("Y",))
     return paths
 
