@@ -127,6 +127,25 @@ def ensure_valid_specular_reflection(ng, wo, n):
     return np.where(keep[..., None], n, nx[..., None] * x + nz[..., None] * ng)
 
 
+def _closure_setup(wi, wo, n, ng, bump_correction):
+    """What the OSL setup of a Cycles microfacet-like closure does first: ``wi``, ``wo``, ``ng`` as float
+    arrays and the closure normal ``n`` normalised and, with ``bump_correction``, passed through
+    ``ensure_valid_specular_reflection`` (``osl/closures_setup.h``)."""
+    wi = np.asarray(wi, float)
+    wo = np.asarray(wo, float)
+    ng = np.asarray(ng, float)
+    n = _normalize(np.asarray(n, float))
+    if bump_correction:
+        n = ensure_valid_specular_reflection(ng, wo, n)
+    return wi, wo, ng, n
+
+
+def _bump_shadowed(ng, n, wi, cos_l):
+    """Cycles ``bump_shadowing_term`` as a mask: light ``wi`` below the shading normal ``ng`` while above
+    the closure normal ``n`` (``cos_l`` = <n, wi>)."""
+    return (_dot(ng, wi) * _dot(ng, n) * cos_l) < 0.0
+
+
 def ggx_eval(wi, wo, n, t, alpha_x, alpha_y, ng=(0.0, 0.0, 1.0), bump_correction=True):
     """Cycles ``microfacet("ggx", N=n, T=t, alpha_x, alpha_y, eta=0, refract=0)`` of unit weight.
 
@@ -134,12 +153,7 @@ def ggx_eval(wi, wo, n, t, alpha_x, alpha_y, ng=(0.0, 0.0, 1.0), bump_correction
     shading normal = geometric normal). ``bump_correction``: the material's "Bump Map Correction"
     (on by default), which enables Cycles' ``ensure_valid_specular_reflection`` of ``n``.
     """
-    wi = np.asarray(wi, float)
-    wo = np.asarray(wo, float)
-    ng = np.asarray(ng, float)
-    n = _normalize(np.asarray(n, float))
-    if bump_correction:
-        n = ensure_valid_specular_reflection(ng, wo, n)
+    wi, wo, ng, n = _closure_setup(wi, wo, n, ng, bump_correction)
     ax = np.clip(np.asarray(alpha_x, float), 0.0, 1.0)
     ay = np.clip(np.asarray(alpha_y, float), 0.0, 1.0)
     cos_v = _dot(n, wo)
@@ -155,8 +169,7 @@ def ggx_eval(wi, wo, n, t, alpha_x, alpha_y, ng=(0.0, 0.0, 1.0), bump_correction
         return 0.5 * (np.sqrt(1.0 + s) - 1.0)
 
     val = d / np.maximum(cos_v, 1e-300) * 0.25 / (1.0 + lam(wo, cos_v) + lam(wi, cos_l))
-    # bump_shadowing_term: light below the shading normal while above n (n differs from ng).
-    shadow = (_dot(ng, wi) * _dot(ng, n) * cos_l) < 0.0
+    shadow = _bump_shadowed(ng, n, wi, cos_l)
     valid = (cos_v > 0.0) & (cos_l >= 0.0) & ~shadow & (ax * ay > 2e-10)
     return np.where(valid, val, 0.0)
 
@@ -170,18 +183,13 @@ def velvet_eval(wi, wo, sigma, n=(0.0, 0.0, 1.0), ng=(0.0, 0.0, 1.0), bump_corre
     (``bump_correction``, the material's default; ``osl/closures_setup.h``) and ``bump_shadowing_term``
     drops light below the shading normal ``ng`` while above N.
     """
-    wi = np.asarray(wi, float)
-    wo = np.asarray(wo, float)
-    ng = np.asarray(ng, float)
-    n = _normalize(np.asarray(n, float))
-    if bump_correction:
-        n = ensure_valid_specular_reflection(ng, wo, n)
+    wi, wo, ng, n = _closure_setup(wi, wo, n, ng, bump_correction)
     inv_s2 = 1.0 / np.maximum(np.asarray(sigma, float), 0.01) ** 2
     cos_v, cos_l = _dot(n, wo), _dot(n, wi)
     h = _normalize(wi + wo)
     cos_nh = _dot(n, h)
     cos_hv = np.abs(_dot(wo, h))
-    shadow = (_dot(ng, wi) * _dot(ng, n) * cos_l) < 0.0
+    shadow = _bump_shadowed(ng, n, wi, cos_l)
     ok = (cos_v > 0) & (cos_l > 0) & (np.abs(cos_nh) < 1.0 - 1e-5) & (cos_hv > 1e-5) & ~shadow
     ratio = np.maximum(cos_nh / np.maximum(cos_hv, 1e-30), 1e-5)
     g = np.minimum(1.0, np.minimum(2.0 * np.abs(ratio * cos_v), 2.0 * np.abs(ratio * cos_l)))
