@@ -101,6 +101,16 @@ def add_eevee_fallback(mat, cycles_output, shader, location=(400, -350), name: s
     return out
 
 
+def add_group_input(group, name: str, socket_type: str, default, lo=None, hi=None):
+    """A new input socket ``name`` of node group ``group`` with its default and, unless ``lo`` is None, its
+    range [lo, hi] (the ``(name, socket_type, default, lo, hi)`` specs of the features' groups)."""
+    sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
+    sock.default_value = default
+    if lo is not None:
+        sock.min_value, sock.max_value = lo, hi
+    return sock
+
+
 def group_node(mat, marker: str):
     """The node of ``mat`` whose node group carries the ID property ``marker`` (None if it has none)."""
     if mat is None or mat.node_tree is None:

@@ -22,7 +22,7 @@ import bpy
 
 from ...core.fabric.closure_fit import CLOSURE_FILES, FIT_KEY_BUDGET, fit_closure_maps, load_closure_maps
 from ...render import load_osl_script
-from ..common import add_eevee_fallback, group_material, group_node
+from ..common import add_eevee_fallback, add_group_input, group_material, group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .maps import CLOSURE_KEYS, closure_maps_to_images, load_fit_folder, maps_to_images
 
@@ -90,7 +90,7 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     group = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
     group[MARKER] = 1
     for spec in GROUP_INPUTS:
-        _new_input(group, *spec)
+        add_group_input(group, *spec)
     group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
     group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
     nodes, links = group.nodes, group.links
@@ -112,14 +112,6 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     return group
 
 
-def _new_input(group, name, socket_type, default, lo, hi):
-    sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
-    sock.default_value = default
-    if lo is not None:
-        sock.min_value, sock.max_value = lo, hi
-    return sock
-
-
 def ensure_fit_inputs(group, scene=None) -> None:
     """Give a group from an older file the fitted-closure inputs (off until closure maps are linked)."""
     have = {item.name for item in group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
@@ -135,7 +127,7 @@ def ensure_fit_inputs(group, scene=None) -> None:
         compile_script_node(script, scene)
     gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
     for spec in missing:
-        _new_input(group, *spec)
+        add_group_input(group, *spec)
         if script is not None and spec[0] in script.inputs:
             group.links.new(gin.outputs[spec[0]], script.inputs[spec[0]])
 

@@ -24,7 +24,7 @@ import os
 import bpy
 
 from ...render import load_osl_script, osl_flip_t
-from ..common import add_eevee_fallback, group_material
+from ..common import add_eevee_fallback, add_group_input, group_material
 from ..common import group_node as _group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .tables import (
@@ -98,11 +98,8 @@ def unique_set_name(base: str, exclude=None) -> str:
 def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
     group = bpy.data.node_groups.new(group_name(name), "ShaderNodeTree")
     group[MARKER] = 1
-    for sock_name, socket_type, default, lo, hi in GROUP_INPUTS:
-        sock = group.interface.new_socket(sock_name, in_out="INPUT", socket_type=socket_type)
-        sock.default_value = default
-        if lo is not None:
-            sock.min_value, sock.max_value = lo, hi
+    for spec in GROUP_INPUTS:
+        add_group_input(group, *spec)
     group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
     nodes, links = group.nodes, group.links
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")

@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 
 from ...render import load_osl_script, material_output, new_material
-from ..common import add_eevee_fallback, group_material
+from ..common import add_eevee_fallback, add_group_input, group_material
 from ..common import group_node as _group_node
 
 MARKER = "material_structures_teeth"
@@ -118,11 +118,8 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
         return group
     group = bpy.data.node_groups.new(kind, "ShaderNodeTree")
     group[MARKER] = kind
-    for name, socket_type, default, lo, hi in _group_inputs(kind):
-        sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
-        sock.default_value = default
-        if lo is not None:
-            sock.min_value, sock.max_value = lo, hi
+    for spec in _group_inputs(kind):
+        add_group_input(group, *spec)
     if kind in SURFACE_GROUPS:
         group.interface.new_socket("Surface", in_out="OUTPUT", socket_type="NodeSocketShader")
     group.interface.new_socket("Volume", in_out="OUTPUT", socket_type="NodeSocketShader")
