@@ -14,6 +14,7 @@ from mathutils.bvhtree import BVHTree
 from mathutils.geometry import barycentric_transform
 
 from ..render import ensure_node_tree
+from . import background_job
 
 CATEGORY = "Material Structures"  # the 3D viewport sidebar tab
 
@@ -186,6 +187,23 @@ class SyncLamps:
     def execute(self, context):
         n = self.sync(context.scene)
         self.report({"INFO"}, f"{n} light(s) evaluated {self.evaluated_by}")
+        return {"FINISHED"}
+
+
+class CancelBackgroundJob:
+    """Base of a feature's "Cancel Fit" operator: cancel this session's running ``background_job`` of
+    ``job_kind``; with none running, report ``nothing_running`` as a warning (nothing of a job is stored in the
+    file: nothing can be stuck)."""
+
+    job_kind = ""
+    nothing_running = ""
+
+    def execute(self, context):
+        job = background_job.current_job(self.job_kind)
+        if job is None or not background_job.job_running(self.job_kind):
+            self.report({"WARNING"}, self.nothing_running)
+            return {"CANCELLED"}
+        job.cancel()
         return {"FINISHED"}
 
 

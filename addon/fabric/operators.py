@@ -19,6 +19,7 @@ from ...core.fabric.parameter_maps import save_params
 from ..background_job import usable_cores
 from ..common import (
     AddGroupNode,
+    CancelBackgroundJob,
     FolderPicker,
     MeshUVLookup,
     SyncLamps,
@@ -215,20 +216,14 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class MS_OT_fabric_fit_cancel(bpy.types.Operator):
+class MS_OT_fabric_fit_cancel(CancelBackgroundJob, bpy.types.Operator):
     """Stop the running fabric fit (the tiles it has fitted are kept: fitting the same folder again goes on
     from there)"""
 
     bl_idname = "material_structures.fabric_fit_cancel"
     bl_label = "Cancel Fabric Fit"
-
-    def execute(self, context):
-        job = fit_job.current_job()
-        if job is None or not fit_job.job_running():
-            self.report({"WARNING"}, "No fabric fit is running")
-            return {"CANCELLED"}
-        job.cancel()
-        return {"FINISHED"}
+    job_kind = fit_job.KIND
+    nothing_running = "No fabric fit is running"
 
 
 class MS_OT_fabric_sync_lamps(SyncLamps, bpy.types.Operator):

@@ -8,7 +8,8 @@ import bpy
 
 from ...core.teeth.anatomy import SPECS as ANATOMY_SPECS
 from ...core.teeth.anatomy import make_anatomical_tooth
-from ..common import AddGroupNode, FilePicker, end_modal_progress
+from ..common import AddGroupNode, CancelBackgroundJob, FilePicker, end_modal_progress
+from . import fit_job
 from .fit_job import FitJob, current_job, job_running, set_current_job, usable_cores
 from .geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
 from .materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
@@ -353,19 +354,13 @@ class MS_OT_teeth_fit(bpy.types.Operator):
         return {"PASS_THROUGH"}
 
 
-class MS_OT_teeth_fit_cancel(bpy.types.Operator):
+class MS_OT_teeth_fit_cancel(CancelBackgroundJob, bpy.types.Operator):
     """Cancel the running teeth fit (what it has done so far is kept in its folder)"""
 
     bl_idname = "material_structures.teeth_fit_cancel"
     bl_label = "Cancel Fit"
-
-    def execute(self, context):
-        job = current_job()
-        if job is None or not job_running():  # nothing of a fit is stored in the file: nothing can be stuck
-            self.report({"WARNING"}, "No teeth fit is running")
-            return {"CANCELLED"}
-        job.cancel()
-        return {"FINISHED"}
+    job_kind = fit_job.KIND
+    nothing_running = "No teeth fit is running"
 
 
 class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
