@@ -17,21 +17,14 @@ import bpy
 import numpy as np
 import pytest
 
+from ._teeth_capture import import_capture_scene, write_tiny_capture
 from .fresh import run_fresh
 
 
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory):
     """A tiny synthetic capture (1 tooth "tooth0", 1 camera, 3 lights, 16 x 12 px) written by the core."""
-    from material_structures.core.teeth.capture import default_rig
-    from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
-
-    folder = str(tmp_path_factory.mktemp("teeth-capture"))
-    scene = make_scene(n_teeth=1, resolution=12)
-    cams, lights = default_rig(target=scene_target(scene), width=16, height=12, n_lights=3, n_cameras=1,
-                               fov_x_deg=2.6)
-    render_capture(scene, cams, lights, spp=2, spp_background=1, max_depth=4).save(folder, scene.to_dict())
-    return folder
+    return write_tiny_capture(str(tmp_path_factory.mktemp("teeth-capture")), width=16, height=12, n_lights=3)
 
 
 def _world_vertices(obj, n: int | None = None) -> np.ndarray:
@@ -117,13 +110,6 @@ def test_tooth_from_mesh_keeps_world_size_place_and_rotation(addon_module, case)
 # ---------------------------------------------------------------------------------------------------------------
 # 8. A .blend saved while a fit runs reopens idle
 
-def _import(capture_dir):
-    bpy.ops.wm.read_homefile(use_empty=True)
-    path = os.path.join(capture_dir, "scene.json")
-    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
-    return bpy.data.objects["tooth0 Enamel"]
-
-
 class _WindowManager:
     """Stand-in window manager: the modal Fit operator's invoke() headless (no window)."""
 
@@ -177,7 +163,7 @@ def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_pat
     import importlib
 
     ops = importlib.import_module(f"{addon_module}.addon.teeth.operators")  # the registered operators' module
-    _import(capture_dir)
+    import_capture_scene(capture_dir)
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = capture_dir
     fs.out_dir = str(tmp_path / "fit")
@@ -294,7 +280,7 @@ def test_apply_fit_result_uses_the_mapping_and_refuses_nothing(addon_module, cap
 
 
 def test_mapping_is_prefilled_where_names_match(addon_module, capture_dir):
-    enamel = _import(capture_dir)  # tooth name "tooth0", as in the capture
+    enamel = import_capture_scene(capture_dir)  # tooth name "tooth0", as in the capture
     assert bpy.ops.material_structures.teeth_add_tooth(kind="MOLAR", resolution=8) == {"FINISHED"}
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = capture_dir

@@ -11,32 +11,19 @@ import bpy
 import numpy as np
 import pytest
 
+from ._teeth_capture import import_capture_scene, write_tiny_capture
+
 
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory):
     """A tiny synthetic capture (1 tooth, 1 camera, 4 lights, 20 x 15 px, 140 tooth pixels) written by the core."""
-    from material_structures.core.teeth.capture import default_rig
-    from material_structures.core.teeth.synthetic import make_scene, render_capture, scene_target
-
-    folder = str(tmp_path_factory.mktemp("teeth-capture"))
-    scene = make_scene(n_teeth=1, resolution=12)
-    cams, lights = default_rig(target=scene_target(scene), width=20, height=15, n_lights=4, n_cameras=1,
-                               fov_x_deg=2.6)
-    render_capture(scene, cams, lights, spp=2, spp_background=1, max_depth=4).save(folder, scene.to_dict())
-    return folder
-
-
-def _import(capture_dir):
-    bpy.ops.wm.read_homefile(use_empty=True)
-    path = os.path.join(capture_dir, "scene.json")
-    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
-    return bpy.data.objects["tooth0 Enamel"]
+    return write_tiny_capture(str(tmp_path_factory.mktemp("teeth-capture")), width=20, height=15, n_lights=4)
 
 
 def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     from material_structures.core.teeth.scene import load_scene
 
-    enamel = _import(capture_dir)
+    enamel = import_capture_scene(capture_dir)
     assert bpy.data.objects.get("Gums") is not None and bpy.data.objects.get("Oral Cavity") is not None
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = capture_dir
@@ -70,7 +57,7 @@ def test_fit_button_runs_the_fit_settings_defaults_and_shows_the_check(addon_mod
     from material_structures.addon.teeth.properties import CHECK_IMAGE_NAME
     from material_structures.core.teeth.fit_settings import FitSettings
 
-    _import(capture_dir)
+    import_capture_scene(capture_dir)
     fs = bpy.context.scene.ms_teeth_fit
     props = type(fs).bl_rna.properties
     assert props["iterations"].default == FitSettings().iterations
@@ -192,7 +179,7 @@ def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp
     from material_structures.addon.teeth import operators as ops
     from material_structures.addon.teeth.fit_job import FitJob
 
-    enamel = _import(capture_dir)
+    enamel = import_capture_scene(capture_dir)
     rec = _Recorder()
     context = SimpleNamespace(scene=bpy.context.scene, window_manager=rec, workspace=rec, screen=None)
     fake = SimpleNamespace(_timer=object(), report=lambda *a: None)
