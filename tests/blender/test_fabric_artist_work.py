@@ -7,8 +7,7 @@ import bpy
 import numpy as np
 import pytest
 
-from material_structures.core.fabric.parameter_maps import make_maps, save_params
-
+from ._fabric_maps import material_maps, stroke_kwargs, write_random_fabric_fit
 from .fresh import run_fresh
 
 UVS = [(0.2, 0.3), (0.35, 0.4), (0.5, 0.45), (0.7, 0.4)]
@@ -24,15 +23,8 @@ for obj in bpy.data.objects:
 """
 
 
-def _fit_folder(tmp_path, h=24, w=32, seed=3):
-    rng = np.random.default_rng(seed)
-    maps = make_maps(
-        kd=rng.uniform(0, 0.3, (h, w, 3)),
-        ks=rng.uniform(0.1, 1, (h, w, 3)),
-        sigma=rng.uniform(0.3, 2, (h, w, 2)),
-        basis=np.tile([1.0, 0.0, 0.0, 0.0], (h, w, 1)) + rng.normal(scale=0.1, size=(h, w, 4)),
-    )
-    save_params(tmp_path / "fit", maps)
+def _fit_folder(tmp_path):
+    write_random_fabric_fit(tmp_path / "fit", 24, 32, seed=3)
     return str(tmp_path / "fit")
 
 
@@ -45,16 +37,15 @@ def _plane(scene, name, x=0.0):
     return obj
 
 
-def _stroke(uvs=UVS, pressure=1.0):
-    return {"stroke": [{"name": "", "uv": uv, "location": (0, 0, 0), "pressure": pressure} for uv in uvs],
-            "stroke_space": "UV"}
+def _plane_with_fit(tmp_path):
+    """A fresh scene whose plane "A" wears the random fit (Import Fabric Maps); returns (fit folder, scene, A)."""
+    from material_structures import render as R
 
-
-def _maps(obj):
-    from material_structures.addon.fabric.maps import images_to_maps
-    from material_structures.addon.fabric.material import material_map_images
-
-    return images_to_maps(material_map_images(obj.active_material))
+    fit = _fit_folder(tmp_path)
+    scene = R.reset_scene()
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    return fit, scene, a
 
 
 def _brush(scene, mode="COMB", **kw):
@@ -62,19 +53,15 @@ def _brush(scene, mode="COMB", **kw):
     brush.mode, brush.radius, brush.strength = mode, 0.08, 1.0
     for k, v in kw.items():
         setattr(brush, k, v)
-    return bpy.ops.material_structures.fabric_brush(**_stroke())
+    return bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS))
 
 
 def test_replayed_strokes_and_undo_survive_save_and_reopen(addon_module, tmp_path):
-    from material_structures import render as R
 
-    fit = _fit_folder(tmp_path)
-    scene = R.reset_scene()
-    a = _plane(scene, "A")
-    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
-    imported = _maps(a)
+    fit, scene, a = _plane_with_fit(tmp_path)
+    imported = material_maps(a)
     assert _brush(scene, "COMB") == {"FINISHED"}
-    combed = _maps(a)
+    combed = material_maps(a)
     changed = np.any(combed.basis != imported.basis, axis=-1)
     assert changed.sum() > 20
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "painted.blend"))
@@ -92,13 +79,9 @@ def test_replayed_strokes_and_undo_survive_save_and_reopen(addon_module, tmp_pat
 
 def test_save_in_the_middle_of_a_stroke_keeps_the_painted_texels(addon_module, tmp_path):
     """The modal tool uploads each segment; a Ctrl+S before the button is released must save them."""
-    from material_structures import render as R
     from material_structures.addon.fabric.brushing import BrushSettings
 
-    fit = _fit_folder(tmp_path)
-    scene = R.reset_scene()
-    a = _plane(scene, "A")
-    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
+    fit, scene, a = _plane_with_fit(tmp_path)
     from importlib import import_module
 
     brush_mod = import_module(f"{addon_module}.addon.fabric.brushing")
@@ -106,43 +89,35 @@ def test_save_in_the_middle_of_a_stroke_keeps_the_painted_texels(addon_module, t
     session.begin_stroke()
     assert session.segment((0.2, 0.3), (0.7, 0.4), BrushSettings(mode="COMB", radius=0.08))
     session.flush()  # what the modal tool does per segment; the stroke is still open
-    painted = _maps(a).basis
+    painted = material_maps(a).basis
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "mid.blend"))
     got = run_fresh(READ_MAPS, blend=str(tmp_path / "mid.blend"))
     np.testing.assert_allclose(np.asarray(got["A"][1]), painted, atol=1e-6)
 
 
 def test_reimport_keeps_earlier_painting_and_materials_paint_separately(addon_module, tmp_path):
-    from material_structures import render as R
 
-    fit = _fit_folder(tmp_path)
-    scene = R.reset_scene()
-    a = _plane(scene, "A")
-    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
-    imported = _maps(a)
+    fit, scene, a = _plane_with_fit(tmp_path)
+    imported = material_maps(a)
     assert _brush(scene, "COMB") == {"FINISHED"}
-    combed = _maps(a)
+    combed = material_maps(a)
     b = _plane(scene, "B", x=3.0)
     assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
-    np.testing.assert_array_equal(_maps(a).basis, combed.basis)  # A's painting kept
-    np.testing.assert_array_equal(_maps(b).basis, imported.basis)  # B starts from the fit
+    np.testing.assert_array_equal(material_maps(a).basis, combed.basis)  # A's painting kept
+    np.testing.assert_array_equal(material_maps(b).basis, imported.basis)  # B starts from the fit
     assert _brush(scene, "RECOLOR", kd=(0.0, 0.9, 0.0), ks=(0.0, 0.9, 0.0)) == {"FINISHED"}  # paints B
-    np.testing.assert_array_equal(_maps(a).kd, combed.kd)
-    assert float(np.abs(_maps(b).kd - imported.kd).max()) > 0.1
+    np.testing.assert_array_equal(material_maps(a).kd, combed.kd)
+    assert float(np.abs(material_maps(b).kd - imported.kd).max()) > 0.1
 
 
 def test_stroke_that_misses_the_map_is_cancelled(addon_module, tmp_path):
-    from material_structures import render as R
 
-    fit = _fit_folder(tmp_path)
-    scene = R.reset_scene()
-    a = _plane(scene, "A")
-    assert bpy.ops.material_structures.fabric_import_maps(directory=fit) == {"FINISHED"}
-    before = _maps(a)
+    fit, scene, a = _plane_with_fit(tmp_path)
+    before = material_maps(a)
     scene.material_structures.fabric_brush.radius = 0.01
     with pytest.raises(RuntimeError, match="changed no texel"):  # an ERROR report, CANCELLED
-        bpy.ops.material_structures.fabric_brush(**_stroke([(3.0, 3.0), (3.5, 3.2)]))
-    np.testing.assert_array_equal(_maps(a).basis, before.basis)
+        bpy.ops.material_structures.fabric_brush(**stroke_kwargs([(3.0, 3.0), (3.5, 3.2)]))
+    np.testing.assert_array_equal(material_maps(a).basis, before.basis)
 
 
 def _lit_scene():
@@ -230,7 +205,7 @@ def test_corduroy_preset_has_wales_like_the_library(addon_module):
     scene = R.reset_scene()
     obj = _plane(scene, "Bolster")
     assert bpy.ops.material_structures.fabric_new_material(preset="CORDUROY") == {"FINISHED"}
-    maps = _maps(obj)  # BTF frame (y down the image)
+    maps = material_maps(obj)  # BTF frame (y down the image)
     q = maps.basis[0].astype(np.float64)  # one row across u
     lean_x = 2.0 * (q[:, 1] * q[:, 3] + q[:, 0] * q[:, 2])  # x component of the fibre axis
     flips = int(np.count_nonzero(np.diff(np.sign(lean_x[np.abs(lean_x) > 0.05])) != 0))

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from material_structures.core.fabric import brushing as core_brush
-from material_structures.core.fabric.parameter_maps import make_maps, save_params
+
+from ._fabric_maps import material_maps, stroke_kwargs, write_random_fabric_fit
 
 
 @pytest.fixture(autouse=True)
@@ -29,14 +30,7 @@ def _closures(obj):
 def _setup(tmp_path, h=48, w=64, seed=3):
     from material_structures import render as R
 
-    rng = np.random.default_rng(seed)
-    maps = make_maps(
-        kd=rng.uniform(0, 0.3, (h, w, 3)),
-        ks=rng.uniform(0.1, 1, (h, w, 3)),
-        sigma=rng.uniform(0.3, 2, (h, w, 2)),
-        basis=np.tile([1.0, 0.0, 0.0, 0.0], (h, w, 1)) + rng.normal(scale=0.1, size=(h, w, 4)),
-    )
-    save_params(tmp_path / "fit", maps)
+    maps = write_random_fabric_fit(tmp_path / "fit", h, w, seed)
     scene = R.reset_scene()
     obj = R.add_textured_plane(scene, 2.0)
     bpy.context.view_layer.objects.active = obj
@@ -47,20 +41,6 @@ def _setup(tmp_path, h=48, w=64, seed=3):
     return scene, obj, maps
 
 
-def _current(obj):
-    from material_structures.addon.fabric.maps import images_to_maps
-    from material_structures.addon.fabric.material import material_map_images
-
-    return images_to_maps(material_map_images(obj.active_material))
-
-
-def _stroke_kwargs(uvs, pressure=1.0):
-    return {
-        "stroke": [{"name": "", "uv": uv, "location": (0, 0, 0), "pressure": pressure} for uv in uvs],
-        "stroke_space": "UV",
-    }
-
-
 UVS = [(0.2, 0.3), (0.35, 0.4), (0.5, 0.45), (0.7, 0.4)]
 
 
@@ -68,9 +48,9 @@ def test_replayed_comb_stroke_matches_core_and_undo_restores(addon_module, tmp_p
     scene, obj, maps = _setup(tmp_path)
     brush = scene.material_structures.fabric_brush
     brush.mode, brush.radius, brush.strength, brush.fibre_length = "COMB", 0.06, 0.9, 1.5
-    before = _current(obj)
-    assert bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS)) == {"FINISHED"}
-    after = _current(obj)
+    before = material_maps(obj)
+    assert bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS)) == {"FINISHED"}
+    after = material_maps(obj)
 
     h, w = maps.shape
     pts = np.array([(u * w, (1 - v) * h) for u, v in UVS])
@@ -84,7 +64,7 @@ def test_replayed_comb_stroke_matches_core_and_undo_restores(addon_module, tmp_p
         np.testing.assert_array_equal(getattr(after, key), getattr(before, key))
 
     assert bpy.ops.material_structures.fabric_brush_undo() == {"FINISHED"}
-    np.testing.assert_array_equal(_current(obj).basis, before.basis)
+    np.testing.assert_array_equal(material_maps(obj).basis, before.basis)
 
 
 def test_comb_stroke_refits_the_closures_of_its_texels_and_undo_restores_them(addon_module, tmp_path):
@@ -93,9 +73,9 @@ def test_comb_stroke_refits_the_closures_of_its_texels_and_undo_restores_them(ad
     scene, obj, _ = _setup(tmp_path)
     brush = scene.material_structures.fabric_brush
     brush.mode, brush.radius, brush.strength, brush.fibre_length = "COMB", 0.06, 0.9, 1.5
-    before, cm_before = _current(obj), _closures(obj)
-    assert bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS)) == {"FINISHED"}
-    after, cm_after = _current(obj), _closures(obj)
+    before, cm_before = material_maps(obj), _closures(obj)
+    assert bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS)) == {"FINISHED"}
+    after, cm_after = material_maps(obj), _closures(obj)
     changed = np.any(after.basis != before.basis, axis=-1)
     assert changed.sum() > 50
     # the stroke's texels hold the table's closures of their new geometry, the others are untouched
@@ -115,7 +95,7 @@ def test_recolor_stroke_keeps_the_closures(addon_module, tmp_path):
     brush = scene.material_structures.fabric_brush
     brush.mode, brush.radius, brush.recolor_diffuse = "RECOLOR", 0.08, True
     cm_before = _closures(obj)
-    assert bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS)) == {"FINISHED"}
+    assert bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS)) == {"FINISHED"}
     np.testing.assert_array_equal(_closures(obj).weights, cm_before.weights)
 
 
@@ -123,16 +103,16 @@ def test_world_space_stroke_equals_uv_stroke(addon_module, tmp_path):
     scene, obj, _ = _setup(tmp_path)
     brush = scene.material_structures.fabric_brush
     brush.mode, brush.radius, brush.strength = "COMB", 0.05, 1.0
-    before = _current(obj)
+    before = material_maps(obj)
     world = [
         {"name": "", "uv": (0, 0), "location": (2 * u - 1, 2 * v - 1, 0.01), "pressure": 1.0} for u, v in UVS
     ]  # plane is 2 x 2
     assert bpy.ops.material_structures.fabric_brush(stroke=world, stroke_space="WORLD") == {"FINISHED"}
-    via_world = _current(obj).basis.copy()
+    via_world = material_maps(obj).basis.copy()
     bpy.ops.material_structures.fabric_brush_undo()
-    np.testing.assert_array_equal(_current(obj).basis, before.basis)
-    bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS))
-    np.testing.assert_allclose(_current(obj).basis, via_world, atol=1e-5)
+    np.testing.assert_array_equal(material_maps(obj).basis, before.basis)
+    bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS))
+    np.testing.assert_allclose(material_maps(obj).basis, via_world, atol=1e-5)
 
 
 def test_recolor_and_pressure(addon_module, tmp_path):
@@ -141,9 +121,9 @@ def test_recolor_and_pressure(addon_module, tmp_path):
     brush.mode, brush.radius, brush.strength = "RECOLOR", 0.05, 1.0
     brush.recolor_diffuse, brush.recolor_specular = True, False
     brush.kd = (0.9, 0.1, 0.1)
-    before = _current(obj)
-    bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS, pressure=0.5))
-    after = _current(obj)
+    before = material_maps(obj)
+    bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS, pressure=0.5))
+    after = material_maps(obj)
     h, w = before.shape
     pts = np.array([(u * w, (1 - v) * h) for u, v in UVS])
     # one segment at a time, each with strength 0.5 (pressure) — the core recolor of each capsule
@@ -158,10 +138,10 @@ def test_clear_errors(addon_module, tmp_path):
     scene, obj, _ = _setup(tmp_path)
     scene.material_structures.fabric_brush.mode = "DATA_DRIVEN"
     with pytest.raises(RuntimeError, match="brushing states"):
-        bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS))
+        bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS))
     scene.material_structures.fabric_brush.states_dir = str(tmp_path / "nowhere")
     with pytest.raises(RuntimeError, match="state_0"):
-        bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS))
+        bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS))
     scene.material_structures.fabric_brush.mode = "COMB"
     with pytest.raises(RuntimeError, match="at least 2 points"):
-        bpy.ops.material_structures.fabric_brush(**_stroke_kwargs(UVS[:1]))
+        bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS[:1]))
