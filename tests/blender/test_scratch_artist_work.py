@@ -252,19 +252,9 @@ class _Recorder:
 
 
 def _env_world(scene):
-    from .test_scratch_world import _env
+    from .test_scratch_world import env_world
 
-    env = _env()
-    img = bpy.data.images.new("Env", env.shape[1], env.shape[0], float_buffer=True)
-    rgba = np.concatenate([env, np.ones(env.shape[:2] + (1,))], -1)[::-1].astype(np.float32)
-    img.pixels.foreach_set(rgba.ravel())
-    img.pack()  # saved with the file
-    tree = scene.world.node_tree
-    tex = tree.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = img
-    bg = next(n for n in tree.nodes if n.type == "BACKGROUND")
-    tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
-    bg.inputs["Strength"].default_value = 1.0
+    env_world(scene, pack=True)  # saved with the file
 
 
 def test_world_lights_is_a_setting_drawn_always_and_read_by_the_shader(scene):

@@ -19,6 +19,25 @@ def _env():
     return sky + sun
 
 
+def env_world(scene, pack: bool = False) -> None:
+    """Light the scene's world with ``_env()`` (an equirectangular float image, packed into the file with
+    ``pack``) at strength 1."""
+    import bpy
+
+    env = _env()
+    img = bpy.data.images.new("Env", env.shape[1], env.shape[0], float_buffer=True)
+    rgba = np.concatenate([env, np.ones(env.shape[:2] + (1,))], -1)[::-1].astype(np.float32)
+    img.pixels.foreach_set(rgba.ravel())
+    if pack:
+        img.pack()
+    tree = scene.world.node_tree
+    tex = tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = img
+    bg = next(n for n in tree.nodes if n.type == "BACKGROUND")
+    tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 1.0
+
+
 def test_bright_region_is_the_sun():
     env = _env()
     d, om = W.equirect_directions()
@@ -37,16 +56,7 @@ def test_world_lamps_reach_the_shader(addon_module):
 
     render_plate_vs_core(lamps=(("POINT", (0.5, 0.3, 1.2), 200.0, 0.08),), resolution=(8, 8))
     scene = bpy.context.scene
-    env = _env()
-    img = bpy.data.images.new("Env", env.shape[1], env.shape[0], float_buffer=True)
-    rgba = np.concatenate([env, np.ones(env.shape[:2] + (1,))], -1)[::-1].astype(np.float32)
-    img.pixels.foreach_set(rgba.ravel())
-    tree = scene.world.node_tree
-    tex = tree.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = img
-    bg = next(n for n in tree.nodes if n.type == "BACKGROUND")
-    tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
-    bg.inputs["Strength"].default_value = 1.0
+    env_world(scene)
     scene["ms_scratch_world_lamps"] = 2
     sync_scratch_lamps(scene)
     node = next(scratch_script_nodes())
