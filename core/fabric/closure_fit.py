@@ -50,6 +50,7 @@ GGX_TILT = (0.5, 1.0)
 GGX_SCALE = (1.0, 1.4)
 REL_FLOOR = 1.0  # residual / (target + REL_FLOOR x the view's mean target): see fit_keys
 FLOOR_PER_VIEW = True
+TIE_TOLERANCE = 1e-9  # relative residual difference below which stage-1 combinations tie (first kept)
 FIT_LIGHTS = (14, 28)  # cosine-stratified light directions of the fit (theta rings, azimuths)
 FIT_VIEWS = (6, 12)  # ... and view directions
 
@@ -277,7 +278,10 @@ def fit_keys(sigma, quat, n_light=FIT_LIGHTS, n_view=FIT_VIEWS, chunk=32):
         for i_s, i_v, i_k, i_g, i_c in combos:
             idx = [0, 1 + i_s, 1 + ns + i_v * nv + i_k, 1 + ns + len(VELVET_SIGMA) * nv + i_g * len(GGX_SCALE) + i_c]
             w, r = _nnls4(gram[:, idx][:, :, idx], rhs[:, idx], tt)
-            better = r < best
+            # a later combination must be better by more than rounding: where NNLS leaves a closure at
+            # weight 0, combinations that differ only in that closure tie exactly, and the BLAS kernel
+            # of the machine (not the fit) would pick one of them
+            better = r < best * (1.0 - TIE_TOLERANCE)
             sl = np.arange(c0, c0 + kk)[better]
             best[better] = r[better]
             out_w[sl, :, :3] = w[better][:, :, None]  # constant weight = sum of the Bernstein terms
