@@ -1,10 +1,12 @@
-"""A tiny synthetic teeth capture and its import, shared by the Blender-side teeth tests (not a test module)."""
+"""A tiny synthetic teeth capture, its import and the check of an applied fit, shared by the Blender-side teeth
+tests (not a test module)."""
 
 from __future__ import annotations
 
 import os
 
 import bpy
+import numpy as np
 
 
 def write_tiny_capture(folder: str, width: int, height: int, n_lights: int) -> str:
@@ -26,3 +28,18 @@ def import_capture_scene(capture_dir: str):
     path = os.path.join(capture_dir, "scene.json")
     assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
     return bpy.data.objects["tooth0 Enamel"]
+
+
+def assert_fit_applied(enamel, fit_dir):
+    """The first tooth of the fitted scene ``fit_dir/scene_fit.json`` is in ``enamel``'s tooth: its coefficients
+    (clipped for the dentin shape keys) and its enamel's Sigma_t. Returns that fitted tooth."""
+    from material_structures.core.teeth.scene import load_scene
+
+    t = load_scene(os.path.join(fit_dir, "scene_fit.json")).teeth[0]
+    st = enamel.ms_tooth
+    assert st.has_fit
+    np.testing.assert_allclose(tuple(st.fitted), t.c, atol=1e-6)
+    np.testing.assert_allclose(st.coefficients(), np.clip(t.c, -0.8, 0.8), atol=1e-6)
+    node = enamel.active_material.node_tree.nodes["Enamel"]
+    np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
+    return t

@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 import pytest
 
-from ._teeth_capture import import_capture_scene, write_tiny_capture
+from ._teeth_capture import assert_fit_applied, import_capture_scene, write_tiny_capture
 from .fresh import run_fresh
 
 
@@ -231,8 +231,6 @@ def test_fit_refuses_to_start_when_no_capture_tooth_is_mapped(addon_module, capt
 
 
 def test_fit_applies_to_the_mapped_tooth(addon_module, capture_dir, tmp_path):
-    from material_structures.core.teeth.scene import load_scene
-
     enamel = _add_incisor()
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = capture_dir
@@ -243,14 +241,7 @@ def test_fit_applies_to_the_mapped_tooth(addon_module, capture_dir, tmp_path):
     assert [m.capture_tooth for m in fs.tooth_map] == ["tooth0"]
     fs.tooth_map[0].enamel = enamel  # the user's choice in the panel
     assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
-    fit = load_scene(str(tmp_path / "fit" / "scene_fit.json"))
-    t = fit.teeth[0]
-    st = enamel.ms_tooth
-    assert st.has_fit
-    np.testing.assert_allclose(tuple(st.fitted), t.c, atol=1e-6)
-    np.testing.assert_allclose(st.coefficients(), np.clip(t.c, -0.8, 0.8), atol=1e-6)
-    node = enamel.active_material.node_tree.nodes["Enamel"]
-    np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
+    assert_fit_applied(enamel, tmp_path / "fit")
     assert "Incisor" in fs.status
 
 

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from ._teeth_capture import import_capture_scene, write_tiny_capture
+from ._teeth_capture import assert_fit_applied, import_capture_scene, write_tiny_capture
 
 
 @pytest.fixture(scope="module")
@@ -21,8 +21,6 @@ def capture_dir(tmp_path_factory):
 
 
 def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
-    from material_structures.core.teeth.scene import load_scene
-
     enamel = import_capture_scene(capture_dir)
     assert bpy.data.objects.get("Gums") is not None and bpy.data.objects.get("Oral Cavity") is not None
     fs = bpy.context.scene.ms_teeth_fit
@@ -31,15 +29,8 @@ def test_fit_operator_applies_result(addon_module, capture_dir, tmp_path):
     fs.iterations = 3
     fs.init = "PERTURBED"  # c reset to 0, volumes perturbed: the fit result differs from the import
     assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}  # EXEC: blocking
-    fit = load_scene(str(tmp_path / "fit" / "scene_fit.json"))
-    t = fit.teeth[0]
-    st = enamel.ms_tooth
-    assert st.has_fit
-    np.testing.assert_allclose(tuple(st.fitted), t.c, atol=1e-6)
-    np.testing.assert_allclose(st.coefficients(), np.clip(t.c, -0.8, 0.8), atol=1e-6)
-    node = enamel.active_material.node_tree.nodes["Enamel"]
-    np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
-    dnode = st.partner.active_material.node_tree.nodes["Dentin"]
+    t = assert_fit_applied(enamel, tmp_path / "fit")
+    dnode = enamel.ms_tooth.partner.active_material.node_tree.nodes["Dentin"]
     np.testing.assert_allclose(tuple(dnode.inputs["Albedo"].default_value)[:3], t.dentin.albedo, rtol=1e-6)
     for name in ("fit_log.txt", "loss.png", "loss.json", "checkpoint.json"):
         assert os.path.isfile(tmp_path / "fit" / name), name
