@@ -7,7 +7,8 @@ box ``lo[i]``, ``hi[i]``; an inner node's children are ``left[i]`` and ``left[i]
 
 Ray queries read the tree in a second layout (``ray_arrays``): the binary tree collapsed into an
 8-wide one (each wide node holds up to ``WIDTH`` child boxes as six rows of ``WIDTH`` floats, so one
-visit tests all children in one loop), each leaf's triangles in leaf order as (v0, e1, e2) rows. The
+visit tests all children at once, as AVX vector code written in LLVM IR: ``_slab_mask``,
+``_packet_box_masks``), each leaf's triangles in leaf order as (v0, e1, e2) rows. The
 same triangles are tested with the same arithmetic as in a binary traversal, so hits and distances are
 the same numbers; only fewer nodes are visited.
 
@@ -27,14 +28,18 @@ Several trees can share one node array (``merge``): each keeps its own root inde
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.extending import intrinsic
 
 LEAF_SIZE = 4  # at most, for the median fallback; the SAH decides below
 SAH_BINS = 16
 STACK_SIZE = 64
 PACKET = 63  # rays per packet of ``packet_hits`` (bits of an int64 mask)
 WIDTH = 8  # children per node of the ray-query tree (one AVX-512 register of float64 per box plane)
+SLACK = 1.0 + 1e-12  # a box is hit where t0 <= t1 * SLACK (rounding of the slab distances)
 
 
 class TriangleBVH:
@@ -223,20 +228,184 @@ def _leaf_triangle(tdat, j, o, d) -> tuple[float, float, float]:
     return t, u, v
 
 
+# ------------------------------------------------------------------------ SIMD box tests (LLVM vector IR)
+# One wide-node visit as a handful of vector instructions: numba does not vectorise the loop over the WIDTH
+# children (docs/teeth-tracer.md), so the slab test is written as LLVM vector IR through numba intrinsics.
+# Each scalar operation of ``_wide_slabs`` / the packet's box loop has its lane-wise twin with the same
+# rounding and the same NaN behaviour (numba's ``max(a, b)`` is ``b if b > a else a``, ordered compare).
+_V = ir.VectorType(ir.DoubleType(), WIDTH)
+_I64 = ir.IntType(64)
+
+
+def _splat(builder: ir.IRBuilder, x: ir.Value, vt: ir.VectorType) -> ir.Value:
+    v = builder.insert_element(ir.Constant(vt, ir.Undefined), x, ir.Constant(ir.IntType(32), 0))
+    return builder.shuffle_vector(v, ir.Constant(vt, ir.Undefined),
+                                  ir.Constant(ir.VectorType(ir.IntType(32), vt.count), [0] * vt.count))
+
+
+def _vmax(builder: ir.IRBuilder, acc: ir.Value, v: ir.Value) -> ir.Value:
+    """Lane-wise numba ``max(acc, v)``: v where v > acc (ordered), else acc."""
+    return builder.select(builder.fcmp_ordered(">", v, acc), v, acc)
+
+
+def _vmin(builder: ir.IRBuilder, acc: ir.Value, v: ir.Value) -> ir.Value:
+    """Lane-wise numba ``min(acc, v)``: v where v < acc (ordered), else acc."""
+    return builder.select(builder.fcmp_ordered("<", v, acc), v, acc)
+
+
+def _row_ptr(context, builder: ir.IRBuilder, aty, ary: ir.Value, inds: list, vt: ir.Type) -> ir.Value:
+    """Pointer to ary[inds] cast to ``vt`` (a row of WIDTH float64 or a packet scratch row)."""
+    a = context.make_array(aty)(context, builder, ary)
+    p = cgutils.get_item_pointer(context, builder, aty, a, inds, wraparound=False)
+    return builder.bitcast(p, vt.as_pointer())
+
+
+def _c_array(ty, dtype, ndim: int) -> bool:
+    """Whether numba type ``ty`` is a C-contiguous array of ``dtype`` and ``ndim`` (the vector loads and stores
+    of the intrinsics below address rows as contiguous WIDTH-element blocks)."""
+    return isinstance(ty, types.Array) and ty.layout == "C" and ty.dtype == dtype and ty.ndim == ndim
+
+
+@intrinsic
+def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
+    """``_wide_slabs`` in vector form: the WIDTH entry distances t0 go into ``dist`` (all of them, also of the
+    missed boxes), the return value has bit c set where the ray enters child c: t0 <= t1 SLACK and t0 < inf
+    (exactly the children ``_wide_slabs`` gives a finite distance)."""
+    if not (_c_array(wbox, types.float64, 3) and _c_array(dist, types.float64, 1)):
+        return None
+    i64, f64 = types.int64, types.float64  # the arguments are cast to these at the call
+    sig = i64(wbox, i64, i64, i64, i64, f64, f64, f64, f64, f64, f64, f64, f64, dist)
+
+    def codegen(context, builder, signature, args):
+        wb, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist = args
+        wty, dty = signature.args[0], signature.args[13]
+        zero, three = ir.Constant(_I64, 0), ir.Constant(_I64, 3)
+
+        def plane(r, o, inv):
+            row = builder.load(_row_ptr(context, builder, wty, wb, [i, r, zero], _V), align=8)
+            return builder.fmul(builder.fsub(row, _splat(builder, o, _V)), _splat(builder, inv, _V))
+
+        def far(n):
+            return builder.select(builder.icmp_signed("<", n, three), builder.add(n, three), builder.sub(n, three))
+
+        ax, ay, az = plane(nx, ox, ix), plane(ny, oy, iy), plane(nz, oz, iz)
+        bx, by, bz = plane(far(nx), ox, ix), plane(far(ny), oy, iy), plane(far(nz), oz, iz)
+        t0 = _vmax(builder, _splat(builder, tmin, _V), _vmax(builder, ax, _vmax(builder, ay, az)))
+        t1 = _vmin(builder, _splat(builder, tmax, _V), _vmin(builder, bx, _vmin(builder, by, bz)))
+        hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, ir.Constant(_V, [SLACK] * WIDTH)))
+        fin = builder.fcmp_ordered("<", t0, ir.Constant(_V, [float("inf")] * WIDTH))
+        builder.store(t0, _row_ptr(context, builder, dty, dist, [zero], _V), align=8)
+        return builder.zext(builder.bitcast(builder.and_(hit, fin), ir.IntType(WIDTH)), _I64)
+
+    return sig, codegen
+
+
+@intrinsic
+def _packet_box_masks(typingctx, wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
+    """The packet's box test of wide node i: for every ray b of ``live`` (inverse direction and current
+    limit in pinv[b]) and child c, the slab test of ``packet_hits`` (t0 <= t1 SLACK, near and far plane by
+    min / max, planes offset by the shared origin once per node); cmask[c] gets the rays that enter child c,
+    the return value has bit c set where cmask[c] != 0."""
+    if not (_c_array(wbox, types.float64, 3) and _c_array(pinv, types.float64, 2)
+            and _c_array(cmask, types.int64, 1)):
+        return None
+    i64, f64 = types.int64, types.float64
+    sig = i64(wbox, i64, f64, f64, f64, pinv, i64, f64, cmask)
+
+    def codegen(context, builder, signature, args):
+        wb, i, ox, oy, oz, pinv, live, tmin, cmask = args
+        wty, pty, cty = signature.args[0], signature.args[5], signature.args[8]
+        vi = ir.VectorType(_I64, WIDTH)
+        zero = ir.Constant(_I64, 0)
+        diff = []
+        for r, o in enumerate((ox, oy, oz, ox, oy, oz)):
+            row = builder.load(_row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, r), zero], _V), align=8)
+            diff.append(builder.fsub(row, _splat(builder, o, _V)))
+        vtmin = _splat(builder, tmin, _V)
+        slack = ir.Constant(_V, [SLACK] * WIDTH)
+        pre = builder.block
+        head = builder.append_basic_block("pk_head")
+        body = builder.append_basic_block("pk_body")
+        done = builder.append_basic_block("pk_done")
+        builder.branch(head)
+        builder.position_at_end(head)
+        m = builder.phi(_I64)
+        acc = builder.phi(vi)
+        m.add_incoming(live, pre)
+        acc.add_incoming(ir.Constant(vi, [0] * WIDTH), pre)
+        builder.cbranch(builder.icmp_unsigned("!=", m, zero), body, done)
+        builder.position_at_end(body)
+        b = builder.cttz(m, ir.Constant(ir.IntType(1), 0))
+        m_next = builder.and_(m, builder.sub(m, ir.Constant(_I64, 1)))
+        p = _row_ptr(context, builder, pty, pinv, [b, zero], ir.DoubleType())
+        inv = [_splat(builder, builder.load(builder.gep(p, [ir.Constant(_I64, k)]), align=8), _V) for k in range(4)]
+        lo = [builder.fmul(diff[k], inv[k]) for k in range(3)]
+        hi = [builder.fmul(diff[k + 3], inv[k]) for k in range(3)]
+        near = [_vmin(builder, lo[k], hi[k]) for k in range(3)]
+        far = [_vmax(builder, lo[k], hi[k]) for k in range(3)]
+        t0 = _vmax(builder, vtmin, _vmax(builder, near[0], _vmax(builder, near[1], near[2])))
+        t1 = _vmin(builder, inv[3], _vmin(builder, far[0], _vmin(builder, far[1], far[2])))
+        hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, slack))
+        bit = _splat(builder, builder.shl(ir.Constant(_I64, 1), b), vi)
+        acc_next = builder.or_(acc, builder.select(hit, bit, ir.Constant(vi, [0] * WIDTH)))
+        m.add_incoming(m_next, builder.block)
+        acc.add_incoming(acc_next, builder.block)
+        builder.branch(head)
+        builder.position_at_end(done)
+        builder.store(acc, _row_ptr(context, builder, cty, cmask, [zero], vi), align=8)
+        nz = builder.icmp_unsigned("!=", acc, ir.Constant(vi, [0] * WIDTH))
+        return builder.zext(builder.bitcast(nz, ir.IntType(WIDTH)), _I64)
+
+    return sig, codegen
+
+
 @njit(cache=True, inline="always")
 def _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist) -> None:
     """Slab test of the ray against the WIDTH child boxes of wide node i (nx, ny, nz: near-plane rows from
-    ``_inverse``): entry distances into dist, inf where the ray misses a box within (tmin, tmax)."""
+    ``_inverse``): entry distances into dist, inf where the ray misses a box within (tmin, tmax). With
+    t_a = (plane_a - o_a) / d_a: t0 = max(tmin, t_near x, t_near y, t_near z), t1 = min(tmax, t_far x, y, z),
+    hit where t0 <= t1 SLACK. The scalar reference of ``_slab_mask``, which the queries use."""
     fx, fy, fz = (nx + 3) % 6, (ny + 3) % 6, (nz + 3) % 6
     for c in range(WIDTH):
         t0 = max(tmin, max((wbox[i, nx, c] - ox) * ix, max((wbox[i, ny, c] - oy) * iy, (wbox[i, nz, c] - oz) * iz)))
         t1 = min(tmax, min((wbox[i, fx, c] - ox) * ix, min((wbox[i, fy, c] - oy) * iy, (wbox[i, fz, c] - oz) * iz)))
-        dist[c] = t0 if t0 <= t1 * (1.0 + 1e-12) else np.inf
+        dist[c] = t0 if t0 <= t1 * SLACK else np.inf
+
+
+@njit(cache=True, _nrt=False)
+def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) -> int:
+    """Scalar reference of ``_packet_box_masks`` (the packet's box loop before it was written as vector IR):
+    with d = box plane - origin and a = d ix (per axis, both planes), t0 = max(tmin, max_axes min(a_lo, a_hi)),
+    t1 = min(tlim, min_axes max(a_lo, a_hi)); ray b enters child c where t0 <= t1 SLACK. ``diff``: (6, WIDTH)
+    scratch."""
+    for c in range(WIDTH):
+        for r in range(6):
+            diff[r, c] = wbox[i, r, c] - (ox if r % 3 == 0 else oy if r % 3 == 1 else oz)
+        cmask[c] = 0
+    m = live
+    while m != 0:
+        b = trailing_zeros(m)
+        m &= m - 1
+        ix, iy, iz, tlim = pinv[b, 0], pinv[b, 1], pinv[b, 2], pinv[b, 3]
+        bit = np.int64(1) << b
+        for c in range(WIDTH):
+            ax, bx = diff[0, c] * ix, diff[3, c] * ix
+            ay, by = diff[1, c] * iy, diff[4, c] * iy
+            az, bz = diff[2, c] * iz, diff[5, c] * iz
+            t0 = max(tmin, max(min(ax, bx), max(min(ay, by), min(az, bz))))
+            t1 = min(tlim, min(max(ax, bx), min(max(ay, by), max(az, bz))))
+            cmask[c] |= bit & -np.int64(t0 <= t1 * SLACK)
+    kids = 0
+    for c in range(WIDTH):
+        if cmask[c] != 0:
+            kids |= 1 << c
+    return kids
 
 
 @njit(cache=True, inline="always")
 def _push_wide(wchild, i, dist, stack, sp) -> int:
-    """Push the children of wide node i with finite entry distance, the nearest on top; new sp."""
+    """Push the children of wide node i with finite entry distance, the nearest on top; new sp (the
+    scalar reference of ``_push_masked``)."""
     base = sp
     cap = stack.shape[0]
     for c in range(WIDTH):
@@ -248,6 +417,27 @@ def _push_wide(wchild, i, dist, stack, sp) -> int:
                 k -= 1
             stack[k] = c
             sp += 1
+    for k in range(base, sp):
+        stack[k] = wchild[i, stack[k]]
+    return sp
+
+
+@njit(cache=True, inline="always")
+def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
+    """``_push_wide`` for the children in the bit mask ``mask`` (from ``_slab_mask``), in the same order."""
+    base = sp
+    cap = stack.shape[0]
+    m = mask
+    while m != 0 and sp < cap:
+        c = trailing_zeros(m)
+        m &= m - 1
+        tc = dist[c]
+        k = sp
+        while k > base and dist[stack[k - 1]] < tc:
+            stack[k] = stack[k - 1]
+            k -= 1
+        stack[k] = c
+        sp += 1
     for k in range(base, sp):
         stack[k] = wchild[i, stack[k]]
     return sp
@@ -292,8 +482,8 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
                 if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tmin < t < best_t:
                     best, best_t = order[j], t
             continue
-        _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, best_t, dist)
-        sp = _push_wide(wchild, i, dist, stack, sp)
+        mask = _slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, best_t, dist)
+        sp = _push_masked(wchild, i, mask, dist, stack, sp)
     return best, best_t
 
 
@@ -414,19 +604,20 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
                     if stops[k]:
                         tlim = t
             continue
-        _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
-        sp = _push_wide(wchild, i, dist, stack, sp)
+        mask = _slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
+        sp = _push_masked(wchild, i, mask, dist, stack, sp)
     return n
 
 
 @njit(cache=True, _nrt=False)
-def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, diff, cmask, buf_tri, buf_t, counts):
+def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, cmask, buf_tri, buf_t, counts):
     """``hits_until_stop`` for the rays o + t dirs[r0 + b] with tmin < t < tmaxs[r0 + b], for every bit b
     set in ``mask`` (b < ``PACKET``), in one traversal: the rays share their origin, so each node's box
     planes are offset by o once for the packet and each triangle's o-terms once (the same per-ray
     arithmetic as ``hits_until_stop``, hence the same hits). Ray r's hits go into buf_tri[r], buf_t[r],
     their number (which may exceed the buffer) into counts[r]. Scratch: pinv (PACKET, 4) float64,
-    pstack (STACK_SIZE, 2) int64, diff (6, WIDTH) float64, cmask (WIDTH,) int64."""
+    pstack (STACK_SIZE, 2) int64, cmask (WIDTH,) int64. The box tests run as vector code
+    (``_packet_box_masks``, scalar reference ``packet_box_masks_scalar``)."""
     wbox, wchild, tdat, order = ray_nodes
     cap = buf_t.shape[1]
     m = mask
@@ -443,31 +634,11 @@ def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, 
     while sp > 0:
         sp -= 1
         i, live = pstack[sp, 0], pstack[sp, 1]
-        for c in range(WIDTH):
-            diff[0, c] = wbox[i, 0, c] - ox
-            diff[1, c] = wbox[i, 1, c] - oy
-            diff[2, c] = wbox[i, 2, c] - oz
-            diff[3, c] = wbox[i, 3, c] - ox
-            diff[4, c] = wbox[i, 4, c] - oy
-            diff[5, c] = wbox[i, 5, c] - oz
-            cmask[c] = 0
-        m = live
-        while m != 0:
-            b = trailing_zeros(m)
-            m &= m - 1
-            ix, iy, iz, tlim = pinv[b, 0], pinv[b, 1], pinv[b, 2], pinv[b, 3]
-            bit = np.int64(1) << b
-            for c in range(WIDTH):
-                ax, bx = diff[0, c] * ix, diff[3, c] * ix
-                ay, by = diff[1, c] * iy, diff[4, c] * iy
-                az, bz = diff[2, c] * iz, diff[5, c] * iz
-                t0 = max(tmin, max(min(ax, bx), max(min(ay, by), min(az, bz))))
-                t1 = min(tlim, min(max(ax, bx), min(max(ay, by), max(az, bz))))
-                cmask[c] |= bit & -np.int64(t0 <= t1 * (1.0 + 1e-12))  # no branch: hits are unpredictable
-        for c in range(WIDTH):
+        kids = _packet_box_masks(wbox, i, ox, oy, oz, pinv, live, tmin, cmask)
+        while kids != 0:
+            c = trailing_zeros(kids)
+            kids &= kids - 1
             cm = cmask[c]
-            if cm == 0:
-                continue
             ch = wchild[i, c]
             if ch >= 0:
                 if sp < pstack.shape[0]:

@@ -134,8 +134,7 @@ def test_packet_shadow_rays_hit_what_single_rays_hit():
     stack, dist = np.empty(STACK_SIZE, dtype=np.int64), np.empty(WIDTH)
     b_tri, b_t = np.empty(32, dtype=np.int64), np.empty(32)
     p_tri, p_t, p_n = np.empty((n_l, 32), dtype=np.int64), np.empty((n_l, 32)), np.empty(n_l, dtype=np.int64)
-    scratch = (np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64), np.empty((6, WIDTH)),
-               np.empty(WIDTH, dtype=np.int64))
+    scratch = (np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64), np.empty(WIDTH, dtype=np.int64))
     o_all, _ = _rays(tris, 40, seed=6)
     n_hits = 0
     for o in o_all:

@@ -1,0 +1,130 @@
+"""The BVH's vector box tests (``bvh._slab_mask``, ``bvh._packet_box_masks``: LLVM vector IR through numba
+intrinsics) against their scalar references (``bvh._wide_slabs``, ``bvh.packet_box_masks_scalar``) on random
+rays and boxes, including the awkward cases: axis-parallel rays (inverse 1e300), empty children (+inf
+planes), origins on a box plane, flat boxes, finite and infinite tmax, NaN slab distances. Tolerance: none;
+the hit masks must be equal and every entry distance equal to the last bit, since the tracer's images are
+meant to stay bit-identical to the scalar traversal's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+numba = pytest.importorskip("numba")
+
+from numba import njit  # noqa: E402
+
+from material_structures.core.teeth import bvh  # noqa: E402
+
+
+@njit(cache=False)
+def _vector_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
+    return bvh._slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist)
+
+
+@njit(cache=False)
+def _scalar_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
+    bvh._wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist)
+
+
+@njit(cache=False)
+def _vector_packet(wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
+    return bvh._packet_box_masks(wbox, i, ox, oy, oz, pinv, live, tmin, cmask)
+
+
+def _boxes(rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 6, WIDTH) wide-node boxes: random, some flat along an axis, some empty children (+inf)."""
+    w = bvh.WIDTH
+    lo = rng.normal(size=(n, 3, w))
+    hi = lo + np.abs(rng.normal(size=(n, 3, w))) * (rng.random((n, 3, w)) > 0.1)  # ~10 % flat extents
+    box = np.concatenate([lo, hi], axis=1)
+    box[:, :, rng.random(w) < 0.2] = np.inf
+    box[0, :, :] = np.inf  # one node of empty children only
+    return np.ascontiguousarray(box)
+
+
+def _ray(rng: np.random.Generator, box: np.ndarray, k: int, origin: np.ndarray | None = None) -> tuple:
+    """Origin (``origin`` if given), inverse direction, near rows and tmax of a random ray, 3 in 4 aimed at a
+    point inside a child box; every 7th axis-parallel (inverse 1e300), every 11th starting on a box plane,
+    every 13th on a box plane with a subnormal direction component along its normal (inverse inf, distance
+    0 x inf = NaN)."""
+    o = rng.normal(size=3) if origin is None else origin.copy()
+    finite = np.flatnonzero(np.isfinite(box[0]))
+    d = rng.normal(size=3)
+    if len(finite) and k % 4:
+        c = rng.choice(finite)
+        d = box[:3, c] + rng.random(3) * (box[3:, c] - box[:3, c]) - o
+    if k % 7 == 0:
+        d[k % 3] = 0.0
+    if len(finite) and (k % 11 == 0 or k % 13 == 0):
+        c = rng.choice(finite)
+        o[0] = box[0, c] if k % 2 else box[3, c]
+        if k % 13 == 0:
+            d[0] = 5e-324 if k % 3 else -5e-324
+    with np.errstate(over="ignore"):
+        inv = [1.0 / x if x != 0.0 else 1e300 for x in d]
+    near = [a if v >= 0.0 else a + 3 for a, v in enumerate(inv)]
+    tmax = np.inf if k % 2 else float(rng.exponential(2.0))
+    return o, inv, near, tmax
+
+
+def test_slab_mask_equals_the_scalar_slab_test():
+    rng = np.random.default_rng(11)
+    wbox = _boxes(rng, 16)
+    vd, sd = np.empty(bvh.WIDTH), np.empty(bvh.WIDTH)
+    n_hit = n_miss = n_nan = 0
+    for k in range(20000):
+        i = k % len(wbox)
+        o, inv, near, tmax = _ray(rng, wbox[i], k)
+        tmin = 0.0 if k % 3 else 1e-4
+        args = (wbox, i, *near, *o, *inv, tmin, tmax)
+        mask = _vector_slabs(*args, vd)
+        _scalar_slabs(*args, sd)
+        for c in range(bvh.WIDTH):
+            hit = bool((mask >> c) & 1)
+            assert hit == (sd[c] < np.inf), (k, c, vd[c], sd[c])
+            if hit:
+                assert vd[c] == sd[c], (k, c, vd[c], sd[c])
+                n_hit += 1
+            else:
+                n_miss += 1
+        with np.errstate(invalid="ignore"):
+            n_nan += int(np.isnan((wbox[i, near[0]] - o[0]) * inv[0]).any())
+    assert n_hit > 10000 and n_miss > 10000 and n_nan > 500  # both outcomes and NaN distances were exercised
+
+
+def test_packet_box_masks_equal_the_scalar_packet_loop():
+    rng = np.random.default_rng(12)
+    wbox = _boxes(rng, 16)
+    pinv = np.empty((bvh.PACKET, 4))
+    diff = np.empty((6, bvh.WIDTH))
+    vc, sc = np.empty(bvh.WIDTH, dtype=np.int64), np.empty(bvh.WIDTH, dtype=np.int64)
+    n_bits = n_nan = 0
+    for k in range(3000):
+        i = k % len(wbox)
+        o = rng.normal(size=3)
+        finite = np.flatnonzero(np.isfinite(wbox[i, 0]))
+        if k % 3 == 0 and len(finite):  # the shared origin on a box plane: NaN distances for subnormal d x
+            o[0] = wbox[i, rng.choice([0, 3]), rng.choice(finite)]
+        for b in range(bvh.PACKET):
+            _, inv, _, tmax = _ray(rng, wbox[i], k * bvh.PACKET + b, o)
+            pinv[b] = (*inv, tmax)
+            with np.errstate(invalid="ignore"):
+                n_nan += int(np.isnan((wbox[i, [0, 3]] - o[0]) * inv[0]).any())
+        live = np.int64(0)
+        for b in rng.choice(bvh.PACKET, size=rng.integers(0, bvh.PACKET + 1), replace=False):
+            live |= np.int64(1) << np.int64(b)
+        tmin = 1e-4 if k % 2 else 0.0
+        kv = _vector_packet(wbox, i, *o, pinv, live, tmin, vc)
+        ks = bvh.packet_box_masks_scalar(wbox, i, *o, pinv, live, tmin, diff, sc)
+        assert kv == ks, k
+        np.testing.assert_array_equal(vc, sc)
+        n_bits += sum(bin(int(x) & ((1 << 64) - 1)).count("1") for x in vc)
+    assert n_bits > 40000 and n_nan > 1000  # ray-child hits (of about 750,000 pairs), NaN distances
+
+
+def test_vector_box_tests_reject_non_contiguous_arrays():
+    """The intrinsics load and store whole rows, so they only type for C-contiguous arrays."""
+    wbox = np.zeros((2, 6, 2 * bvh.WIDTH))[:, :, ::2]
+    with pytest.raises(numba.core.errors.TypingError):
+        _vector_slabs(wbox, 0, 0, 1, 2, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 1.0, np.empty(bvh.WIDTH))
