@@ -112,6 +112,24 @@ def add_group_input(group, name: str, socket_type: str, default, lo=None, hi=Non
     return sock
 
 
+def wire_lamp_shader_group(group, gin, script, gout, input_names, lamp_term: str):
+    """Wire an OSL ``script`` node that returns a BSDF and a term it evaluates per lamp itself (fabric, scratch)
+    inside ``group``: each of ``input_names`` from the group input ``gin`` to the script's input of that name,
+    a UV-map tangent into its "Tangent", and its "BSDF" plus its ``lamp_term`` output summed into the group
+    output ``gout``'s "Shader". Returns the (tangent, add shader) nodes it made, for placing."""
+    nodes, links = group.nodes, group.links
+    tangent = nodes.new("ShaderNodeTangent")
+    tangent.direction_type = "UV_MAP"
+    add = nodes.new("ShaderNodeAddShader")
+    for name in input_names:
+        links.new(gin.outputs[name], script.inputs[name])
+    links.new(tangent.outputs["Tangent"], script.inputs["Tangent"])
+    links.new(script.outputs["BSDF"], add.inputs[0])
+    links.new(script.outputs[lamp_term], add.inputs[1])
+    links.new(add.outputs[0], gout.inputs["Shader"])
+    return tangent, add
+
+
 def group_node(mat, marker: str):
     """The node of ``mat`` whose node group carries the ID property ``marker`` (None if it has none)."""
     if mat is None or mat.node_tree is None:

@@ -22,7 +22,7 @@ import bpy
 
 from ...core.fabric.closure_fit import CLOSURE_FILES, FIT_KEY_BUDGET, fit_closure_maps, load_closure_maps
 from ...render import load_osl_script
-from ..common import add_eevee_fallback, add_group_input, group_material, group_node
+from ..common import add_eevee_fallback, add_group_input, group_material, group_node, wire_lamp_shader_group
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .maps import CLOSURE_KEYS, closure_maps_to_images, load_fit_folder, maps_to_images
 
@@ -93,19 +93,10 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
         add_group_input(group, *spec)
     group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
     group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
-    nodes, links = group.nodes, group.links
-    gin = nodes.new("NodeGroupInput")
-    gout = nodes.new("NodeGroupOutput")
+    gin = group.nodes.new("NodeGroupInput")
+    gout = group.nodes.new("NodeGroupOutput")
     script = _load_script(group, scene)
-    tangent = nodes.new("ShaderNodeTangent")
-    tangent.direction_type = "UV_MAP"
-    add = nodes.new("ShaderNodeAddShader")
-    for name, *_ in GROUP_INPUTS:
-        links.new(gin.outputs[name], script.inputs[name])
-    links.new(tangent.outputs["Tangent"], script.inputs["Tangent"])
-    links.new(script.outputs["BSDF"], add.inputs[0])
-    links.new(script.outputs["Exact"], add.inputs[1])
-    links.new(add.outputs[0], gout.inputs["Shader"])
+    tangent, add = wire_lamp_shader_group(group, gin, script, gout, [name for name, *_ in GROUP_INPUTS], "Exact")
     gin.location, script.location, tangent.location = (-500, 0), (-150, 0), (-500, -350)
     add.location, gout.location = (150, 0), (350, 0)
     _build_viewport_look(group)

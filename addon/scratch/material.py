@@ -24,7 +24,7 @@ import os
 import bpy
 
 from ...render import load_osl_script, osl_flip_t
-from ..common import add_eevee_fallback, add_group_input, group_material
+from ..common import add_eevee_fallback, add_group_input, group_material, wire_lamp_shader_group
 from ..common import group_node as _group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .tables import (
@@ -105,16 +105,8 @@ def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
     script = _load_script(group, scene)
     texco = nodes.new("ShaderNodeTexCoord")
-    tangent = nodes.new("ShaderNodeTangent")
-    tangent.direction_type = "UV_MAP"
-    add = nodes.new("ShaderNodeAddShader")
-    for sock_name, *_ in GROUP_INPUTS:
-        links.new(gin.outputs[sock_name], script.inputs[sock_name])
+    tangent, add = wire_lamp_shader_group(group, gin, script, gout, [name for name, *_ in GROUP_INPUTS], "Scratch")
     links.new(texco.outputs["UV"], script.inputs["UV"])
-    links.new(tangent.outputs["Tangent"], script.inputs["Tangent"])
-    links.new(script.outputs["BSDF"], add.inputs[0])
-    links.new(script.outputs["Scratch"], add.inputs[1])
-    links.new(add.outputs[0], gout.inputs["Shader"])
     gin.location, script.location, texco.location = (-500, 0), (-150, 0), (-500, -300)
     tangent.location, add.location, gout.location = (-500, -500), (150, 0), (350, 0)
     return group
