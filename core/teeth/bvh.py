@@ -7,10 +7,13 @@ box ``lo[i]``, ``hi[i]``; an inner node's children are ``left[i]`` and ``left[i]
 
 Ray queries read the tree in a second layout (``ray_arrays``): the binary tree collapsed into an
 8-wide one (each wide node holds up to ``WIDTH`` child boxes as six rows of ``WIDTH`` floats, so one
-visit tests all children at once, as AVX vector code written in LLVM IR: ``_slab_mask``,
-``_packet_box_masks``), each leaf's triangles in leaf order as (v0, e1, e2) rows. The
-same triangles are tested with the same arithmetic as in a binary traversal, so hits and distances are
-the same numbers; only fewer nodes are visited.
+visit tests all children at once), each leaf's triangles in leaf order in blocks of ``LANES`` (v0, e1, e2
+rows, one lane per triangle). The box and triangle tests are AVX vector code written as LLVM IR through
+numba intrinsics (``_slab_mask``, ``_packet_box_masks``, ``_leaf_hits``, ``_packet_leaf_hits``; numba does not
+vectorise these loops itself), each lane doing the scalar references' operations in their order
+(``_wide_slabs``, ``packet_box_masks_scalar``, ``leaf_hits_scalar``). The same triangles are tested with the
+same arithmetic as in a binary traversal, so hits and distances are the same numbers; only fewer nodes are
+visited.
 
 Queries (numba, per ray / point, float64 throughout):
 * ``first_hit``: nearest triangle with tmin < t < tmax (Moeller-Trumbore; the distance is the plane
@@ -39,6 +42,7 @@ SAH_BINS = 16
 STACK_SIZE = 64
 PACKET = 63  # rays per packet of ``packet_hits`` (bits of an int64 mask)
 WIDTH = 8  # children per node of the ray-query tree (one AVX-512 register of float64 per box plane)
+LANES = 4  # triangles per leaf block of the ray-query layout (one AVX register of float64)
 SLACK = 1.0 + 1e-12  # a box is hit where t0 <= t1 * SLACK (rounding of the slab distances)
 
 
@@ -116,12 +120,30 @@ class TriangleBVH:
         """The layout ``first_hit`` and ``hits_until_stop`` read: the binary tree collapsed into a
         ``WIDTH``-wide one (wide box (M, 6, WIDTH): rows lo x, y, z, hi x, y, z, one column per child,
         empty children with every plane at +inf; wide child (M, WIDTH): a wide node index (>= 0), or a
-        leaf ~(first slot << 5 | triangle count); leaf triangles (S, 9): v0, v1 - v0, v2 - v0 in leaf order;
-        order (S,): their triangle ids)."""
-        tv = np.asarray(triangles, dtype=np.float64)[self.order]
-        tdat = np.ascontiguousarray(np.concatenate([tv[:, 0], tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]], axis=1))
+        leaf ~(first block << 5 | triangle count); leaf triangles in blocks of ``LANES`` (B, 9, LANES): rows
+        v0, v1 - v0, v2 - v0 (x, y, z each), one lane per triangle, a leaf's triangles in leaf order over
+        ceil(count / LANES) consecutive blocks, unused lanes NaN (no comparison holds for them); order
+        (B, LANES): the lanes' triangle ids, -1 where unused)."""
+        tv = np.asarray(triangles, dtype=np.float64)
         wbox, wchild = self._collapse()
-        return wbox, wchild, tdat, self.order.copy()
+        leaves = np.flatnonzero(self.count > 0)
+        leaves = leaves[np.argsort(self.start[leaves], kind="stable")]
+        n_blk = (self.count[leaves] + LANES - 1) // LANES
+        first = np.concatenate([[0], np.cumsum(n_blk)[:-1]]).astype(np.int64)
+        tblk = np.full((int(n_blk.sum()), 9, LANES), np.nan)
+        tord = np.full((len(tblk), LANES), -1, dtype=np.int64)
+        block_of = dict(zip(self.start[leaves].tolist(), first.tolist(), strict=True))
+        for leaf, b0 in zip(leaves, first, strict=True):
+            ids = self.order[self.start[leaf]:self.start[leaf] + self.count[leaf]]
+            for k, tri in enumerate(ids):
+                b, lane = b0 + k // LANES, k % LANES
+                v0 = tv[tri, 0]
+                tblk[b, :, lane] = np.concatenate([v0, tv[tri, 1] - v0, tv[tri, 2] - v0])
+                tord[b, lane] = tri
+        leaf = wchild < 0
+        slot, cnt = (~wchild[leaf]) >> 5, (~wchild[leaf]) & 31
+        wchild[leaf] = ~((np.array([block_of.get(int(x), 0) for x in slot], dtype=np.int64) << 5) | cnt)
+        return wbox, wchild, np.ascontiguousarray(tblk), tord
 
     def _collapse(self) -> tuple[np.ndarray, np.ndarray]:
         """Wide nodes from the binary tree: each takes a binary node's children and keeps opening its
@@ -208,17 +230,18 @@ def _inverse(d) -> tuple[float, float, float, int, int, int]:
 
 
 @njit(cache=True, inline="always")
-def _leaf_triangle(tdat, j, o, d) -> tuple[float, float, float]:
-    """(t, u, v) of the ray with leaf slot j's triangle plane, as ``ray_triangle`` (the same operations
-    on the stored edges, so the same numbers); u is returned as 2 where it already rules the hit out."""
-    e1x, e1y, e1z = tdat[j, 3], tdat[j, 4], tdat[j, 5]
-    e2x, e2y, e2z = tdat[j, 6], tdat[j, 7], tdat[j, 8]
+def _leaf_triangle(tblk, blk, lane, o, d) -> tuple[float, float, float]:
+    """(t, u, v) of the ray with the plane of the triangle in lane ``lane`` of leaf block ``blk``, as
+    ``ray_triangle`` (the same operations on the stored edges, so the same numbers); u is returned as 2
+    where it already rules the hit out. The scalar reference of ``_leaf_hits``."""
+    e1x, e1y, e1z = tblk[blk, 3, lane], tblk[blk, 4, lane], tblk[blk, 5, lane]
+    e2x, e2y, e2z = tblk[blk, 6, lane], tblk[blk, 7, lane], tblk[blk, 8, lane]
     px, py, pz = d[1] * e2z - d[2] * e2y, d[2] * e2x - d[0] * e2z, d[0] * e2y - d[1] * e2x
     det = e1x * px + e1y * py + e1z * pz
     if abs(det) < 1e-300:
         det = 1e-300
     inv = 1.0 / det
-    sx, sy, sz = o[0] - tdat[j, 0], o[1] - tdat[j, 1], o[2] - tdat[j, 2]
+    sx, sy, sz = o[0] - tblk[blk, 0, lane], o[1] - tblk[blk, 1, lane], o[2] - tblk[blk, 2, lane]
     u = (sx * px + sy * py + sz * pz) * inv
     if u < 0.0 or u > 1.0:
         return 0.0, 2.0, 0.0
@@ -226,6 +249,19 @@ def _leaf_triangle(tdat, j, o, d) -> tuple[float, float, float]:
     v = (d[0] * qx + d[1] * qy + d[2] * qz) * inv
     t = (e2x * qx + e2y * qy + e2z * qz) * inv
     return t, u, v
+
+
+@njit(cache=True, _nrt=False)
+def leaf_hits_scalar(tblk, blk, o, d, tmin, tout) -> int:
+    """Scalar reference of ``_leaf_hits``: bit l set where lane l's triangle is hit with tmin < t (u, v >= 0,
+    u + v <= 1), its t in tout[l] (t of every lane with u in [0, 1]; the others' entries are not used)."""
+    m = 0
+    for lane in range(LANES):
+        t, u, v = _leaf_triangle(tblk, blk, lane, o, d)
+        tout[lane] = t
+        if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tmin < t:
+            m |= 1 << lane
+    return m
 
 
 # ------------------------------------------------------------------------ SIMD box tests (LLVM vector IR)
@@ -359,6 +395,127 @@ def _packet_box_masks(typingctx, wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
     return sig, codegen
 
 
+_VL = ir.VectorType(ir.DoubleType(), LANES)
+
+
+def _leaf_o_terms(builder: ir.IRBuilder, tri: list, o: tuple) -> tuple:
+    """Lane-wise o-terms of the triangle test: s = o - v0, q = s x e1, tq = e2 . q (``_leaf_triangle``'s
+    operations in its order). ``tri``: the 9 rows (v0, e1, e2) as vectors, ``o``: the origin's 3 scalars."""
+    sx, sy, sz = (builder.fsub(_splat(builder, o[k], _VL), tri[k]) for k in range(3))
+    e1x, e1y, e1z = tri[3:6]
+    e2x, e2y, e2z = tri[6:9]
+    fm, fs, fa = builder.fmul, builder.fsub, builder.fadd
+    qx = fs(fm(sy, e1z), fm(sz, e1y))
+    qy = fs(fm(sz, e1x), fm(sx, e1z))
+    qz = fs(fm(sx, e1y), fm(sy, e1x))
+    tq = fa(fa(fm(e2x, qx), fm(e2y, qy)), fm(e2z, qz))
+    return (sx, sy, sz), (qx, qy, qz), tq
+
+
+def _leaf_ray(builder: ir.IRBuilder, tri: list, s_: tuple, q: tuple, tq: ir.Value, d: tuple, tmin: ir.Value):
+    """Lane-wise ray-triangle test (``_leaf_triangle`` with its operations in its order, the o-terms given):
+    (mask of u >= 0, u <= 1, v >= 0, u + v <= 1, tmin < t as <LANES x i1>, t)."""
+    fm, fs, fa = builder.fmul, builder.fsub, builder.fadd
+    dx, dy, dz = (_splat(builder, x, _VL) for x in d)
+    e1x, e1y, e1z = tri[3:6]
+    e2x, e2y, e2z = tri[6:9]
+    px = fs(fm(dy, e2z), fm(dz, e2y))
+    py = fs(fm(dz, e2x), fm(dx, e2z))
+    pz = fs(fm(dx, e2y), fm(dy, e2x))
+    det = fa(fa(fm(e1x, px), fm(e1y, py)), fm(e1z, pz))
+    fabs = cgutils.get_or_insert_function(builder.module, ir.FunctionType(_VL, [_VL]), f"llvm.fabs.v{LANES}f64")
+    tiny = ir.Constant(_VL, [1e-300] * LANES)
+    det = builder.select(builder.fcmp_ordered("<", builder.call(fabs, [det]), tiny), tiny, det)
+    inv = builder.fdiv(ir.Constant(_VL, [1.0] * LANES), det)
+    u = fm(fa(fa(fm(s_[0], px), fm(s_[1], py)), fm(s_[2], pz)), inv)
+    v = fm(fa(fa(fm(dx, q[0]), fm(dy, q[1])), fm(dz, q[2])), inv)
+    t = fm(tq, inv)
+    zero, one = ir.Constant(_VL, [0.0] * LANES), ir.Constant(_VL, [1.0] * LANES)
+    ok = builder.and_(builder.fcmp_ordered(">=", u, zero), builder.fcmp_ordered("<=", u, one))
+    ok = builder.and_(ok, builder.fcmp_ordered(">=", v, zero))
+    ok = builder.and_(ok, builder.fcmp_ordered("<=", fa(u, v), one))
+    ok = builder.and_(ok, builder.fcmp_ordered("<", _splat(builder, tmin, _VL), t))
+    return ok, t
+
+
+def _load_block(context, builder: ir.IRBuilder, bty, tblk: ir.Value, blk: ir.Value) -> list:
+    return [builder.load(_row_ptr(context, builder, bty, tblk, [blk, ir.Constant(_I64, r), ir.Constant(_I64, 0)],
+                                  _VL), align=8) for r in range(9)]
+
+
+def _mask_bits(builder: ir.IRBuilder, m: ir.Value, n: int) -> ir.Value:
+    return builder.zext(builder.bitcast(m, ir.IntType(n)), _I64)
+
+
+@intrinsic
+def _leaf_hits(typingctx, tblk, blk, ox, oy, oz, dx, dy, dz, tmin, tout):
+    """The ray o + t d against the LANES triangles of leaf block ``blk`` at once: bit l set where lane l's
+    triangle is hit with tmin < t (barycentrics u, v >= 0, u + v <= 1), every lane's t into tout[:LANES]
+    (``leaf_hits_scalar`` in vector form, the same operations per lane, so the same t)."""
+    if not (_c_array(tblk, types.float64, 3) and _c_array(tout, types.float64, 1)):
+        return None
+    i64, f64 = types.int64, types.float64
+    sig = i64(tblk, i64, f64, f64, f64, f64, f64, f64, f64, tout)
+
+    def codegen(context, builder, signature, args):
+        tb, blk, ox, oy, oz, dx, dy, dz, tmin, tout = args
+        tri = _load_block(context, builder, signature.args[0], tb, blk)
+        s_, q, tq = _leaf_o_terms(builder, tri, (ox, oy, oz))
+        ok, t = _leaf_ray(builder, tri, s_, q, tq, (dx, dy, dz), tmin)
+        builder.store(t, _row_ptr(context, builder, signature.args[9], tout, [ir.Constant(_I64, 0)], _VL), align=8)
+        return _mask_bits(builder, ok, LANES)
+
+    return sig, codegen
+
+
+@intrinsic
+def _packet_leaf_hits(typingctx, tblk, blk, ox, oy, oz, dirs, r0, rays, tmin, pmask, pt):
+    """``_leaf_hits`` for every ray b of the bit mask ``rays`` (direction dirs[r0 + b], origin o shared, so the
+    o-terms are computed once per block): lane mask into pmask[b], the lanes' t into pt[b, :LANES]. Returns
+    the rays with a nonzero lane mask."""
+    if not (_c_array(tblk, types.float64, 3) and _c_array(dirs, types.float64, 2)
+            and _c_array(pmask, types.int64, 1) and _c_array(pt, types.float64, 2)):
+        return None
+    i64, f64 = types.int64, types.float64
+    sig = i64(tblk, i64, f64, f64, f64, dirs, i64, i64, f64, pmask, pt)
+
+    def codegen(context, builder, signature, args):
+        tb, blk, ox, oy, oz, dirs, r0, rays, tmin, pmask, pt = args
+        bty, dty, mty, tty = (signature.args[k] for k in (0, 5, 9, 10))
+        zero, one = ir.Constant(_I64, 0), ir.Constant(_I64, 1)
+        tri = _load_block(context, builder, bty, tb, blk)
+        s_, q, tq = _leaf_o_terms(builder, tri, (ox, oy, oz))
+        pre = builder.block
+        head = builder.append_basic_block("lf_head")
+        body = builder.append_basic_block("lf_body")
+        done = builder.append_basic_block("lf_done")
+        builder.branch(head)
+        builder.position_at_end(head)
+        m = builder.phi(_I64)
+        anyhit = builder.phi(_I64)
+        m.add_incoming(rays, pre)
+        anyhit.add_incoming(zero, pre)
+        builder.cbranch(builder.icmp_unsigned("!=", m, zero), body, done)
+        builder.position_at_end(body)
+        b = builder.cttz(m, ir.Constant(ir.IntType(1), 0))
+        m_next = builder.and_(m, builder.sub(m, one))
+        dp = _row_ptr(context, builder, dty, dirs, [builder.add(r0, b), zero], ir.DoubleType())
+        d = tuple(builder.load(builder.gep(dp, [ir.Constant(_I64, k)]), align=8) for k in range(3))
+        ok, t = _leaf_ray(builder, tri, s_, q, tq, d, tmin)
+        bits = _mask_bits(builder, ok, LANES)
+        builder.store(bits, _row_ptr(context, builder, mty, pmask, [b], _I64), align=8)
+        builder.store(t, _row_ptr(context, builder, tty, pt, [b, zero], _VL), align=8)
+        hit = builder.zext(builder.icmp_unsigned("!=", bits, zero), _I64)
+        any_next = builder.or_(anyhit, builder.shl(hit, b))
+        m.add_incoming(m_next, builder.block)
+        anyhit.add_incoming(any_next, builder.block)
+        builder.branch(head)
+        builder.position_at_end(done)
+        return anyhit
+
+    return sig, codegen
+
+
 @njit(cache=True, inline="always")
 def _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist) -> None:
     """Slab test of the ray against the WIDTH child boxes of wide node i (nx, ny, nz: near-plane rows from
@@ -465,9 +622,10 @@ def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
 def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
     """Nearest triangle hit by o + t d with tmin < t < tmax: (triangle or -1, t). ``ray_nodes``: a tree's
     ``ray_arrays``; ``stack``: int64 scratch of ``STACK_SIZE``, ``dist``: float64 scratch of ``WIDTH``."""
-    wbox, wchild, tdat, order = ray_nodes
+    wbox, wchild, tblk, tord = ray_nodes
     ix, iy, iz, nx, ny, nz = _inverse(d)
     ox, oy, oz = o[0], o[1], o[2]
+    dx, dy, dz = d[0], d[1], d[2]
     best, best_t = -1, tmax
     stack[0] = 0
     sp = 1
@@ -476,11 +634,14 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
         i = stack[sp]
         if i < 0:
             s = ~i
-            j0 = s >> 5
-            for j in range(j0, j0 + (s & 31)):
-                t, u, v = _leaf_triangle(tdat, j, o, d)
-                if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tmin < t < best_t:
-                    best, best_t = order[j], t
+            b0 = s >> 5
+            for blk in range(b0, b0 + ((s & 31) + LANES - 1) // LANES):
+                hm = _leaf_hits(tblk, blk, ox, oy, oz, dx, dy, dz, tmin, dist)
+                while hm != 0:  # lanes in order: ties go to the first triangle, as one at a time
+                    lane = trailing_zeros(hm)
+                    hm &= hm - 1
+                    if dist[lane] < best_t:
+                        best, best_t = tord[blk, lane], dist[lane]
             continue
         mask = _slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, best_t, dist)
         sp = _push_masked(wchild, i, mask, dist, stack, sp)
@@ -579,9 +740,10 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
     traversal (boxes beyond the nearest stopping hit found so far are skipped). Hits go unsorted into
     ``buf_tri``, ``buf_t``; a few beyond the final stopping hit may be among them. Returns the number
     of hits, which exceeds the buffer when it overflowed (the extra ones are not stored)."""
-    wbox, wchild, tdat, order = ray_nodes
+    wbox, wchild, tblk, tord = ray_nodes
     ix, iy, iz, nx, ny, nz = _inverse(d)
     ox, oy, oz = o[0], o[1], o[2]
+    dx, dy, dz = d[0], d[1], d[2]
     cap = buf_t.shape[0]
     n = 0
     tlim = tmax
@@ -592,17 +754,21 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
         i = stack[sp]
         if i < 0:
             s = ~i
-            j0 = s >> 5
-            for j in range(j0, j0 + (s & 31)):
-                t, u, v = _leaf_triangle(tdat, j, o, d)
-                if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tmin < t <= tlim and t < tmax:
-                    k = order[j]
-                    if n < cap:
-                        buf_tri[n] = k
-                        buf_t[n] = t
-                    n += 1
-                    if stops[k]:
-                        tlim = t
+            b0 = s >> 5
+            for blk in range(b0, b0 + ((s & 31) + LANES - 1) // LANES):
+                hm = _leaf_hits(tblk, blk, ox, oy, oz, dx, dy, dz, tmin, dist)
+                while hm != 0:
+                    lane = trailing_zeros(hm)
+                    hm &= hm - 1
+                    t = dist[lane]
+                    if t <= tlim and t < tmax:
+                        k = tord[blk, lane]
+                        if n < cap:
+                            buf_tri[n] = k
+                            buf_t[n] = t
+                        n += 1
+                        if stops[k]:
+                            tlim = t
             continue
         mask = _slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
         sp = _push_masked(wchild, i, mask, dist, stack, sp)
@@ -610,15 +776,17 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
 
 
 @njit(cache=True, _nrt=False)
-def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, cmask, buf_tri, buf_t, counts):
+def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, cmask, pmask, pt, buf_tri, buf_t,
+                counts):
     """``hits_until_stop`` for the rays o + t dirs[r0 + b] with tmin < t < tmaxs[r0 + b], for every bit b
     set in ``mask`` (b < ``PACKET``), in one traversal: the rays share their origin, so each node's box
     planes are offset by o once for the packet and each triangle's o-terms once (the same per-ray
     arithmetic as ``hits_until_stop``, hence the same hits). Ray r's hits go into buf_tri[r], buf_t[r],
     their number (which may exceed the buffer) into counts[r]. Scratch: pinv (PACKET, 4) float64,
-    pstack (STACK_SIZE, 2) int64, cmask (WIDTH,) int64. The box tests run as vector code
-    (``_packet_box_masks``, scalar reference ``packet_box_masks_scalar``)."""
-    wbox, wchild, tdat, order = ray_nodes
+    pstack (STACK_SIZE, 2) int64, cmask (WIDTH,) int64, pmask (PACKET,) int64, pt (PACKET, LANES) float64. The
+    box and triangle tests run as vector code (``_packet_box_masks``, ``_packet_leaf_hits``; scalar references
+    ``packet_box_masks_scalar``, ``leaf_hits_scalar``)."""
+    wbox, wchild, tblk, tord = ray_nodes
     cap = buf_t.shape[1]
     m = mask
     while m != 0:
@@ -646,36 +814,25 @@ def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, 
                     sp += 1
                 continue
             s = ~ch
-            j0 = s >> 5
-            for j in range(j0, j0 + (s & 31)):
-                e1x, e1y, e1z = tdat[j, 3], tdat[j, 4], tdat[j, 5]
-                e2x, e2y, e2z = tdat[j, 6], tdat[j, 7], tdat[j, 8]
-                sx, sy, sz = ox - tdat[j, 0], oy - tdat[j, 1], oz - tdat[j, 2]
-                qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
-                tq = e2x * qx + e2y * qy + e2z * qz
-                mm = cm
+            b0 = s >> 5
+            for blk in range(b0, b0 + ((s & 31) + LANES - 1) // LANES):
+                mm = _packet_leaf_hits(tblk, blk, ox, oy, oz, dirs, r0, cm, tmin, pmask, pt)
                 while mm != 0:
                     b = trailing_zeros(mm)
                     mm &= mm - 1
                     r = r0 + b
-                    dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-                    px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
-                    det = e1x * px + e1y * py + e1z * pz
-                    if abs(det) < 1e-300:
-                        det = 1e-300
-                    inv = 1.0 / det
-                    u = (sx * px + sy * py + sz * pz) * inv
-                    if u < 0.0 or u > 1.0:
-                        continue
-                    v = (dx * qx + dy * qy + dz * qz) * inv
-                    t = tq * inv
-                    if v >= 0.0 and u + v <= 1.0 and tmin < t <= pinv[b, 3] and t < tmaxs[r]:
-                        k = order[j]
-                        n = counts[r]
-                        if n < cap:
-                            buf_tri[r, n] = k
-                            buf_t[r, n] = t
-                        counts[r] = n + 1
-                        if stops[k]:
-                            pinv[b, 3] = t
+                    hm = pmask[b]
+                    while hm != 0:  # lanes in order, the ray's limit updated as one triangle at a time
+                        lane = trailing_zeros(hm)
+                        hm &= hm - 1
+                        t = pt[b, lane]
+                        if t <= pinv[b, 3] and t < tmaxs[r]:
+                            k = tord[blk, lane]
+                            n = counts[r]
+                            if n < cap:
+                                buf_tri[r, n] = k
+                                buf_t[r, n] = t
+                            counts[r] = n + 1
+                            if stops[k]:
+                                pinv[b, 3] = t
     return 0

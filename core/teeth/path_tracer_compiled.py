@@ -27,6 +27,7 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from .bvh import (
+    LANES,
     PACKET,
     STACK_SIZE,
     WIDTH,
@@ -469,7 +470,7 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
     """``_nee``'s shadow rays from x as packets (``bvh.packet_hits``): every light's direction, distance, mu and
     f (phase function or cosine / pi) into pk, and the hits of the rays with f > 0 (a function of its own,
     so that ``_nee``'s one-light code is compiled as before)."""
-    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n, pinv, pstack, pmask = pk
+    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n, pinv, pstack, pmask, plane, plt = pk
     n_l = lp.shape[0]
     for lt in range(n_l):
         r2 = 0.0
@@ -492,7 +493,8 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
             if lgeo[l0 + b] > 0.0:
                 mask |= np.int64(1) << b
         if mask != 0:
-            packet_hits(geo[11:15], geo[22], x, ldir, lr, l0, mask, RAY_EPS, pinv, pstack, pmask, pk_tri, pk_t, pk_n)
+            packet_hits(geo[11:15], geo[22], x, ldir, lr, l0, mask, RAY_EPS, pinv, pstack, pmask, plane, plt, pk_tri,
+                        pk_t, pk_n)
 
 
 # ------------------------------------------------------------------------------------------ one path
@@ -869,7 +871,7 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                    (np.empty((n_l, 3)), np.empty(n_l), np.empty(n_l), np.empty(n_l),
                     np.empty((n_l, HIT_BUFFER), dtype=np.int64), np.empty((n_l, HIT_BUFFER)),
                     np.empty(n_l, dtype=np.int64), np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64),
-                    np.empty(WIDTH, dtype=np.int64)))
+                    np.empty(WIDTH, dtype=np.int64), np.empty(PACKET, dtype=np.int64), np.empty((PACKET, LANES))))
         vecs = np.empty((17, 3))
         path_vecs = (np.empty((n_j, 3)), (vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5], vecs[6], vecs[7],
                                           vecs[8], vecs[9], vecs[10], vecs[11], vecs[12], vecs[13], vecs[14],

@@ -128,3 +128,93 @@ def test_vector_box_tests_reject_non_contiguous_arrays():
     wbox = np.zeros((2, 6, 2 * bvh.WIDTH))[:, :, ::2]
     with pytest.raises(numba.core.errors.TypingError):
         _vector_slabs(wbox, 0, 0, 1, 2, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 1.0, np.empty(bvh.WIDTH))
+
+
+@njit(cache=False)
+def _vector_leaf(tblk, blk, o, d, tmin, tout):
+    return bvh._leaf_hits(tblk, blk, o[0], o[1], o[2], d[0], d[1], d[2], tmin, tout)
+
+
+@njit(cache=False)
+def _vector_packet_leaf(tblk, blk, o, dirs, r0, rays, tmin, pmask, pt):
+    return bvh._packet_leaf_hits(tblk, blk, o[0], o[1], o[2], dirs, r0, rays, tmin, pmask, pt)
+
+
+def _leaf_blocks(rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 9, LANES) leaf blocks as ``ray_arrays`` stores them (v0, e1, e2 per lane), some lanes unused
+    (NaN), some triangles degenerate (e2 = 0, e2 parallel to e1: det 0 -> 1e-300)."""
+    v = rng.normal(size=(n, 3, 3, bvh.LANES))
+    v[:, 1:] = 0.6 * v[:, 1:]  # edges
+    v[::5, 2, :, 1] = 0.0
+    v[::7, 2, :, 2] = 2.0 * v[::7, 1, :, 2]
+    blk = v.reshape(n, 9, bvh.LANES).copy()
+    blk[::3, :, 3] = np.nan
+    return np.ascontiguousarray(blk)
+
+
+def _point_on(rng: np.random.Generator, tblk: np.ndarray, blk: int, lane: int, w: float) -> np.ndarray:
+    """A random point v0 + a e1 + b e2 (a, b in [0, w)) of the triangle in ``lane`` of block ``blk``."""
+    return tblk[blk, :3, lane] + w * rng.random() * tblk[blk, 3:6, lane] + w * rng.random() * tblk[blk, 6:, lane]
+
+
+def test_leaf_hits_equal_the_scalar_triangle_test():
+    """Lane masks equal, and t equal to the last bit in every lane the scalar test keeps (u in [0, 1])."""
+    rng = np.random.default_rng(13)
+    tblk = _leaf_blocks(rng, 64)
+    vt, st = np.empty(bvh.WIDTH), np.empty(bvh.LANES)
+    n_hit = 0
+    for k in range(20000):
+        blk = k % len(tblk)
+        lane = k % bvh.LANES
+        o = rng.normal(size=3) * 2.0
+        target = _point_on(rng, tblk, blk, lane, 0.5)
+        d = target - o if np.all(np.isfinite(target)) and k % 4 else rng.normal(size=3)
+        if k % 9 == 0:
+            d[k % 3] = 0.0
+        d /= np.linalg.norm(d)
+        tmin = 0.0 if k % 2 else 1e-4
+        mv = _vector_leaf(tblk, blk, o, d, tmin, vt)
+        ms = bvh.leaf_hits_scalar(tblk, blk, o, d, tmin, st)
+        assert mv == ms, k
+        for lane_ in range(bvh.LANES):
+            if (ms >> lane_) & 1:
+                assert vt[lane_] == st[lane_], (k, lane_)
+        n_hit += bin(int(ms)).count("1")
+    assert n_hit > 5000
+
+
+def test_packet_leaf_hits_equal_one_ray_at_a_time():
+    rng = np.random.default_rng(14)
+    tblk = _leaf_blocks(rng, 32)
+    n_l = 50
+    pmask, pt = np.empty(bvh.PACKET, dtype=np.int64), np.empty((bvh.PACKET, bvh.LANES))
+    st = np.empty(bvh.LANES)
+    n_hit = 0
+    for k in range(400):
+        blk = k % len(tblk)
+        o = rng.normal(size=3) * 2.0
+        dirs = np.empty((n_l + 3, 3))
+        for r in range(len(dirs)):
+            lane = rng.integers(bvh.LANES)
+            target = _point_on(rng, tblk, blk, lane, 0.4)
+            d = target - o if np.all(np.isfinite(target)) else rng.normal(size=3)
+            dirs[r] = d / np.linalg.norm(d)
+        r0 = 3
+        rays = np.int64(0)
+        for b in rng.choice(n_l, size=rng.integers(0, n_l + 1), replace=False):
+            rays |= np.int64(1) << np.int64(b)
+        tmin = 1e-4
+        anyhit = _vector_packet_leaf(tblk, blk, o, dirs, r0, rays, tmin, pmask, pt)
+        want_any = 0
+        for b in range(n_l):
+            if not (int(rays) >> b) & 1:
+                continue
+            ms = bvh.leaf_hits_scalar(tblk, blk, o, dirs[r0 + b], tmin, st)
+            assert pmask[b] == ms, (k, b)
+            for lane_ in range(bvh.LANES):
+                if (ms >> lane_) & 1:
+                    assert pt[b, lane_] == st[lane_], (k, b, lane_)
+            want_any |= (ms != 0) << b
+            n_hit += bin(int(ms)).count("1")
+        assert anyhit == want_any, k
+    assert n_hit > 2000

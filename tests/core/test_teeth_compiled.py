@@ -123,7 +123,7 @@ def test_compiled_render_does_not_depend_on_the_thread_count():
 def test_packet_shadow_rays_hit_what_single_rays_hit():
     """``packet_hits`` (a vertex's shadow rays to many lights in one traversal) gathers, per ray, exactly the
     hits ``hits_until_stop`` gathers for that ray alone (same triangles, same distances to the last bit)."""
-    from material_structures.core.teeth.bvh import PACKET, STACK_SIZE, WIDTH, packet_hits
+    from material_structures.core.teeth.bvh import LANES, PACKET, STACK_SIZE, WIDTH, packet_hits
 
     cs = CompiledScene(make_scene(n_teeth=2, resolution=12))
     tris = cs.tris_s
@@ -134,7 +134,8 @@ def test_packet_shadow_rays_hit_what_single_rays_hit():
     stack, dist = np.empty(STACK_SIZE, dtype=np.int64), np.empty(WIDTH)
     b_tri, b_t = np.empty(32, dtype=np.int64), np.empty(32)
     p_tri, p_t, p_n = np.empty((n_l, 32), dtype=np.int64), np.empty((n_l, 32)), np.empty(n_l, dtype=np.int64)
-    scratch = (np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64), np.empty(WIDTH, dtype=np.int64))
+    scratch = (np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64), np.empty(WIDTH, dtype=np.int64),
+               np.empty(PACKET, dtype=np.int64), np.empty((PACKET, LANES)))
     o_all, _ = _rays(tris, 40, seed=6)
     n_hits = 0
     for o in o_all:
