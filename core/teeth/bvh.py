@@ -302,6 +302,28 @@ def _c_array(ty, dtype, ndim: int) -> bool:
     return isinstance(ty, types.Array) and ty.layout == "C" and ty.dtype == dtype and ty.ndim == ndim
 
 
+def _by_width(context, builder: ir.IRBuilder, wty, wb: ir.Value, i: ir.Value, test) -> ir.Value:
+    """``test(WIDTH // 2)`` where wide node i has at most WIDTH / 2 children (its children come first, an empty
+    one has every plane at +inf: the box of column WIDTH / 2 is empty), else ``test(WIDTH)``; the i64 result.
+    Most nodes near the leaves have 2-4 children, so half the vector work is skipped there. Where the narrow
+    test runs, outputs beyond column WIDTH / 2 are left as they were and their mask bits are 0 (the full test
+    may report a ray with tmax = inf as entering an empty child, t0 = t1 = inf: an empty leaf either way)."""
+    half = WIDTH // 2
+    p = _row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, 0), ir.Constant(_I64, half)], ir.DoubleType())
+    narrow = builder.fcmp_ordered("==", builder.load(p, align=8), ir.Constant(ir.DoubleType(), float("inf")))
+    with builder.if_else(narrow) as (then, otherwise):
+        with then:
+            m_narrow = test(half)
+            bb_narrow = builder.block
+        with otherwise:
+            m_wide = test(WIDTH)
+            bb_wide = builder.block
+    res = builder.phi(_I64)
+    res.add_incoming(m_narrow, bb_narrow)
+    res.add_incoming(m_wide, bb_wide)
+    return res
+
+
 @intrinsic
 def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
     """``_wide_slabs`` in vector form: the WIDTH entry distances t0 go into ``dist`` (all of them, also of the
@@ -317,21 +339,26 @@ def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tma
         wty, dty = signature.args[0], signature.args[13]
         zero, three = ir.Constant(_I64, 0), ir.Constant(_I64, 3)
 
-        def plane(r, o, inv):
-            row = builder.load(_row_ptr(context, builder, wty, wb, [i, r, zero], _V), align=8)
-            return builder.fmul(builder.fsub(row, _splat(builder, o, _V)), _splat(builder, inv, _V))
-
         def far(n):
             return builder.select(builder.icmp_signed("<", n, three), builder.add(n, three), builder.sub(n, three))
 
-        ax, ay, az = plane(nx, ox, ix), plane(ny, oy, iy), plane(nz, oz, iz)
-        bx, by, bz = plane(far(nx), ox, ix), plane(far(ny), oy, iy), plane(far(nz), oz, iz)
-        t0 = _vmax(builder, _splat(builder, tmin, _V), _vmax(builder, ax, _vmax(builder, ay, az)))
-        t1 = _vmin(builder, _splat(builder, tmax, _V), _vmin(builder, bx, _vmin(builder, by, bz)))
-        hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, ir.Constant(_V, [SLACK] * WIDTH)))
-        fin = builder.fcmp_ordered("<", t0, ir.Constant(_V, [float("inf")] * WIDTH))
-        builder.store(t0, _row_ptr(context, builder, dty, dist, [zero], _V), align=8)
-        return builder.zext(builder.bitcast(builder.and_(hit, fin), ir.IntType(WIDTH)), _I64)
+        def test(w):  # the first w children (the others empty)
+            vt = ir.VectorType(ir.DoubleType(), w)
+
+            def plane(r, o, inv):
+                row = builder.load(_row_ptr(context, builder, wty, wb, [i, r, zero], vt), align=8)
+                return builder.fmul(builder.fsub(row, _splat(builder, o, vt)), _splat(builder, inv, vt))
+
+            ax, ay, az = plane(nx, ox, ix), plane(ny, oy, iy), plane(nz, oz, iz)
+            bx, by, bz = plane(far(nx), ox, ix), plane(far(ny), oy, iy), plane(far(nz), oz, iz)
+            t0 = _vmax(builder, _splat(builder, tmin, vt), _vmax(builder, ax, _vmax(builder, ay, az)))
+            t1 = _vmin(builder, _splat(builder, tmax, vt), _vmin(builder, bx, _vmin(builder, by, bz)))
+            hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, ir.Constant(vt, [SLACK] * w)))
+            fin = builder.fcmp_ordered("<", t0, ir.Constant(vt, [float("inf")] * w))
+            builder.store(t0, _row_ptr(context, builder, dty, dist, [zero], vt), align=8)
+            return builder.zext(builder.bitcast(builder.and_(hit, fin), ir.IntType(w)), _I64)
+
+        return test(WIDTH)  # one ray: a narrow branch as in the packets' test saved nothing (mispredictions)
 
     return sig, codegen
 
@@ -351,46 +378,50 @@ def _packet_box_masks(typingctx, wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
     def codegen(context, builder, signature, args):
         wb, i, ox, oy, oz, pinv, live, tmin, cmask = args
         wty, pty, cty = signature.args[0], signature.args[5], signature.args[8]
-        vi = ir.VectorType(_I64, WIDTH)
         zero = ir.Constant(_I64, 0)
-        diff = []
-        for r, o in enumerate((ox, oy, oz, ox, oy, oz)):
-            row = builder.load(_row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, r), zero], _V), align=8)
-            diff.append(builder.fsub(row, _splat(builder, o, _V)))
-        vtmin = _splat(builder, tmin, _V)
-        slack = ir.Constant(_V, [SLACK] * WIDTH)
-        pre = builder.block
-        head = builder.append_basic_block("pk_head")
-        body = builder.append_basic_block("pk_body")
-        done = builder.append_basic_block("pk_done")
-        builder.branch(head)
-        builder.position_at_end(head)
-        m = builder.phi(_I64)
-        acc = builder.phi(vi)
-        m.add_incoming(live, pre)
-        acc.add_incoming(ir.Constant(vi, [0] * WIDTH), pre)
-        builder.cbranch(builder.icmp_unsigned("!=", m, zero), body, done)
-        builder.position_at_end(body)
-        b = builder.cttz(m, ir.Constant(ir.IntType(1), 0))
-        m_next = builder.and_(m, builder.sub(m, ir.Constant(_I64, 1)))
-        p = _row_ptr(context, builder, pty, pinv, [b, zero], ir.DoubleType())
-        inv = [_splat(builder, builder.load(builder.gep(p, [ir.Constant(_I64, k)]), align=8), _V) for k in range(4)]
-        lo = [builder.fmul(diff[k], inv[k]) for k in range(3)]
-        hi = [builder.fmul(diff[k + 3], inv[k]) for k in range(3)]
-        near = [_vmin(builder, lo[k], hi[k]) for k in range(3)]
-        far = [_vmax(builder, lo[k], hi[k]) for k in range(3)]
-        t0 = _vmax(builder, vtmin, _vmax(builder, near[0], _vmax(builder, near[1], near[2])))
-        t1 = _vmin(builder, inv[3], _vmin(builder, far[0], _vmin(builder, far[1], far[2])))
-        hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, slack))
-        bit = _splat(builder, builder.shl(ir.Constant(_I64, 1), b), vi)
-        acc_next = builder.or_(acc, builder.select(hit, bit, ir.Constant(vi, [0] * WIDTH)))
-        m.add_incoming(m_next, builder.block)
-        acc.add_incoming(acc_next, builder.block)
-        builder.branch(head)
-        builder.position_at_end(done)
-        builder.store(acc, _row_ptr(context, builder, cty, cmask, [zero], vi), align=8)
-        nz = builder.icmp_unsigned("!=", acc, ir.Constant(vi, [0] * WIDTH))
-        return builder.zext(builder.bitcast(nz, ir.IntType(WIDTH)), _I64)
+
+        def test(w):  # the first w children (the others empty)
+            vt, vi = ir.VectorType(ir.DoubleType(), w), ir.VectorType(_I64, w)
+            diff = []
+            for r, o in enumerate((ox, oy, oz, ox, oy, oz)):
+                row = builder.load(_row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, r), zero], vt), align=8)
+                diff.append(builder.fsub(row, _splat(builder, o, vt)))
+            vtmin = _splat(builder, tmin, vt)
+            slack = ir.Constant(vt, [SLACK] * w)
+            pre = builder.block
+            head = builder.append_basic_block("pk_head")
+            body = builder.append_basic_block("pk_body")
+            done = builder.append_basic_block("pk_done")
+            builder.branch(head)
+            builder.position_at_end(head)
+            m = builder.phi(_I64)
+            acc = builder.phi(vi)
+            m.add_incoming(live, pre)
+            acc.add_incoming(ir.Constant(vi, [0] * w), pre)
+            builder.cbranch(builder.icmp_unsigned("!=", m, zero), body, done)
+            builder.position_at_end(body)
+            b = builder.cttz(m, ir.Constant(ir.IntType(1), 0))
+            m_next = builder.and_(m, builder.sub(m, ir.Constant(_I64, 1)))
+            p = _row_ptr(context, builder, pty, pinv, [b, zero], ir.DoubleType())
+            inv = [_splat(builder, builder.load(builder.gep(p, [ir.Constant(_I64, k)]), align=8), vt) for k in range(4)]
+            lo = [builder.fmul(diff[k], inv[k]) for k in range(3)]
+            hi = [builder.fmul(diff[k + 3], inv[k]) for k in range(3)]
+            near = [_vmin(builder, lo[k], hi[k]) for k in range(3)]
+            far = [_vmax(builder, lo[k], hi[k]) for k in range(3)]
+            t0 = _vmax(builder, vtmin, _vmax(builder, near[0], _vmax(builder, near[1], near[2])))
+            t1 = _vmin(builder, inv[3], _vmin(builder, far[0], _vmin(builder, far[1], far[2])))
+            hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, slack))
+            bit = _splat(builder, builder.shl(ir.Constant(_I64, 1), b), vi)
+            acc_next = builder.or_(acc, builder.select(hit, bit, ir.Constant(vi, [0] * w)))
+            m.add_incoming(m_next, builder.block)
+            acc.add_incoming(acc_next, builder.block)
+            builder.branch(head)
+            builder.position_at_end(done)
+            builder.store(acc, _row_ptr(context, builder, cty, cmask, [zero], vi), align=8)
+            nz = builder.icmp_unsigned("!=", acc, ir.Constant(vi, [0] * w))
+            return builder.zext(builder.bitcast(nz, ir.IntType(w)), _I64)
+
+        return _by_width(context, builder, wty, wb, i, test)
 
     return sig, codegen
 

@@ -33,13 +33,15 @@ def _vector_packet(wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
 
 
 def _boxes(rng: np.random.Generator, n: int) -> np.ndarray:
-    """(n, 6, WIDTH) wide-node boxes: random, some flat along an axis, some empty children (+inf)."""
+    """(n, 6, WIDTH) wide-node boxes: random, some flat along an axis; node k has 1 + k % WIDTH children, then
+    empty ones (+inf), as ``ray_arrays`` stores them (``_packet_box_masks`` relies on it); node 0 is empty."""
     w = bvh.WIDTH
     lo = rng.normal(size=(n, 3, w))
     hi = lo + np.abs(rng.normal(size=(n, 3, w))) * (rng.random((n, 3, w)) > 0.1)  # ~10 % flat extents
     box = np.concatenate([lo, hi], axis=1)
-    box[:, :, rng.random(w) < 0.2] = np.inf
-    box[0, :, :] = np.inf  # one node of empty children only
+    for node in range(n):
+        box[node, :, 1 + node % w:] = np.inf
+    box[0, :, :] = np.inf
     return np.ascontiguousarray(box)
 
 
@@ -117,8 +119,13 @@ def test_packet_box_masks_equal_the_scalar_packet_loop():
         tmin = 1e-4 if k % 2 else 0.0
         kv = _vector_packet(wbox, i, *o, pinv, live, tmin, vc)
         ks = bvh.packet_box_masks_scalar(wbox, i, *o, pinv, live, tmin, diff, sc)
-        assert kv == ks, k
-        np.testing.assert_array_equal(vc, sc)
+        # empty children (every plane +inf) are empty leaves: the scalar loop lets a ray with tmax = inf "enter"
+        # them (t0 = t1 = inf), the vector test of a narrow node skips them; only the real children are compared
+        real = sum(1 << c for c in range(bvh.WIDTH) if np.isfinite(wbox[i, 0, c]))
+        assert kv & real == ks & real, k
+        for c in range(bvh.WIDTH):  # the rays entering each child (columns of no entered child are not used)
+            if (real >> c) & (ks >> c) & 1:
+                assert vc[c] == sc[c], (k, c)
         n_bits += sum(bin(int(x) & ((1 << 64) - 1)).count("1") for x in vc)
     assert n_bits > 40000 and n_nan > 1000  # ray-child hits (of about 750,000 pairs), NaN distances
 
