@@ -68,7 +68,15 @@ def test_props_read_the_live_rna(recorded):
     assert [it.op_props.get("source") for it in add] == ["TEMPLATE", "MESH"]
 
 
+def _skip_painting_on_45():
+    import bpy
+
+    if bpy.app.version < (5, 0, 0):
+        pytest.skip("the pictures are painted in Blender 5's theme (4.5 keeps panel colours per editor)")
+
+
 def test_painting_every_feature(recorded, tmp_path):
+    _skip_painting_on_45()
     for feature, (sidebar, material) in recorded.items():
         path = ui.paint_feature(sidebar, material, str(tmp_path / f"ui-{feature}.png"), scale=1.0)
         with Image.open(path) as im:
@@ -108,6 +116,7 @@ def test_known_templates_are_placeholders(addon_module):
 
 def test_every_recorded_call_paints(addon_module, tmp_path):
     """The calls our panels do not use yet record and paint too (split layouts, flows, menus, enums, ...)."""
+    _skip_painting_on_45()
     def body(layout, ctx):
         layout.use_property_split = True
         layout.prop(ctx.scene.render, "resolution_x")
