@@ -591,28 +591,9 @@ def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) 
 
 
 @njit(cache=True, inline="always")
-def _push_wide(wchild, i, dist, stack, sp) -> int:
-    """Push the children of wide node i with finite entry distance, the nearest on top; new sp (the
-    scalar reference of ``_push_masked``)."""
-    base = sp
-    cap = stack.shape[0]
-    for c in range(WIDTH):
-        tc = dist[c]
-        if tc < np.inf and sp < cap:
-            k = sp
-            while k > base and dist[stack[k - 1]] < tc:
-                stack[k] = stack[k - 1]
-                k -= 1
-            stack[k] = c
-            sp += 1
-    for k in range(base, sp):
-        stack[k] = wchild[i, stack[k]]
-    return sp
-
-
-@njit(cache=True, inline="always")
 def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
-    """``_push_wide`` for the children in the bit mask ``mask`` (from ``_slab_mask``), in the same order."""
+    """Push the children of wide node i in the bit mask ``mask`` (from ``_slab_mask``), the nearest by entry
+    distance ``dist`` on top; new sp."""
     base = sp
     cap = stack.shape[0]
     m = mask
