@@ -16,6 +16,8 @@ from numba import njit  # noqa: E402
 
 from material_structures.core.teeth import bvh  # noqa: E402
 
+pytestmark = pytest.mark.heavy  # compiles the vector kernels (about 15 s): outside `make test-fast`
+
 
 @njit(cache=False)
 def _vector_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
