@@ -208,6 +208,19 @@ def _emit_diag(col0, v, w, g, sx, jmap) -> None:
     _emit(col0 + 2, 0.0, 0.0, v[2], w, g, sx, jmap)
 
 
+@njit(cache=True, inline="always")
+def _emit_blend(col_e, col_d, v_e, row_e, v_d, row_d, w, tmp, ab_b, g, sx, jmap) -> None:
+    """Derivatives of log(w a + (1 - w) b), the log of a blended coefficient (eq. 5.17-5.21), with
+    a = v_e[row_e], b = v_d[row_d] per channel: w / mix by a (on columns ``col_e``), (1 - w) / mix by b
+    (on ``col_d``)."""
+    for c in range(3):
+        tmp[c] = w / (v_e[row_e, c] * w + v_d[row_d, c] * (1 - w))
+    _emit_diag(col_e, tmp, ab_b, g, sx, jmap)
+    for c in range(3):
+        tmp[c] = (1 - w) / (v_e[row_e, c] * w + v_d[row_d, c] * (1 - w))
+    _emit_diag(col_d, tmp, ab_b, g, sx, jmap)
+
+
 # ------------------------------------------------------------------------------------------ ray walks
 @njit(cache=True, inline="always")
 def _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds) -> int:
@@ -723,18 +736,9 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                     logfs[c] += (np.log(sigma_s[me_, c] * lw_s + sigma_s[md_, c] * (1 - lw_s))
                                  + np.log(alb_es[mv, c] * lw_s + alb_ds[mv, c] * (1 - lw_s)))
             if use_g or use_s:
-                for c in range(3):
-                    tmp[c] = lw_e / (sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e))
-                _emit_diag(col_sigma[me_], tmp, ab[b], g_lvl, sx_lvl, jmap)
-                for c in range(3):
-                    tmp[c] = (1 - lw_e) / (sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e))
-                _emit_diag(col_sigma[md_], tmp, ab[b], g_lvl, sx_lvl, jmap)
-                for c in range(3):
-                    tmp[c] = lw_e / (alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e))
-                _emit_diag(col_alb_e[mv], tmp, ab[b], g_lvl, sx_lvl, jmap)
-                for c in range(3):
-                    tmp[c] = (1 - lw_e) / (alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e))
-                _emit_diag(col_alb_d[mv], tmp, ab[b], g_lvl, sx_lvl, jmap)
+                _emit_blend(col_sigma[me_], col_sigma[md_], sigma_e, me_, sigma_e, md_, lw_e, tmp, ab[b], g_lvl, sx_lvl,
+                            jmap)
+                _emit_blend(col_alb_e[mv], col_alb_d[mv], alb_ee, mv, alb_de, mv, lw_e, tmp, ab[b], g_lvl, sx_lvl, jmap)
                 if tooth >= 0:
                     for c in range(3):
                         s_mix = sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e)
