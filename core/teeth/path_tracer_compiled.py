@@ -483,7 +483,7 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
     """``_nee``'s shadow rays from x as packets (``bvh.packet_hits``): every light's direction, distance, mu and
     f (phase function or cosine / pi) into pk, and the hits of the rays with f > 0 (a function of its own,
     so that ``_nee``'s one-light code is compiled as before)."""
-    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n, pinv, pstack, pmask, plane, plt = pk
+    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n, pinv, pstack, cmask, pmask, pt = pk
     n_l = lp.shape[0]
     for lt in range(n_l):
         r2 = 0.0
@@ -506,7 +506,7 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
             if lgeo[l0 + b] > 0.0:
                 mask |= np.int64(1) << b
         if mask != 0:
-            packet_hits(geo[11:15], geo[22], x, ldir, lr, l0, mask, RAY_EPS, pinv, pstack, pmask, plane, plt, pk_tri,
+            packet_hits(geo[11:15], geo[22], x, ldir, lr, l0, mask, RAY_EPS, pinv, pstack, cmask, pmask, pt, pk_tri,
                         pk_t, pk_n)
 
 
