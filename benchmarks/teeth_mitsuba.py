@@ -157,7 +157,8 @@ def bench_teeth_vs_mitsuba() -> dict:
                  "mitsuba_version": mi.__version__, "drjit_version": dr.__version__,
                  "mitsuba_threads": int(dr.thread_count()), "mitsuba_integrators":
                  "volpath / prbvolpath, max_depth -1, default rr_depth (5)", "our_settings":
-                 "RenderSettings(max_depth=None) (Russian roulette from rr_depth 5), compiled tracer",
+                 f"RenderSettings(max_depth=None) (Russian roulette from rr_depth {RenderSettings().rr_depth}), "
+                 "compiled tracer",
                  "targets": TARGETS, "load_average_start": list(os.getloadavg()), "source": _source_state()}
     t0 = time.perf_counter()
     cs = CompiledScene(sc)

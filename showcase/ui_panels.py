@@ -540,6 +540,9 @@ class Theme:
     def __init__(self):
         t = bpy.context.preferences.themes[0]
         ui = t.user_interface
+        if not hasattr(ui, "panel_header"):
+            raise RuntimeError(f"the panel pictures are painted in Blender 5's theme; Blender "
+                               f"{bpy.app.version_string} keeps panel colours per editor")
         self.wcol = {name: getattr(ui, f"wcol_{name}") for name in (
             "regular", "tool", "toggle", "option", "num", "numslider", "menu", "text", "box", "progress",
             "pulldown")}
