@@ -86,6 +86,10 @@ def pack_scene(cs: CompiledScene) -> tuple:
            cs.col_alb["E"], cs.col_alb["D"], cs.col_ph["E"], cs.col_ph["D"], cs.c_col,
            cs.rho_s if has_cavity else np.ones(3), cs.rho_e if has_cavity else np.ones(3),
            int(cs.col_rho) if has_cavity else -1, float(cs.spread))
+    # the logs of the unblended coefficients (most vertices lie where l(q) is 0 or 1 to the last bit), computed by
+    # the kernels' own log so that a table entry equals the log the vertex would compute
+    med = med + tuple(_log_table(np.ascontiguousarray(v, dtype=np.float64)) for v in (
+        cs.sigma_s, cs.sigma_e, cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], med[20], med[21]))
     offs, hs, ws, flat_s, flat_e = [], [], [], [], []
     n = 0
     for ts, te in zip(cs.tex_s, cs.tex_e, strict=True):
@@ -100,6 +104,21 @@ def pack_scene(cs: CompiledScene) -> tuple:
            np.array(offs, dtype=np.int64), np.array(hs, dtype=np.int64), np.array(ws, dtype=np.int64),
            np.array(cs.tex_col, dtype=np.int64))
     return geo, med, tex
+
+
+@njit(cache=True)
+def _log_table(a):
+    return np.log(a)
+
+
+@njit(cache=True, inline="always")
+def _log_mix(a, b, log_a, log_b, w) -> float:
+    """log(w a + (1 - w) b), the log of a blended coefficient (eq. 5.17); from the tables where w is 0 or 1."""
+    if w == 1.0:
+        return log_a
+    if w == 0.0:
+        return log_b
+    return np.log(a * w + b * (1 - w))
 
 
 # ------------------------------------------------------------------------------------------ random numbers
@@ -178,8 +197,14 @@ def _logmeanexp3(a) -> float:
 
 @njit(cache=True)
 def _blend(q, spread) -> float:
-    """l(q) of eq. 5.15."""
-    return 0.5 * (1.0 + np.tanh(0.5 * q / spread))
+    """l(q) of eq. 5.15. Beyond |q / (2 spread)| = 20, tanh is +-1 to the last bit (1 - tanh(20) < 1e-17): there
+    l is exactly 1 or 0 without the call."""
+    z = 0.5 * q / spread
+    if z >= 20.0:
+        return 1.0
+    if z <= -20.0:
+        return 0.0
+    return 0.5 * (1.0 + np.tanh(z))
 
 
 # ------------------------------------------------------------------------------------------ score sinks
@@ -636,6 +661,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
     alb_es, alb_ds, alb_ee, alb_de, ph_es, ph_ds, ph_ee, ph_de = med[7:15]
     col_alb_e, col_alb_d, c_col, rho_s, rho_e, col_rho, spread = med[15], med[16], med[19], med[20], med[21], \
         med[22], med[23]
+    ln_sigma_s, ln_sigma_e, ln_alb_es, ln_alb_ds, ln_alb_ee, ln_alb_de, ln_rho_s, ln_rho_e = med[24:32]
     kind, normal_s, eta = geo[3], geo[2], geo[6]
     tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t, wdist, _ = scratch
     s_run, vecs = path_vecs
@@ -688,7 +714,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             tau_at[c] = tau_cum[c] + sig_k[c] * (s - tb_k)
             logp[c] -= tau_at[c]
             if scatter:
-                logp[c] += np.log(sig_k[c])
+                logp[c] += ln_sigma_s[mk, c]
         # ---- evaluation: piece lengths on the evaluation geometry up to s
         _eval_crossings(geo, o, d, k, tri_x, t_x, s if scatter else end_t, t_e, clipped)
         if in_medium:
@@ -729,12 +755,12 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 dl = lw_e * (1.0 - lw_e) / spread
             me_, md_ = med_e_of[mv], med_d_of[mv]
             for c in range(3):
-                s_mix = sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e)
-                a_mix = alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e)
-                logf[c] += np.log(s_mix) + np.log(a_mix)
+                logf[c] += (_log_mix(sigma_e[me_, c], sigma_e[md_, c], ln_sigma_e[me_, c], ln_sigma_e[md_, c], lw_e)
+                            + _log_mix(alb_ee[mv, c], alb_de[mv, c], ln_alb_ee[mv, c], ln_alb_de[mv, c], lw_e))
                 if roulette:
-                    logfs[c] += (np.log(sigma_s[me_, c] * lw_s + sigma_s[md_, c] * (1 - lw_s))
-                                 + np.log(alb_es[mv, c] * lw_s + alb_ds[mv, c] * (1 - lw_s)))
+                    logfs[c] += (_log_mix(sigma_s[me_, c], sigma_s[md_, c], ln_sigma_s[me_, c], ln_sigma_s[md_, c],
+                                          lw_s)
+                                 + _log_mix(alb_es[mv, c], alb_ds[mv, c], ln_alb_es[mv, c], ln_alb_ds[mv, c], lw_s))
             if use_g or use_s:
                 _emit_blend(col_sigma[me_], col_sigma[md_], sigma_e, me_, sigma_e, md_, lw_e, tmp, ab[b], g_lvl, sx_lvl,
                             jmap)
@@ -765,7 +791,8 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             _direction_from_mu(d, mu, 2.0 * np.pi * u3, nd)
             f_e = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
             f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
-            lf_e, lf_s = np.log(f_e), np.log(f_s)
+            lf_e = np.log(f_e)
+            lf_s = lf_e if f_s == f_e else np.log(f_s)
             for c in range(3):
                 logf[c] += lf_e
                 logp[c] += lf_s
@@ -801,9 +828,9 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 sg = -1.0 if dn > 0.0 else (1.0 if dn < 0.0 else 0.0)
                 for c in range(3):
                     nrm[c] = normal_s[end_tri, c] * sg
-                    logf[c] += np.log(rho_e[c])
+                    logf[c] += ln_rho_e[c]
                     if roulette:
-                        logfs[c] += np.log(rho_s[c])
+                        logfs[c] += ln_rho_s[c]
                 if use_g or use_s:
                     for c in range(3):
                         tmp[c] = 1.0 / rho_e[c]
