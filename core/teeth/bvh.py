@@ -302,6 +302,33 @@ def _c_array(ty, dtype, ndim: int) -> bool:
     return isinstance(ty, types.Array) and ty.layout == "C" and ty.dtype == dtype and ty.ndim == ndim
 
 
+def _over_set_bits(builder: ir.IRBuilder, mask: ir.Value, init: ir.Value, step, name: str) -> ir.Value:
+    """A loop over the set bits b of the i64 ``mask``, lowest first, carrying one value: acc = init, then
+    acc = step(b, acc) per bit (``step`` emits its IR at the builder's position). Returns the final acc, with the
+    builder after the loop."""
+    zero = ir.Constant(_I64, 0)
+    pre = builder.block
+    head = builder.append_basic_block(name + "_head")
+    body = builder.append_basic_block(name + "_body")
+    done = builder.append_basic_block(name + "_done")
+    builder.branch(head)
+    builder.position_at_end(head)
+    m = builder.phi(_I64)
+    acc = builder.phi(init.type)
+    m.add_incoming(mask, pre)
+    acc.add_incoming(init, pre)
+    builder.cbranch(builder.icmp_unsigned("!=", m, zero), body, done)
+    builder.position_at_end(body)
+    b = builder.cttz(m, ir.Constant(ir.IntType(1), 0))
+    m_next = builder.and_(m, builder.sub(m, ir.Constant(_I64, 1)))
+    acc_next = step(b, acc)
+    m.add_incoming(m_next, builder.block)
+    acc.add_incoming(acc_next, builder.block)
+    builder.branch(head)
+    builder.position_at_end(done)
+    return acc
+
+
 def _by_width(context, builder: ir.IRBuilder, wty, wb: ir.Value, i: ir.Value, test) -> ir.Value:
     """``test(WIDTH // 2)`` where wide node i has at most WIDTH / 2 children (its children come first, an empty
     one has every plane at +inf: the box of column WIDTH / 2 is empty), else ``test(WIDTH)``; the i64 result.
@@ -388,35 +415,22 @@ def _packet_box_masks(typingctx, wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
                 diff.append(builder.fsub(row, _splat(builder, o, vt)))
             vtmin = _splat(builder, tmin, vt)
             slack = ir.Constant(vt, [SLACK] * w)
-            pre = builder.block
-            head = builder.append_basic_block("pk_head")
-            body = builder.append_basic_block("pk_body")
-            done = builder.append_basic_block("pk_done")
-            builder.branch(head)
-            builder.position_at_end(head)
-            m = builder.phi(_I64)
-            acc = builder.phi(vi)
-            m.add_incoming(live, pre)
-            acc.add_incoming(ir.Constant(vi, [0] * w), pre)
-            builder.cbranch(builder.icmp_unsigned("!=", m, zero), body, done)
-            builder.position_at_end(body)
-            b = builder.cttz(m, ir.Constant(ir.IntType(1), 0))
-            m_next = builder.and_(m, builder.sub(m, ir.Constant(_I64, 1)))
-            p = _row_ptr(context, builder, pty, pinv, [b, zero], ir.DoubleType())
-            inv = [_splat(builder, builder.load(builder.gep(p, [ir.Constant(_I64, k)]), align=8), vt) for k in range(4)]
-            lo = [builder.fmul(diff[k], inv[k]) for k in range(3)]
-            hi = [builder.fmul(diff[k + 3], inv[k]) for k in range(3)]
-            near = [_vmin(builder, lo[k], hi[k]) for k in range(3)]
-            far = [_vmax(builder, lo[k], hi[k]) for k in range(3)]
-            t0 = _vmax(builder, vtmin, _vmax(builder, near[0], _vmax(builder, near[1], near[2])))
-            t1 = _vmin(builder, inv[3], _vmin(builder, far[0], _vmin(builder, far[1], far[2])))
-            hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, slack))
-            bit = _splat(builder, builder.shl(ir.Constant(_I64, 1), b), vi)
-            acc_next = builder.or_(acc, builder.select(hit, bit, ir.Constant(vi, [0] * w)))
-            m.add_incoming(m_next, builder.block)
-            acc.add_incoming(acc_next, builder.block)
-            builder.branch(head)
-            builder.position_at_end(done)
+
+            def ray(b, acc):  # ray b of the packet against the w children
+                p = _row_ptr(context, builder, pty, pinv, [b, zero], ir.DoubleType())
+                inv = [_splat(builder, builder.load(builder.gep(p, [ir.Constant(_I64, k)]), align=8), vt)
+                       for k in range(4)]
+                lo = [builder.fmul(diff[k], inv[k]) for k in range(3)]
+                hi = [builder.fmul(diff[k + 3], inv[k]) for k in range(3)]
+                near = [_vmin(builder, lo[k], hi[k]) for k in range(3)]
+                far = [_vmax(builder, lo[k], hi[k]) for k in range(3)]
+                t0 = _vmax(builder, vtmin, _vmax(builder, near[0], _vmax(builder, near[1], near[2])))
+                t1 = _vmin(builder, inv[3], _vmin(builder, far[0], _vmin(builder, far[1], far[2])))
+                hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, slack))
+                bit = _splat(builder, builder.shl(ir.Constant(_I64, 1), b), vi)
+                return builder.or_(acc, builder.select(hit, bit, ir.Constant(vi, [0] * w)))
+
+            acc = _over_set_bits(builder, live, ir.Constant(vi, [0] * w), ray, "pk")
             builder.store(acc, _row_ptr(context, builder, cty, cmask, [zero], vi), align=8)
             nz = builder.icmp_unsigned("!=", acc, ir.Constant(vi, [0] * w))
             return builder.zext(builder.bitcast(nz, ir.IntType(w)), _I64)
@@ -513,36 +527,21 @@ def _packet_leaf_hits(typingctx, tblk, blk, ox, oy, oz, dirs, r0, rays, tmin, pm
     def codegen(context, builder, signature, args):
         tb, blk, ox, oy, oz, dirs, r0, rays, tmin, pmask, pt = args
         bty, dty, mty, tty = (signature.args[k] for k in (0, 5, 9, 10))
-        zero, one = ir.Constant(_I64, 0), ir.Constant(_I64, 1)
+        zero = ir.Constant(_I64, 0)
         tri = _load_block(context, builder, bty, tb, blk)
         s_, q, tq = _leaf_o_terms(builder, tri, (ox, oy, oz))
-        pre = builder.block
-        head = builder.append_basic_block("lf_head")
-        body = builder.append_basic_block("lf_body")
-        done = builder.append_basic_block("lf_done")
-        builder.branch(head)
-        builder.position_at_end(head)
-        m = builder.phi(_I64)
-        anyhit = builder.phi(_I64)
-        m.add_incoming(rays, pre)
-        anyhit.add_incoming(zero, pre)
-        builder.cbranch(builder.icmp_unsigned("!=", m, zero), body, done)
-        builder.position_at_end(body)
-        b = builder.cttz(m, ir.Constant(ir.IntType(1), 0))
-        m_next = builder.and_(m, builder.sub(m, one))
-        dp = _row_ptr(context, builder, dty, dirs, [builder.add(r0, b), zero], ir.DoubleType())
-        d = tuple(builder.load(builder.gep(dp, [ir.Constant(_I64, k)]), align=8) for k in range(3))
-        ok, t = _leaf_ray(builder, tri, s_, q, tq, d, tmin)
-        bits = _mask_bits(builder, ok, LANES)
-        builder.store(bits, _row_ptr(context, builder, mty, pmask, [b], _I64), align=8)
-        builder.store(t, _row_ptr(context, builder, tty, pt, [b, zero], _VL), align=8)
-        hit = builder.zext(builder.icmp_unsigned("!=", bits, zero), _I64)
-        any_next = builder.or_(anyhit, builder.shl(hit, b))
-        m.add_incoming(m_next, builder.block)
-        anyhit.add_incoming(any_next, builder.block)
-        builder.branch(head)
-        builder.position_at_end(done)
-        return anyhit
+
+        def ray(b, anyhit):  # ray b of the packet against the block's 4 triangles
+            dp = _row_ptr(context, builder, dty, dirs, [builder.add(r0, b), zero], ir.DoubleType())
+            d = tuple(builder.load(builder.gep(dp, [ir.Constant(_I64, k)]), align=8) for k in range(3))
+            ok, t = _leaf_ray(builder, tri, s_, q, tq, d, tmin)
+            bits = _mask_bits(builder, ok, LANES)
+            builder.store(bits, _row_ptr(context, builder, mty, pmask, [b], _I64), align=8)
+            builder.store(t, _row_ptr(context, builder, tty, pt, [b, zero], _VL), align=8)
+            hit = builder.zext(builder.icmp_unsigned("!=", bits, zero), _I64)
+            return builder.or_(anyhit, builder.shl(hit, b))
+
+        return _over_set_bits(builder, rays, zero, ray, "lf")
 
     return sig, codegen
 

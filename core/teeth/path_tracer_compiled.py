@@ -659,8 +659,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
     without reference counting."""
     sigma_s, sigma_e, med_kind, med_tooth, col_sigma, med_e_of, med_d_of = med[:7]
     alb_es, alb_ds, alb_ee, alb_de, ph_es, ph_ds, ph_ee, ph_de = med[7:15]
-    col_alb_e, col_alb_d, c_col, rho_s, rho_e, col_rho, spread = med[15], med[16], med[19], med[20], med[21], \
-        med[22], med[23]
+    col_alb_e, col_alb_d, c_col, rho_e, col_rho, spread = med[15], med[16], med[19], med[21], med[22], med[23]
     ln_sigma_s, ln_sigma_e, ln_alb_es, ln_alb_ds, ln_alb_ee, ln_alb_de, ln_rho_s, ln_rho_e = med[24:32]
     kind, normal_s, eta = geo[3], geo[2], geo[6]
     tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t, wdist, _ = scratch
