@@ -110,16 +110,25 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
 
 
 def damped_inverse(hmat: np.ndarray, damping: float) -> np.ndarray:
-    """(H + damping diag H)^-1 (Levenberg-Marquardt); H must be symmetric positive semi-definite."""
+    """(H + damping diag H)^-1 (Levenberg-Marquardt); H must be symmetric positive semi-definite.
+
+    A variable whose row and column of H are zero does not change the masked pixels at this point (a lobe's
+    g while the lobe's weight beta sits at its bound, say): it gets a zero row and column, so the matrix
+    does not move it, and the inverse is taken over the others."""
     if damping <= 0:
         raise ValueError(f"damping must be > 0, got {damping}")
+    if not np.all(np.isfinite(hmat)):
+        raise ValueError("the Gauss-Newton matrix is not finite")
     d = np.diag(hmat).copy()
-    if np.any(d <= 0) or not np.all(np.isfinite(hmat)):
-        raise ValueError("the Gauss-Newton matrix needs a positive, finite diagonal (does every free "
-                         "parameter change the masked pixels?)")
-    s = 1.0 / np.sqrt(d)
-    a = hmat * np.outer(s, s) + damping * np.eye(len(d))  # unit diagonal scaling: better conditioned
-    return np.linalg.inv(a) * np.outer(s, s)
+    dead = d == 0.0
+    if np.any(d < 0) or np.any(hmat[dead] != 0.0):
+        raise ValueError("the Gauss-Newton matrix needs a nonnegative diagonal, and zero rows where it is 0")
+    live = ~dead
+    s = 1.0 / np.sqrt(d[live])
+    a = hmat[np.ix_(live, live)] * np.outer(s, s) + damping * np.eye(len(s))  # unit diagonal: better conditioned
+    out = np.zeros_like(hmat)
+    out[np.ix_(live, live)] = np.linalg.inv(a) * np.outer(s, s)
+    return out
 
 
 @dataclass

@@ -114,6 +114,19 @@ def test_damped_inverse_and_momentum_step_closed_forms():
     bad[2, 2] = 0.0
     with pytest.raises(ValueError, match="diagonal"):
         damped_inverse(bad, 0.1)
+    bad = hmat.copy()
+    bad[1, 1] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        damped_inverse(bad, 0.1)
+    # a variable without effect (zero row and column, e.g. the gums' g2 while their beta sits at 1): no step for
+    # it, and the others' block is the damped inverse of their own sub-matrix
+    dead = hmat.copy()
+    dead[3, :] = dead[:, 3] = 0.0
+    inv = damped_inverse(dead, 0.1)
+    keep = [0, 1, 2, 4]
+    sub = dead[np.ix_(keep, keep)]
+    np.testing.assert_allclose(inv[np.ix_(keep, keep)], np.linalg.inv(sub + 0.1 * np.diag(np.diag(sub))), rtol=1e-8)
+    assert np.all(inv[3, :] == 0.0) and np.all(inv[:, 3] == 0.0)
 
 
 def test_momentum_step_is_shortened_as_a_whole():
