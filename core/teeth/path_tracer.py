@@ -741,7 +741,6 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                         logfs[tv_] += np.log(tr.a_t_at(tt, o[tv_], d[tv_], end_t[tv_], "s")[0])
                     if want:
                         push(b, pid[tv_], cols, tr.a_t_vals(a, w4))
-                new_med[rv] = med[rv]
             # opaque Lambertian oral cavity
             ov = sv[kind == KIND_OPAQUE]
             if len(ov):
@@ -755,7 +754,7 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                     push(b, pid[ov], np.broadcast_to(cs.col_rho + np.arange(3), (len(ov), 3)),
                          _diag(np.broadcast_to(1.0 / cs.rho_e, (len(ov), 3))))
                 wv = np.exp(logf[ov] - _logmeanexp(logp[ov]))
-                _nee(tr, ov, x[ov], d[ov], med[ov], wv, nrm, lp, li, cam, pix, pid, b, img, adj, grad, A, hw,
+                _nee(tr, ov, x[ov], d[ov], new_med[ov], wv, nrm, lp, li, cam, pix, pid, b, img, adj, grad, A, hw,
                      inv_spp, None, fwd)
                 # cosine-weighted continuation: f / p = rho
                 r1, r2 = u[ov, 4], u[ov, 5]

@@ -805,10 +805,9 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 # ---- thin dielectric boundary (eq. 5.1-5.2)
                 n_vert += 1
                 cosv = normal_s[end_tri, 0] * d[0] + normal_s[end_tri, 1] * d[1] + normal_s[end_tri, 2] * d[2]
-                if u4 < _fresnel(cosv, eta[end_tri]):
+                if u4 < _fresnel(cosv, eta[end_tri]):  # reflected: stays in the medium of the last piece (mk)
                     for c in range(3):
                         nd[c] = d[c] - 2.0 * cosv * normal_s[end_tri, c]
-                    new_m = m
                 else:
                     new_m = geo[4][end_tri] if cosv < 0.0 else geo[5][end_tri]
                     col0 = _a_t(geo, tex, end_tri, o, d, True, a, idx, wts)
@@ -837,7 +836,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 lme = _logmeanexp3(logp)
                 for c in range(3):
                     wv[c] = np.exp(logf[c] - lme)
-                ns, nc = _nee(geo, med, tex, x, d, m, wv, nrm, scatter, ones, 1.0, 0.0, dqdc, lp, li, inv_spp, row,
+                ns, nc = _nee(geo, med, tex, x, d, mk, wv, nrm, scatter, ones, 1.0, 0.0, dqdc, lp, li, inv_spp, row,
                               cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
                 n_shadow += ns
                 casts += nc
