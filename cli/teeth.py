@@ -37,8 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
                    help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "
                         "llvm_ad_rgb where Dr.Jit's LLVM backend loads, else scalar_rgb; needs mitsuba==3.9.1): "
-                        "Mitsuba's boundaries are index-matched, so for mitsuba the scene is made index-matched "
-                        "(eta 1, a_t 1, sharp enamel/dentin blend spread 1e-5 mm) and scene.json is that scene")
+                        "for mitsuba the scene is made index-matched (eta 1, a_t 1, sharp enamel/dentin blend "
+                        "spread 1e-5 mm) and scene.json is that scene")
     s.set_defaults(func=run_synth)
 
     f = tsub.add_parser("fit", help="fit the appearance model to a capture folder",

@@ -1,11 +1,13 @@
 """The teeth scene in Mitsuba 3, and synthetic captures rendered by it (``teeth synth --renderer mitsuba``).
 
-Mitsuba computes the same image as our tracer when the boundaries are index-matched (eta 1, a_t 1: ``null``
-interfaces around homogeneous media) and the enamel/dentin boundary is sharp (blend spread -> 0): enamel, dentin
-and gum media with two-lobe HG phase functions (``blendphase``), a two-sided diffuse oral cavity, point lights
-and perspective cameras matching our ``Camera`` (tests/core/test_teeth_mitsuba.py). Rendered with ``volpath``
-and all bounces (``max_depth -1``). Mitsuba is imported lazily, inside the functions; the variant is
-``llvm_ad_rgb`` where Dr.Jit's LLVM backend is available, otherwise ``scalar_rgb`` (same images, much slower).
+Mitsuba computes the same image as our tracer when the enamel/dentin boundary is sharp (blend spread -> 0):
+enamel, dentin and gum media with two-lobe HG phase functions (``blendphase``), a two-sided diffuse oral cavity,
+point lights and perspective cameras matching our ``Camera`` (tests/core/test_teeth_mitsuba.py). Rendered with
+``volpath`` and all bounces (``max_depth -1``). Index-matched boundaries (eta 1, a_t 1) are Mitsuba ``null``
+interfaces; the thin dielectric boundary of eq. 5.1-5.2 (reflect with the Fresnel factor F, else pass straight on
+with weight a_t) is the BSDF plugin ``teeth_thin_boundary`` defined here, for an a_t constant over each part.
+Mitsuba is imported lazily, inside the functions; the variant is ``llvm_ad_rgb`` where Dr.Jit's LLVM backend is
+available, otherwise ``scalar_rgb`` (same images, much slower).
 """
 
 from __future__ import annotations
@@ -45,6 +47,87 @@ def import_mitsuba(variant: str | None = None) -> tuple[object, str]:
     return mi, variant
 
 
+THIN_BOUNDARY = "teeth_thin_boundary"
+_REGISTERED: set[str] = set()
+
+
+def register_thin_boundary(mi) -> None:
+    """Register the BSDF plugin ``teeth_thin_boundary`` for Mitsuba's current variant (once per variant).
+
+    The thin, non-bending boundary of eq. 5.1-5.2 from either side: with the unpolarised Fresnel factor F(|cos|,
+    eta) of ``path_tracer.fresnel_dielectric`` (F = 1 past the critical angle where eta < 1) the light is
+    reflected (weight 1, a delta reflection); otherwise it passes straight on with weight a_t, as a ``null``
+    interface that attenuates (Mitsuba then counts no bounce, and ``volpath``'s shadow rays take
+    ``eval_null_transmission`` = a_t (1 - F) at each crossing, as our next-event estimation does). Properties:
+    ``eta`` (float), ``a_t`` (RGB)."""
+    import drjit as dr
+
+    if mi.variant() in _REGISTERED:
+        return
+
+    def fresnel(cos_i, eta):
+        c = dr.minimum(dr.abs(cos_i), 1.0)
+        cos_t = dr.sqrt(dr.maximum(1.0 - (1.0 - c * c) / (eta * eta), 0.0))
+        rs = (c - eta * cos_t) / (c + eta * cos_t)
+        rp = (eta * c - cos_t) / (eta * c + cos_t)
+        return 0.5 * (rs * rs + rp * rp)
+
+    class ThinBoundary(mi.BSDF):
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.eta = float(props.get("eta", 1.0))
+            a_t = props.get("a_t", mi.ScalarColor3f(1.0))
+            self.a_t = mi.Color3f(float(a_t[0]), float(a_t[1]), float(a_t[2]))
+            sides = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
+            reflection, transmission = mi.BSDFFlags.DeltaReflection | sides, mi.BSDFFlags.Null | sides
+            self.m_components = [reflection, transmission]
+            self.m_flags = reflection | transmission
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            f = fresnel(mi.Frame3f.cos_theta(si.wi), self.eta)
+            reflect = sample1 < f
+            bs = mi.BSDFSample3f()
+            bs.wo = dr.select(reflect, mi.reflect(si.wi), -si.wi)
+            bs.pdf = dr.select(reflect, f, 1.0 - f)
+            bs.eta = mi.Float(1.0)
+            bs.sampled_component = dr.select(reflect, mi.UInt32(0), mi.UInt32(1))
+            bs.sampled_type = dr.select(reflect, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
+                                        mi.UInt32(+mi.BSDFFlags.Null))
+            value = dr.select(reflect, mi.Color3f(1.0), self.a_t)
+            return bs, dr.select(active, value, mi.Color3f(0.0))
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Color3f(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Color3f(0.0), mi.Float(0.0)
+
+        def eval_null_transmission(self, si, active=True):
+            value = self.a_t * (1.0 - fresnel(mi.Frame3f.cos_theta(si.wi), self.eta))
+            return dr.select(active, value, mi.Color3f(0.0))
+
+        def to_string(self):
+            return f"ThinBoundary[eta={self.eta}]"
+
+    mi.register_bsdf(THIN_BOUNDARY, lambda props: ThinBoundary(props))
+    _REGISTERED.add(mi.variant())
+
+
+def _boundary(name: str, part) -> dict:
+    """The Mitsuba BSDF of a tooth's or the gums' outer boundary: ``null`` where index-matched, else the thin
+    boundary plugin (a ValueError where a_t varies over the part: the plugin takes one a_t per part)."""
+    a_t = np.asarray(part.a_t, dtype=np.float64).reshape(-1, 3)
+    if part.eta == 1.0 and np.all(a_t == 1.0):
+        return {"type": "null"}
+    if not np.all(a_t == a_t[0]):
+        raise ValueError(f"Mitsuba renders one a_t per part; {name} has a_t in "
+                         f"[{float(a_t.min()):g}, {float(a_t.max()):g}]")
+    return {"type": THIN_BOUNDARY, "eta": float(part.eta), "a_t": {"type": "rgb", "value": a_t[0].tolist()}}
+
+
 def _medium(m) -> dict:
     """Mitsuba ``homogeneous`` medium of a ``VolumeMaterial`` (sigma_t as an RGB in [0, 1] times ``scale``;
     ``blendphase``: (1 - beta) HG(g2) + beta HG(g1))."""
@@ -59,10 +142,15 @@ def mitsuba_scene(mi, sc: TeethScene, cameras: list[Camera], folder: str, spp: i
     """``sc`` as a Mitsuba scene (meshes written as PLY into ``folder``): one sensor per camera (``sensor{k}``,
     ``spp`` samples by default), one point light ``light`` (moved by ``set_light``), one medium per tooth part and
     the gums, referenced by the shapes that bound them. Loaded with ``optimize=False``: Mitsuba would otherwise
-    merge the teeth's media (equal values) into one, and their meshes with them. The boundaries are Mitsuba
-    ``null`` interfaces whatever the scene's eta and a_t (``check_index_matched`` says whether that is the scene),
-    the enamel/dentin boundary is sharp. Returns (scene, the names of the parameters that map to ours)."""
+    merge the teeth's media (equal values) into one, and their meshes with them. The outer boundaries are ``null``
+    interfaces where index-matched, else ``teeth_thin_boundary`` (``register_thin_boundary``; a ValueError where
+    a_t varies over a part); the enamel/dentin boundary is sharp. Returns (scene, the names of the parameters that
+    map to ours)."""
     from .mesh import TriMesh, save_mesh
+
+    bsdfs = [_boundary(t.name, t) for t in sc.teeth] + ([_boundary("gums", sc.gums)] if sc.gums is not None else [])
+    if any(b["type"] == THIN_BOUNDARY for b in bsdfs):
+        register_thin_boundary(mi)
 
     def ply(name: str, mesh) -> str:
         path = os.path.join(folder, f"{name}.ply")
@@ -76,7 +164,7 @@ def mitsuba_scene(mi, sc: TeethScene, cameras: list[Camera], folder: str, spp: i
         d[enamel], d[dentin] = _medium(t.enamel), _medium(t.dentin)
         media += [enamel, dentin]
         d[f"{enamel}_mesh"] = {"type": "ply", "filename": ply(enamel, t.enamel_mesh), "face_normals": True,
-                               "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": enamel}}
+                               "bsdf": bsdfs[i], "interior": {"type": "ref", "id": enamel}}
         d[f"{dentin}_mesh"] = {"type": "ply", "filename": ply(dentin, t.dentin_shape.mesh(t.c)), "face_normals": True,
                                "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": dentin},
                                "exterior": {"type": "ref", "id": enamel}}
@@ -84,7 +172,7 @@ def mitsuba_scene(mi, sc: TeethScene, cameras: list[Camera], folder: str, spp: i
         d["gums"] = _medium(sc.gums.material)
         media.append("gums")
         d["gums_mesh"] = {"type": "ply", "filename": ply("gums", sc.gums.mesh), "face_normals": True,
-                          "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": "gums"}}
+                          "bsdf": bsdfs[-1], "interior": {"type": "ref", "id": "gums"}}
     keys = [f"{m}.{p}" for m in media for p in MEDIUM_PARAMS]
     if sc.cavity is not None:
         d["cavity"] = {"type": "ply", "filename": ply("cavity", sc.cavity.mesh), "face_normals": True,
@@ -122,21 +210,6 @@ def mitsuba_image(mi, scene, sensor: int, spp: int, seed: int, integrator) -> np
     return np.asarray(mi.render(scene, sensor=int(sensor), integrator=integrator, spp=int(spp), seed=int(seed)))
 
 
-def check_index_matched(scene: TeethScene) -> None:
-    """Raise ValueError (one line naming the offending parts) unless every tooth and the gums have eta 1 and a_t 1
-    everywhere: Mitsuba's ``null`` interfaces cannot render our thin dielectric boundaries."""
-    bad = []
-    parts = [(t.name, t) for t in scene.teeth] + ([("gums", scene.gums)] if scene.gums is not None else [])
-    for name, p in parts:
-        if p.eta != 1.0:
-            bad.append(f"{name} eta {p.eta:g}")
-        if not np.all(p.a_t == 1.0):
-            bad.append(f"{name} a_t in [{float(np.min(p.a_t)):g}, {float(np.max(p.a_t)):g}]")
-    if bad:
-        raise ValueError("Mitsuba renders index-matched boundaries only (eta 1, a_t 1), the scene has: "
-                         + ", ".join(bad))
-
-
 def index_matched(scene: TeethScene, blend_spread: float = 1e-5) -> TeethScene:
     """A copy of ``scene`` with index-matched boundaries (eta 1, a_t 1 for every tooth and the gums) and a sharp
     enamel/dentin boundary (``blend_spread`` mm): the scene that Mitsuba and our tracer render alike."""
@@ -154,12 +227,12 @@ def render_capture_mitsuba(scene: TeethScene, cameras: list[Camera], lights: lis
     """Synthetic capture of ``scene`` rendered by Mitsuba 3 ``volpath`` with all bounces (``max_depth -1``, its
     default Russian roulette): images float32 (n_cam, n_light, H, W, 3), every pixel at ``spp`` samples, one
     render per (camera, light) with seed ``seed + n_cam * light + camera`` (mod 2^32), and the ``tooth_masks``, as
-    ``synthetic.render_capture`` returns them. The scene must be index-matched (``check_index_matched``: a
-    ValueError otherwise, nothing is changed); its blend spread is ignored (Mitsuba's enamel/dentin boundary is
-    sharp). ``progress(1)`` is called after each light; ``variant`` as in ``import_mitsuba``."""
+    ``synthetic.render_capture`` returns them. Each tooth's and the gums' a_t must be one value (a ValueError
+    otherwise, nothing is changed; boundaries as in ``mitsuba_scene``); the blend spread is ignored (Mitsuba's
+    enamel/dentin boundary is sharp). ``progress(1)`` is called after each light; ``variant`` as in
+    ``import_mitsuba``."""
     from .synthetic import tooth_masks
 
-    check_index_matched(scene)
     if spp < 1:
         raise ValueError("need spp >= 1")
     mi, _ = import_mitsuba(variant)

@@ -58,12 +58,15 @@ def test_synth_mitsuba_capture_matches_our_tracer(tmp_path, capsys):
         assert np.all(np.abs(a - b) < 4 * np.hypot(sa, sb) + 0.01 * b), (li, a, b, sa, sb)
 
 
-def test_render_capture_mitsuba_refuses_refractive_scene():
+def test_render_capture_mitsuba_refuses_a_textured_a_t():
+    """Mitsuba's thin boundary takes one a_t per part: an a_t that varies over a tooth is refused in one line."""
     from material_structures.core.teeth.mitsuba_capture import render_capture_mitsuba
 
     sc = make_scene(n_teeth=1, resolution=12)
     sc.teeth[0].eta = 1.63
+    sc.teeth[0].a_t = np.full((2, 2, 3), 0.9)
+    sc.teeth[0].a_t[0, 1] = 0.7
     cams, lights = default_rig(target=scene_target(sc), width=8, height=6, n_lights=1, n_cameras=1)
-    with pytest.raises(ValueError, match="tooth0 eta 1.63"):
+    with pytest.raises(ValueError, match=r"tooth0 has a_t in \[0.7, 0.9\]"):
         render_capture_mitsuba(sc, cams, lights, 4, 0)
-    assert sc.teeth[0].eta == 1.63  # the scene is not changed
+    assert sc.teeth[0].eta == 1.63 and sc.teeth[0].a_t[0, 1, 0] == 0.7  # the scene is not changed
