@@ -37,8 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
                    help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "
                         "llvm_ad_rgb where Dr.Jit's LLVM backend loads, else scalar_rgb; needs mitsuba==3.9.1): "
-                        "for mitsuba the scene is made index-matched (eta 1, a_t 1, sharp enamel/dentin blend "
-                        "spread 1e-5 mm) and scene.json is that scene")
+                        "for mitsuba the enamel/dentin boundary is made sharp (blend spread 1e-5 mm, as Mitsuba "
+                        "renders it) and scene.json is that scene")
     s.set_defaults(func=run_synth)
 
     f = tsub.add_parser("fit", help="fit the appearance model to a capture folder",
@@ -112,15 +112,16 @@ def run_synth(args: argparse.Namespace) -> int:
     cams, lights = default_rig(target=scene_target(scene), width=args.width, height=args.height,
                                n_lights=args.lights, n_cameras=args.cameras, fov_x_deg=fov)
     if args.renderer == "mitsuba":
-        from ..core.teeth.mitsuba_capture import import_mitsuba, index_matched, render_capture_mitsuba
+        from ..core.teeth.mitsuba_capture import import_mitsuba, render_capture_mitsuba
 
-        scene = index_matched(scene)
+        scene = scene.copy()
+        scene.blend_spread = 1e-5  # Mitsuba's enamel/dentin boundary is sharp
         _, variant = import_mitsuba()
         with _bar(len(lights), "synth (mitsuba)", "light") as bar:
             cap = render_capture_mitsuba(scene, cams, lights, args.spp, args.seed, progress=bar.update,
                                          variant=variant)
-        how = (f" rendered by Mitsuba 3 {variant} (volpath, all bounces, {args.spp} spp per pixel) of the "
-               "index-matched scene (eta 1, a_t 1, blend spread 1e-5 mm)")
+        how = (f" rendered by Mitsuba 3 {variant} (volpath, all bounces, {args.spp} spp per pixel; blend spread "
+               "1e-5 mm)")
     else:
         with _bar(2 * len(lights), "synth", "light-pass") as bar:
             cap = render_capture(scene, cams, lights, args.spp, args.spp_background, args.seed,

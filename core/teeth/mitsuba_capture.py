@@ -210,17 +210,6 @@ def mitsuba_image(mi, scene, sensor: int, spp: int, seed: int, integrator) -> np
     return np.asarray(mi.render(scene, sensor=int(sensor), integrator=integrator, spp=int(spp), seed=int(seed)))
 
 
-def index_matched(scene: TeethScene, blend_spread: float = 1e-5) -> TeethScene:
-    """A copy of ``scene`` with index-matched boundaries (eta 1, a_t 1 for every tooth and the gums) and a sharp
-    enamel/dentin boundary (``blend_spread`` mm): the scene that Mitsuba and our tracer render alike."""
-    out = scene.copy()
-    for p in out.teeth + ([out.gums] if out.gums is not None else []):
-        p.eta = 1.0
-        p.a_t = np.ones_like(p.a_t)
-    out.blend_spread = blend_spread
-    return out
-
-
 def render_capture_mitsuba(scene: TeethScene, cameras: list[Camera], lights: list[PointLight], spp: int = 16,
                            seed: int = 12345, progress: Callable[[int], object] | None = None,
                            variant: str | None = None) -> Capture:

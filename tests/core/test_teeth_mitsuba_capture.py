@@ -1,5 +1,6 @@
 """``teeth synth --renderer mitsuba``: a synthetic capture rendered by Mitsuba 3 (volpath, all bounces) in our
-capture format, agreeing with our tracer's render of the scene it wrote (scene.json, index-matched)."""
+capture format, agreeing with our tracer's render of the scene it wrote (scene.json: the synthetic scene with its
+thin dielectric boundaries, eta 1.63 / 1.4, and a sharp enamel/dentin boundary)."""
 
 from __future__ import annotations
 
@@ -36,16 +37,18 @@ def test_synth_mitsuba_capture_matches_our_tracer(tmp_path, capsys):
         assert main(["teeth", "synth", str(tmp_path / f"cap{s}"), *SYNTH, "--seed", str(s)]) == 0
         caps.append(Capture.load(tmp_path / f"cap{s}"))
     out = capsys.readouterr().out
-    assert "Mitsuba 3" in out and "index-matched" in out
+    assert "Mitsuba 3" in out and "blend spread 1e-5 mm" in out
     cap = caps[0]
     assert cap.images.shape == (2, 3, 14, 20, 3) and cap.images.dtype == np.float32
     assert cap.masks.shape == (2, 14, 20) and cap.masks.sum() > 20
     assert np.all(np.isfinite(cap.images)) and cap.images.max() > 0
     with open(tmp_path / f"cap{SEEDS[0]}" / "scene.json") as f:
         scene = TeethScene.from_dict(json.load(f))
-    # the written scene is the one rendered: index-matched, sharp blend, and its masks are the capture's
-    assert scene.teeth[0].eta == 1.0 and scene.gums.eta == 1.0 and scene.blend_spread == 1e-5
-    assert np.all(scene.teeth[0].a_t == 1.0) and np.all(scene.gums.a_t == 1.0)
+    # the written scene is the one rendered: the synthetic scene's boundaries, a sharp blend, the capture's masks
+    truth = make_scene(n_teeth=1, resolution=12)
+    assert scene.teeth[0].eta == truth.teeth[0].eta != 1.0 and scene.gums.eta == truth.gums.eta != 1.0
+    np.testing.assert_array_equal(scene.teeth[0].a_t, truth.teeth[0].a_t)
+    assert np.all(scene.teeth[0].a_t < 1.0) and scene.blend_spread == 1e-5
     np.testing.assert_array_equal(tooth_masks(scene, cap.cameras), cap.masks)
     for c in caps[1:]:
         np.testing.assert_array_equal(c.masks, cap.masks)
