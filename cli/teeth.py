@@ -64,8 +64,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to fit (default: every material, a_t and the "
                         "dentin shape)")
-    f.add_argument("--seed", type=int, default=FIT_DEFAULTS.seed)
-    f.add_argument("--resume", action="store_true", help="continue an interrupted fit from FIT_DIR")
+    f.add_argument("--seed", type=int, default=FIT_DEFAULTS.seed,
+                   help="random seed of the perturbed start, the lights of each iteration and the path samples "
+                        f"(default {FIT_DEFAULTS.seed}); another seed gives an independent fit")
+    f.add_argument("--resume", action="store_true", help="continue an interrupted fit from its --out folder")
     f.add_argument("--scheduler", default=None,
                    help="Dask scheduler address (tcp://host:8786): per-view gradient renders become tasks there")
     f.add_argument("--dask-workers", type=at_least(1), default=None,
@@ -73,7 +75,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "faster in its own process, the default)")
     f.add_argument("--workers", type=at_least(1), default=FIT_DEFAULTS.workers,
                    help="where numba is missing: processes that trace each pass")
-    f.add_argument("--no-progress", action="store_true")
+    f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_fit)
 
     r = tsub.add_parser("render", help="render a scene JSON with the cameras/lights of a capture")
