@@ -1,6 +1,6 @@
 """``teeth synth --renderer mitsuba``: a synthetic capture rendered by Mitsuba 3 (volpath, all bounces) in our
 capture format, agreeing with our tracer's render of the scene it wrote (scene.json: the synthetic scene with its
-thin dielectric boundaries, eta 1.63 / 1.4, and a sharp enamel/dentin boundary)."""
+thin dielectric boundaries, eta 1.631 / 1.33, and a sharp enamel/dentin boundary)."""
 
 from __future__ import annotations
 
