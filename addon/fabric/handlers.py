@@ -1,4 +1,4 @@
-"""Handlers of the fabric shader: lamp sync (depsgraph, render_pre: moving a lamp just works), the brush
+"""Handlers of the fabric shader: lamp and world sync (depsgraph, render_pre: moving a lamp just works), the brush
 sessions' maps packed before a save and dropped when another file is loaded."""
 
 from __future__ import annotations
@@ -10,8 +10,10 @@ from .brushing import drop_sessions, pack_sessions
 from .material import fabric_script_nodes, has_fabric_links, sync_fabric_lamps
 
 # Updates that can change which lamps the fabric evaluates or which objects wear it: lamps, objects,
-# meshes (material slots on the data), materials, and the scene (render engine, OSL switch).
-_FABRIC_UPDATES = (bpy.types.Light, bpy.types.Object, bpy.types.Mesh, bpy.types.Material, bpy.types.Scene)
+# meshes (material slots on the data), materials, the scene (render engine, OSL switch) and the world
+# (its environment is the exact world light's).
+_FABRIC_UPDATES = (bpy.types.Light, bpy.types.Object, bpy.types.Mesh, bpy.types.Material, bpy.types.Scene,
+                   bpy.types.World)
 
 
 def _has_fabric() -> bool:

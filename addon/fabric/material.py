@@ -25,6 +25,7 @@ from ...render import load_osl_script
 from ..common import add_eevee_fallback, add_group_input, group_material, group_node, wire_lamp_shader_group
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .maps import CLOSURE_KEYS, closure_maps_to_images, load_fit_folder, maps_to_images
+from .world_light import world_tables, write_world_inputs
 
 GROUP_NAME = "SGGX Fabric"
 VIEWPORT_OUTPUT = "Viewport"
@@ -61,6 +62,9 @@ FIT_INPUTS = [
     ("FitShapeA", "NodeSocketFloat", 0.0, 0.0, 1.0),
     ("FitGGXScale", "NodeSocketFloat", 1.0, 0.0, 10.0),
 ]
+# Exact world light (world_light.py): on by default; off gives the world to the fitted closures.
+WORLD_INPUTS = [("ExactWorld", "NodeSocketInt", 1, 0, 1)]
+FIT_INPUTS = FIT_INPUTS + WORLD_INPUTS  # added to groups from older files like the fit inputs
 GROUP_INPUTS = GROUP_INPUTS + FIT_INPUTS
 SHADER_INPUTS = [name for name, *_ in GROUP_INPUTS] + ["Tangent"]
 # closure image key -> (group input of its Color output, group input of its Alpha output)
@@ -104,7 +108,8 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
 
 
 def ensure_fit_inputs(group, scene=None) -> None:
-    """Give a group from an older file the fitted-closure inputs (off until closure maps are linked)."""
+    """Give a group from an older file the fitted-closure and world inputs (closures off until their maps
+    are linked; exact world light on)."""
     have = {item.name for item in group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
     missing = [spec for spec in FIT_INPUTS if spec[0] not in have]
     if not missing:
@@ -422,8 +427,9 @@ def exact_path_renders(scene) -> bool:
 
 
 def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
-    """Copy the scene's lamps into every fabric shader; light-link them off the objects whose shader
-    evaluates them (Cycles with OSL, exact path on) and off no other object.
+    """Copy the scene's lamps and its world environment (world_light.py) into every fabric shader;
+    light-link the lamps off the objects whose shader evaluates them (Cycles with OSL, exact path on)
+    and off no other object.
 
     ``update_matrices`` evaluates the view layer first so freshly moved lamps have current world
     matrices (pass False from depsgraph handlers, where they are current already).
@@ -434,8 +440,10 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
             layer.update()
     pairs = scene_shader_lamps(scene)
     lamps = [lamp for _, lamp in pairs]
+    folder, width, height, _status = world_tables(scene)
     for node in fabric_script_nodes():
         write_lamp_inputs(node, lamps)
+        write_world_inputs(node, folder, width, height)
     receivers = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
     in_shader = {obj.name for obj, _ in pairs}
     for obj in scene.objects:

@@ -8,9 +8,10 @@ import bpy
 from ..common import MaterialPanel, SidebarPanel, draw_group_inputs
 from . import fit_job
 from .material import GROUP_NAME, MARKER, fabric_group_node, material_map_images
+from .world_light import world_light_status
 
 MULTIPLIERS = (("Tint", "Tint"), ("SigmaScale", "Roughness Scale"), ("Anisotropy", "Anisotropy"),
-               ("FastPreview", "Fast Preview (closures only)"))
+               ("FastPreview", "Fast Preview (closures only)"), ("ExactWorld", "Exact World Light"))
 
 
 class MATERIAL_PT_material_structures_fabric(MaterialPanel, bpy.types.Panel):
@@ -25,7 +26,9 @@ class MATERIAL_PT_material_structures_fabric(MaterialPanel, bpy.types.Panel):
         if node is None:
             layout.label(text=f"No '{GROUP_NAME}' node in this material", icon="ERROR")
             return
-        draw_group_inputs(layout, node, MULTIPLIERS, linked="from a map")
+        draw_group_inputs(layout, node, [m for m in MULTIPLIERS if m[0] in node.inputs], linked="from a map")
+        if "ExactWorld" in node.inputs and node.inputs["ExactWorld"].default_value:
+            layout.label(text=world_light_status(context.scene), icon="WORLD")
         images = material_map_images(mat)
         box = layout.box()
         box.label(text="Parameter maps" if images else "Constant parameters (no maps)")

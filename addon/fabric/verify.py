@@ -225,10 +225,12 @@ def render_hdri_patch_vs_core(
     resolution=(8, 8),
     samples=256,
     seed=0,
+    exact_world: bool = True,
 ):
     """A flat fabric patch with fitted closures (uniform 4 x 4 maps), lit only by the world ``env``,
     rendered by Cycles along each view direction (V, 3) with an orthographic camera; every pixel of a
     view sees the same radiance, so the mean over the patch's pixels is the view's value.
+    ``exact_world``: the material's exact world light (the default) or, off, its fitted closures.
 
     Returns ``(rendered (V, 3), eq39 (V, 3), closure_model (V, 3))``.
     """
@@ -244,7 +246,9 @@ def render_hdri_patch_vs_core(
     images = maps_to_images(maps, "HDRI patch", btf_frame=False)
     closures = fit_closure_images(maps, "HDRI patch")
     mat = create_fabric_material("HDRI Patch", maps=images, scene=scene, closures=closures)
+    fabric_group_node(mat).inputs["ExactWorld"].default_value = int(exact_world)
     add_textured_plane(scene, 1.0, mat)
+    sync_fabric_lamps(scene)  # no lamps; hands the world's environment to the shader
     cam = add_orthographic_camera(scene, ortho_scale=0.25)  # inside the patch for views up to 75 degrees
     out = []
     for wo in np.asarray(views, float):
