@@ -1,8 +1,8 @@
 """The pile-fabric library materials under the studio lamps and under a sky HDRI (README picture).
 
 Under lamps the fabric shader evaluates eq. 3.9 exactly for each lamp; under an environment (no
-lamps) everything reaches it through the fitted closures (``core.fabric.closure_fit``), so the pair
-shows what world lighting of the fabric looks like. The HDRI is ``closure_accuracy.sky_hdri`` (sky
+lamps) it integrates eq. 3.9 against the world's radiance itself (exact world light,
+``core.fabric.environment_sampling``), so the pair shows the same model under both lightings. The HDRI is ``closure_accuracy.sky_hdri`` (sky
 gradient and a sun-like hot spot), the one the accuracy benchmark uses, turned so that the sun lights
 the ball from the camera's side as the studio's key lamp does.
 """
@@ -34,10 +34,10 @@ def render_under_hdri(name: str, workdir: str, resolution=(640, 480), samples: i
     (entry.preview or library.build_preview_scene)(scene, material)
     for obj in [o for o in scene.objects if o.type == "LIGHT"]:
         bpy.data.objects.remove(obj, do_unlink=True)
-    sync_fabric_lamps(scene)  # no lamps: the exact path adds nothing, the closures see the world
     sky = np.roll(sky_hdri(256, 512), 256, axis=1)  # sun turned to azimuth 300 deg: a key light from the camera side
     world = hdri_world(scene, sky * strength, os.path.join(workdir, "sky.exr"))
     world.node_tree.nodes["Environment Texture"].interpolation = "Linear"  # a picture, not a quadrature
+    sync_fabric_lamps(scene)  # no lamps left; hands the sky to the exact world path
     denoise_for_display(scene)
     return render_to_array(scene)
 
@@ -55,7 +55,7 @@ def fabric_lighting_sheet(out_png: str, workdir: str, width: int = 640, samples:
         images.append(library.render_material_preview(name, workdir, res, samples, denoise=True))
         labels.append(f"{name}: studio lamps (exact eq. 3.9)")
         images.append(render_under_hdri(name, workdir, res, samples))
-        labels.append(f"{name}: sky HDRI (fitted closures)")
+        labels.append(f"{name}: sky HDRI (exact eq. 3.9)")
     sheet = contact_sheet(images, labels, columns=2, cell=cell, title="Pile fabric under lamps and under an HDRI")
     sheet.save(out_png, optimize=True)
     return out_png
