@@ -169,7 +169,8 @@ def bench_fit() -> dict:
 
 
 def bench_brush() -> dict:
-    from ..core.fabric.brushing import BrushStates, brush_data_driven, brush_edit, brush_fibres
+    from ..core.fabric.brushing import BrushStates, brush_data_driven, brush_edit, brush_fibres, capsule_window
+    from ..core.fabric.closure_table import load_table, lookup_closure_texels
     from ..core.fabric.parameter_maps import make_maps
     from ..core.fabric.synthetic_btf import synthetic_maps
 
@@ -190,6 +191,19 @@ def bench_brush() -> dict:
         return np.array(times) * 1e3
 
     fib = timed(lambda m, a, b: brush_fibres(m, a, b, radius, fibre_length=1.2))
+    grid = load_table()
+
+    def fibres_and_closures(m, a, b):
+        """A combing segment plus the closure lookup of the texels it changed (what the brush does)."""
+        new = brush_fibres(m, a, b, radius, fibre_length=1.2)
+        win = capsule_window(m.shape, a, b, radius, 1.0)
+        if win is not None:
+            sl = win.slices
+            changed = np.any(new.basis[sl] != m.basis[sl], axis=-1)
+            lookup_closure_texels(new.sigma[sl][changed], new.basis[sl][changed], grid)
+        return new
+
+    fib_closures = timed(fibres_and_closures)
     states = BrushStates(tuple(synthetic_maps(64, 64, seed=k) for k in range(8)))
     dd = timed(lambda m, a, b: brush_data_driven(m, a, b, radius, states))
     ed = timed(lambda m, a, b: brush_edit(m, a, b, radius, kd=(0.1, 0.5, 0.1), anisotropy_factor=0.7))
@@ -197,6 +211,8 @@ def bench_brush() -> dict:
         "ms_per_update": round(float(fib.mean()), 2),
         "ms_per_update_p95": round(float(np.percentile(fib, 95)), 2),
         "ms_per_update_max": round(float(fib.max()), 2),
+        "with_closures_ms_per_update_median": round(float(np.median(fib_closures)), 2),
+        "with_closures_ms_per_update_p95": round(float(np.percentile(fib_closures, 95)), 2),
         "data_driven_ms_per_update": round(float(dd.mean()), 2),
         "edit_ms_per_update": round(float(ed.mean()), 2),
         "map_size": n,
