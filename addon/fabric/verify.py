@@ -176,11 +176,12 @@ def render_maps_vs_core(
     return rgb, ref, mask
 
 
-def hdri_world(scene, env, path: str):
+def hdri_world(scene, env, path: str, rotation_z_deg: float = 0.0):
     """A world lit only by the environment ``env`` (core.fabric.closure_accuracy convention, (H, W, 3)),
     written to ``path`` as an EXR in Blender's equirect layout and read through an Environment Texture
     with closest-texel lookup (so Cycles integrates the same piecewise-constant radiance as the core
-    quadrature)."""
+    quadrature). ``rotation_z_deg``: turned by a Mapping node (Texture Coordinate Generated -> Mapping
+    rotation about Z), the way artists turn an HDRI."""
     import bpy
 
     from ...core.exr_io import write_exr
@@ -195,6 +196,12 @@ def hdri_world(scene, env, path: str):
     tex.image.colorspace_settings.name = "Non-Color"  # the stored floats are the radiance
     tex.interpolation = "Closest"
     tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    if rotation_z_deg:
+        coord = tree.nodes.new("ShaderNodeTexCoord")
+        mapping = tree.nodes.new("ShaderNodeMapping")
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(rotation_z_deg))
+        tree.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+        tree.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
     return world
 
 
@@ -226,11 +233,14 @@ def render_hdri_patch_vs_core(
     samples=256,
     seed=0,
     exact_world: bool = True,
+    rotation_z_deg: float = 0.0,
 ):
     """A flat fabric patch with fitted closures (uniform 4 x 4 maps), lit only by the world ``env``,
     rendered by Cycles along each view direction (V, 3) with an orthographic camera; every pixel of a
     view sees the same radiance, so the mean over the patch's pixels is the view's value.
     ``exact_world``: the material's exact world light (the default) or, off, its fitted closures.
+    ``rotation_z_deg`` turns the world with a Mapping node (a multiple of 360 / width degrees); the
+    references use the turned environment, E'(d) = E(R_z d).
 
     Returns ``(rendered (V, 3), eq39 (V, 3), closure_model (V, 3))``.
     """
@@ -239,7 +249,7 @@ def render_hdri_patch_vs_core(
 
     scene = reset_scene()
     configure_cycles(scene, resolution=resolution, samples=samples, seed=seed)
-    hdri_world(scene, env, env_path)
+    hdri_world(scene, env, env_path, rotation_z_deg)
     n = 4
     maps = make_maps(kd=np.broadcast_to(kd, (n, n, 3)), ks=np.broadcast_to(ks, (n, n, 3)),
                      sigma=np.broadcast_to(sigma, (n, n, 2)), basis=np.broadcast_to(quat, (n, n, 4)))
@@ -258,5 +268,9 @@ def render_hdri_patch_vs_core(
         out.append(render_to_array(scene)[..., :3].reshape(-1, 3).mean(axis=0))
     cm = fit_closure_maps(np.asarray(sigma, float)[None, None], np.asarray(quat, float)[None, None])
     fit = (cm.weights[0, 0], cm.shape[0, 0], cm.ggx_scale[0, 0])
-    ref, model = hdri_references(env, np.asarray(views, float), kd, ks, sigma, quat, fit)
+    shift = rotation_z_deg / 360.0 * np.shape(env)[1]
+    if abs(shift - round(shift)) > 1e-9:
+        raise ValueError("rotation_z_deg must be a multiple of 360 / the environment's width")
+    turned = np.roll(np.asarray(env), -round(shift), axis=1)  # column j sees azimuth phi_j + rotation
+    ref, model = hdri_references(turned, np.asarray(views, float), kd, ks, sigma, quat, fit)
     return np.asarray(out), ref, model

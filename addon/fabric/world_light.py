@@ -45,39 +45,84 @@ def _image_radiance(image) -> np.ndarray:
     return rgb
 
 
+def _euler_xyz(rx: float, ry: float, rz: float) -> np.ndarray:
+    """Blender's XYZ Euler rotation matrix (X applied first)."""
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    mx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    my = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    mz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return mz @ my @ mx
+
+
+def _mapping_rotation(vector_socket):
+    """M with lookup direction = M d for the Environment Texture's Vector input: the identity when
+    unlinked, a rotation for Texture Coordinate (Generated) -> Mapping (rotation, uniform scale, no
+    offset); a reason string for anything else."""
+    if not vector_socket.is_linked:
+        return np.eye(3)
+    link = vector_socket.links[0]
+    node = link.from_node
+    if node.type == "TEX_COORD" and link.from_socket.name == "Generated":
+        return np.eye(3)
+    if node.type != "MAPPING" or node.vector_type not in {"POINT", "VECTOR", "TEXTURE"}:
+        return "the world's Environment Texture has a mapping other than a rotation"
+    ins = node.inputs
+    if any(ins[name].is_linked for name in ("Rotation", "Scale") if name in ins) or (
+            "Location" in ins and ins["Location"].is_linked):
+        return "the world's Mapping node is driven by other nodes"
+    src = ins["Vector"].links[0] if ins["Vector"].is_linked else None
+    if src is None or src.from_node.type != "TEX_COORD" or src.from_socket.name != "Generated":
+        return "the world's Mapping node does not map the Generated direction"
+    scale = np.asarray(ins["Scale"].default_value, float)
+    if np.any(scale <= 0) or np.ptp(scale) > 1e-6 * scale.max():
+        return "the world's Mapping node scales unevenly"
+    if node.vector_type != "VECTOR" and np.any(np.asarray(ins["Location"].default_value) != 0):
+        return "the world's Mapping node moves the direction"
+    r = _euler_xyz(*ins["Rotation"].default_value)
+    return r.T if node.vector_type == "TEXTURE" else r
+
+
+def world_rotation(scene) -> np.ndarray:
+    """M of the world's Environment Texture lookup (lookup direction = M d; identity when none)."""
+    return _world_source(scene)[2]
+
+
 def _world_source(scene):
-    """(key, radiance loader) of the scene's world, or (None, reason) when the shader cannot sample it."""
+    """(key, radiance loader, M) of the scene's world, or (None, reason, identity) when the shader cannot
+    sample it."""
+    eye = np.eye(3)
     world = scene.world
     if world is None:
-        return None, "no world"
+        return None, "no world", eye
     tree = world.node_tree
     if blender_version()[0] < 5 and not world.use_nodes:  # 5.x worlds always use their nodes
         tree = None
     if tree is None:
         color = tuple(float(c) for c in world.color)
-        return ("color", color), lambda: np.broadcast_to(np.float32(color), (2, 4, 3)).copy()
+        return ("color", color), lambda: np.broadcast_to(np.float32(color), (2, 4, 3)).copy(), eye
     out = next((n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
     out = out or next((n for n in tree.nodes if n.type == "OUTPUT_WORLD"), None)
     surface = out.inputs["Surface"] if out is not None else None
     if surface is None or not surface.is_linked:
-        return None, "the world has no surface"
+        return None, "the world has no surface", eye
     bg = surface.links[0].from_node
     if bg.type != "BACKGROUND" or bg.inputs["Strength"].is_linked:
-        return None, "the world is not a Background node with a fixed strength"
+        return None, "the world is not a Background node with a fixed strength", eye
     strength = float(bg.inputs["Strength"].default_value)
     col = bg.inputs["Color"]
     if not col.is_linked:
         color = tuple(float(c) * strength for c in col.default_value[:3])
-        return ("color", color), lambda: np.broadcast_to(np.float32(color), (2, 4, 3)).copy()
+        return ("color", color), lambda: np.broadcast_to(np.float32(color), (2, 4, 3)).copy(), eye
     tex = col.links[0].from_node
     if tex.type != "TEX_ENVIRONMENT" or tex.projection != "EQUIRECTANGULAR" or tex.image is None:
-        return None, "the world's colour is not an equirectangular Environment Texture"
-    if tex.inputs["Vector"].is_linked:
-        return None, "the world's Environment Texture has a mapping"
+        return None, "the world's colour is not an equirectangular Environment Texture", eye
+    rotation = _mapping_rotation(tex.inputs["Vector"])
+    if isinstance(rotation, str):
+        return None, rotation, eye
     image = tex.image
     key = ("image", image.name, image.filepath, tuple(image.size), image.is_dirty,
            image.colorspace_settings.name, strength)
-    return key, lambda: _image_radiance(image) * np.float32(strength)
+    return key, lambda: _image_radiance(image) * np.float32(strength), rotation
 
 
 def _write_tables(radiance: np.ndarray):
@@ -102,7 +147,7 @@ def world_tables(scene, build: bool = True) -> tuple[str, int, int, str]:
     """(folder, width, height, status) of the scene's world tables; folder "" when the shader cannot
     sample the world (status says why) or the world is black. ``build=False`` (panels) only reads
     what the last sync made."""
-    key, load = _world_source(scene)
+    key, load, _rotation = _world_source(scene)
     if key is None:
         return "", 0, 0, load
     hit = _cache.get(key)
@@ -123,14 +168,22 @@ def world_tables(scene, build: bool = True) -> tuple[str, int, int, str]:
     return folder, w, h, f"exact ({w} x {h} environment)"
 
 
-def write_world_inputs(node, folder: str, width: int, height: int) -> None:
-    """Point a fabric script node at the world tables (an older node without the inputs is skipped)."""
+def write_world_inputs(node, folder: str, width: int, height: int, rotation=None) -> None:
+    """Point a fabric script node at the world tables; ``rotation`` M (lookup direction = M d) goes in
+    as its rows (an older node without the inputs is skipped)."""
     if "WorldTable" not in node.inputs:
         return
-    values = {"WorldTable": folder, "WorldWidth": width, "WorldHeight": height, "FlipT": osl_flip_t()}
+    m = np.eye(3) if rotation is None else np.asarray(rotation, float)
+    values = {"WorldTable": folder, "WorldWidth": width, "WorldHeight": height, "FlipT": osl_flip_t(),
+              "WorldAxisX": tuple(m[0]), "WorldAxisY": tuple(m[1]), "WorldAxisZ": tuple(m[2])}
     for name, value in values.items():
-        if node.inputs[name].default_value != value:
-            node.inputs[name].default_value = value
+        if name not in node.inputs:
+            continue
+        sock = node.inputs[name]
+        current = sock.default_value
+        same = tuple(current) == tuple(value) if isinstance(value, tuple) else current == value
+        if not same:
+            sock.default_value = value
 
 
 def world_light_status(scene) -> str:

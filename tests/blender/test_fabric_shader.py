@@ -185,6 +185,22 @@ def test_exact_world_light_matches_eq_3_9_under_an_hdri(addon_module, tmp_path, 
     assert np.max(np.abs(model - ref) / ref) > 0.05  # the closures alone would not pass
 
 
+def test_exact_world_light_follows_a_turned_hdri(addon_module, tmp_path):
+    """An HDRI turned by 90 degrees with a Mapping node: the shader's sampled directions turn with it.
+    A large k_d makes Cycles' own world lighting (the diffuse closure) check the reference's turn."""
+    from material_structures.addon.fabric.verify import render_hdri_patch_vs_core
+    from material_structures.core.fabric import closure_accuracy as A
+    from material_structures.core.fabric.closure_fit import hemisphere_grid
+
+    views = hemisphere_grid(2, 2, offset=0.125)
+    rgb, ref, _ = render_hdri_patch_vs_core(A.sky_hdri(), str(tmp_path / "sky.exr"), views, kd=(0.3, 0.3, 0.3),
+                                            sigma=(0.3, 0.8), quat=tilted_quat(20.0, 40.0), samples=64,
+                                            rotation_z_deg=90.0)
+    rel = np.abs(rgb - ref) / ref
+    assert np.median(rel) <= 0.01
+    assert rel.max() <= 0.03
+
+
 def test_world_tables_follow_the_world(addon_module, tmp_path):
     """Which worlds the exact path samples, and that a change of the world gives new tables."""
     import bpy
