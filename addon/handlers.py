@@ -8,7 +8,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ..render.osl import refresh_embedded_scripts
-from .fabric.handlers import FABRIC_HANDLERS
+from .fabric.handlers import FABRIC_HANDLERS, sync_fabric_after_load
 from .scratch.handlers import SCRATCH_HANDLERS
 
 
@@ -16,6 +16,7 @@ from .scratch.handlers import SCRATCH_HANDLERS
 def on_load_post(*_args) -> None:
     """Shaders are embedded in the file; bring files from older versions (or an older extension) up to date."""
     refresh_embedded_scripts()  # compiles under Cycles + OSL lent to the scene, its own engine restored
+    sync_fabric_after_load()  # the world tables live in the temp folder: re-extract them for this file
 
 
 HANDLERS = [*FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_load_post), *SCRATCH_HANDLERS]

@@ -18,6 +18,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 MAX_LAMPS = 4
 LAMP_TYPE_CODES = {"POINT": 1, "SUN": 2, "SPOT": 3, "AREA_RECT": 4, "AREA_ELLIPSE": 5}
 
@@ -135,9 +137,9 @@ def write_lamp_inputs(node, lamps: list[ShaderLamp]) -> None:
 def _set(node, name, value) -> None:
     sock = node.inputs[name]
     current = sock.default_value
-    try:
-        same = tuple(current) == tuple(value)
-    except TypeError:
+    try:  # compared as the socket stores it (float32): a float64 value would never look equal
+        same = bool(np.array_equal(np.asarray(current, np.float32), np.asarray(value, np.float32)))
+    except (TypeError, ValueError):
         same = current == value
     if not same:  # avoid needless depsgraph updates (and handler recursion)
         sock.default_value = value

@@ -2,9 +2,10 @@
 
 Under lamps the fabric shader evaluates eq. 3.9 exactly for each lamp; under an environment (no
 lamps) it integrates eq. 3.9 against the world's radiance itself (exact world light,
-``core.fabric.environment_sampling``), so the pair shows the same model under both lightings. The HDRI is ``closure_accuracy.sky_hdri`` (sky
-gradient and a sun-like hot spot), the one the accuracy benchmark uses, turned so that the sun lights
-the ball from the camera's side as the studio's key lamp does.
+``core.fabric.environment_sampling``), so the pair shows the same model under both lightings. The
+HDRI is ``closure_accuracy.sky_hdri`` (sky gradient and a sun-like hot spot), the one the accuracy
+benchmark uses, turned so that the sun lights the ball from the camera's side as the studio's key
+lamp does.
 """
 
 from __future__ import annotations

@@ -38,6 +38,13 @@ def on_render_pre(scene, *_args) -> None:
         sync_fabric_lamps(scene, update_matrices=False)
 
 
+def sync_fabric_after_load() -> None:
+    """After a file is loaded (and its shaders refreshed): lamps and world into the fabric shaders."""
+    scene = bpy.context.scene
+    if scene is not None and _has_fabric():
+        sync_fabric_lamps(scene, update_matrices=False)
+
+
 @persistent
 def on_save_pre(*_args) -> None:
     """Pack painted fabric maps that changed since their last pack (a save in the middle of a stroke)."""

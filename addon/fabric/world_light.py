@@ -1,14 +1,17 @@
 """The fabric's exact world light: the scene's world environment handed to the fabric shader.
 
 Cycles gives OSL no access to the world, so the add-on reads it here: a world whose surface is a
-Background node fed by a constant colour or by an equirectangular Environment Texture (no mapping).
-Its radiance (colour x strength) becomes the importance-sampling tables of
-``core.fabric.environment_sampling``, written as two EXRs into a content-addressed folder
-``<tempdir>/material_structures_world/<sha1>/`` (identical content -> identical path, so OpenImageIO's
-texture cache never serves stale tables; a reopened file re-extracts them), and the folder goes into
-the script nodes' ``WorldTable`` input. Any other world (a sky texture, mapping nodes, mixes) leaves
-``WorldTable`` empty, and the fabric takes world light through its fitted closures as before;
-:func:`world_light_status` says which, for the material panel.
+Background node fed by a constant colour or by an equirectangular Environment Texture, the latter
+optionally through Texture Coordinate (Generated) -> Mapping (a rotation, uniform scale). Its radiance
+becomes the importance-sampling tables of ``core.fabric.environment_sampling`` (piecewise constant,
+at most 1024 texels wide), written as two EXRs into a content-addressed folder
+``<tempdir>/material_structures_world-<user>/<sha1>/`` (identical content -> identical path, so
+OpenImageIO's texture cache never serves stale tables; a reopened file re-extracts them), and the
+folder goes into the script nodes' ``WorldTable`` input; the Background's strength and the Mapping's
+rotation go into ``WorldStrength`` and ``WorldAxis*``, so turning or dimming the world rebuilds
+nothing. Any other world (a sky texture, other mappings, mixes) leaves ``WorldTable`` empty, and the
+fabric takes world light through its fitted closures as before; :func:`world_light_status` says
+which, for the material panel. Tables are only made where they render (Cycles with OSL).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from ...core.fabric.environment_sampling import EnvironmentMapError, build_envir
 from ...render import blender_version, osl_flip_t
 
 CACHE_DIR = "material_structures_world"
-_cache: dict = {}  # world key -> (folder, width, height) or (None, reason)
+_cache: dict = {}  # world key -> (folder, width, height, status); folder "" when it cannot be sampled
 
 
 def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -40,8 +43,13 @@ def _image_radiance(image) -> np.ndarray:
     image.pixels.foreach_get(buf)
     px = buf.reshape(h, w, image.channels)
     rgb = px[..., :3] if image.channels >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    if not image.is_float and image.colorspace_settings.name == "sRGB":
-        rgb = _srgb_to_linear(rgb.astype(np.float64)).astype(np.float32)
+    space = image.colorspace_settings.name
+    if not image.is_float:
+        if space == "sRGB":
+            rgb = _srgb_to_linear(rgb).astype(np.float32)
+        elif space not in {"Non-Color", "Linear Rec.709", "Linear", "Raw"}:
+            raise EnvironmentMapError(f"the world's 8-bit image '{image.name}' is in the {space} colour space; "
+                                      "use an HDR image, or sRGB / Non-Color")
     return rgb
 
 
@@ -108,10 +116,9 @@ def _world_source(scene):
     bg = surface.links[0].from_node
     if bg.type != "BACKGROUND" or bg.inputs["Strength"].is_linked:
         return None, "the world is not a Background node with a fixed strength", eye
-    strength = float(bg.inputs["Strength"].default_value)
     col = bg.inputs["Color"]
     if not col.is_linked:
-        color = tuple(float(c) * strength for c in col.default_value[:3])
+        color = tuple(float(c) for c in col.default_value[:3])
         return ("color", color), lambda: np.broadcast_to(np.float32(color), (2, 4, 3)).copy(), eye
     tex = col.links[0].from_node
     if tex.type != "TEX_ENVIRONMENT" or tex.projection != "EQUIRECTANGULAR" or tex.image is None:
@@ -120,9 +127,22 @@ def _world_source(scene):
     if isinstance(rotation, str):
         return None, rotation, eye
     image = tex.image
-    key = ("image", image.name, image.filepath, tuple(image.size), image.is_dirty,
-           image.colorspace_settings.name, strength)
-    return key, lambda: _image_radiance(image) * np.float32(strength), rotation
+    key = ("image", image.name, image.filepath, tuple(image.size), image.is_dirty, image.colorspace_settings.name)
+    return key, lambda: _image_radiance(image), rotation
+
+
+def world_strength(scene) -> float:
+    """The world Background's strength (1 for a world without nodes)."""
+    world = scene.world
+    tree = world.node_tree if world is not None else None
+    if tree is None or (blender_version()[0] < 5 and not world.use_nodes):
+        return 1.0
+    out = next((n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
+    out = out or next((n for n in tree.nodes if n.type == "OUTPUT_WORLD"), None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return 1.0
+    bg = out.inputs["Surface"].links[0].from_node
+    return float(bg.inputs["Strength"].default_value) if bg.type == "BACKGROUND" else 1.0
 
 
 def _write_tables(radiance: np.ndarray):
@@ -133,7 +153,8 @@ def _write_tables(radiance: np.ndarray):
     digest = hashlib.sha1()
     for name in sorted(files):
         digest.update(np.ascontiguousarray(files[name]).tobytes())
-    folder = os.path.join(tempfile.gettempdir(), CACHE_DIR, digest.hexdigest()[:20])
+    user = os.getuid() if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
+    folder = os.path.join(tempfile.gettempdir(), f"{CACHE_DIR}-{user}", digest.hexdigest()[:20])
     os.makedirs(folder, exist_ok=True)
     for name, arr in files.items():
         path = os.path.join(folder, name)
@@ -146,10 +167,13 @@ def _write_tables(radiance: np.ndarray):
 def world_tables(scene, build: bool = True) -> tuple[str, int, int, str]:
     """(folder, width, height, status) of the scene's world tables; folder "" when the shader cannot
     sample the world (status says why) or the world is black. ``build=False`` (panels) only reads
-    what the last sync made."""
+    what the last sync made. A failure (a bad image, a full disk) is remembered for that world, so it
+    is tried again only when the world changes."""
     key, load, _rotation = _world_source(scene)
     if key is None:
         return "", 0, 0, load
+    if not world_strength(scene) > 0:
+        return "", 0, 0, "the world is black"
     hit = _cache.get(key)
     if hit is None and not build:
         return "", 0, 0, "tables are made at the next render"
@@ -157,31 +181,36 @@ def world_tables(scene, build: bool = True) -> tuple[str, int, int, str]:
                                           for f in ("radiance.exr", "alias.exr"))):
         try:
             folder, w, h = _write_tables(load())
+            status = f"exact ({w} x {h} environment)" if folder else "the world is black"
         except EnvironmentMapError as exc:
-            return "", 0, 0, str(exc)
-        hit = (folder or "", w, h)
+            folder, w, h, status = None, 0, 0, str(exc)
+        except (OSError, MemoryError, ValueError) as exc:  # temp folder, disk, EXR writer
+            folder, w, h, status = None, 0, 0, f"the world's tables could not be written ({exc})"
+        hit = (folder or "", w, h, status)
         _cache.clear()  # one world at a time is plenty
         _cache[key] = hit
-    folder, w, h = hit
-    if not folder:
-        return "", 0, 0, "the world is black"
-    return folder, w, h, f"exact ({w} x {h} environment)"
+    return hit
 
 
-def write_world_inputs(node, folder: str, width: int, height: int, rotation=None) -> None:
+def write_world_inputs(node, folder: str, width: int, height: int, rotation=None, strength: float = 1.0) -> None:
     """Point a fabric script node at the world tables; ``rotation`` M (lookup direction = M d) goes in
-    as its rows (an older node without the inputs is skipped)."""
+    as its rows (an older node without the inputs is skipped). Values are compared as the sockets
+    store them (float32), so an unchanged world writes nothing (no depsgraph update, no handler loop)."""
     if "WorldTable" not in node.inputs:
         return
     m = np.eye(3) if rotation is None else np.asarray(rotation, float)
     values = {"WorldTable": folder, "WorldWidth": width, "WorldHeight": height, "FlipT": osl_flip_t(),
+              "WorldStrength": float(strength),
               "WorldAxisX": tuple(m[0]), "WorldAxisY": tuple(m[1]), "WorldAxisZ": tuple(m[2])}
     for name, value in values.items():
         if name not in node.inputs:
             continue
         sock = node.inputs[name]
         current = sock.default_value
-        same = tuple(current) == tuple(value) if isinstance(value, tuple) else current == value
+        if isinstance(value, str | int) and not isinstance(value, bool):
+            same = current == value
+        else:
+            same = np.array_equal(np.asarray(current, np.float32), np.asarray(value, np.float32))
         if not same:
             sock.default_value = value
 
@@ -189,6 +218,6 @@ def write_world_inputs(node, folder: str, width: int, height: int, rotation=None
 def world_light_status(scene) -> str:
     """One line for the panel: how world light reaches the fabric."""
     folder, _w, _h, status = world_tables(scene, build=False)
-    if not folder and status.startswith("tables"):
+    if not folder and status.startswith("tables are made"):
         return f"World light: exact ({status})"
     return f"World light: {status}" if folder else f"World light: fitted closures ({status})"

@@ -14,7 +14,9 @@ with probability P_j = b_j Omega_j / sum_i b_i Omega_i (b = mean of the texel's 
 its solid angle) by Walker's alias method (a uniform index i, kept if u < q_i, else its alias a_i:
 two or three table reads in the shader), then a direction uniform in solid angle inside the texel,
 so p(w) = P_j / Omega_j for w in texel j. Every texel with any radiance has P_j > 0: the estimator is
-unbiased for the piecewise-constant environment, which is what Cycles reads with closest lookup.
+unbiased for the piecewise-constant environment of the table: what Cycles reads with Closest
+interpolation at the table's size (maps wider than MAX_WIDTH are box-filtered first; with Linear
+interpolation Cycles blends neighbouring texels, a difference below a texel's width).
 
 Layout (Blender's world Environment Texture): u = atan2(d_y, -d_x) / 2 pi (mod 1), v = elevation / pi
 + 1/2, row 0 = the bottom row (v = 0). Texel (column c, row r) of a W x H map spans azimuth 2 pi [c,
@@ -64,15 +66,17 @@ def texel_solid_angles(h: int, w: int) -> np.ndarray:
 
 
 def downsample(img: np.ndarray, max_width: int = MAX_WIDTH) -> np.ndarray:
-    """Box-filter ``img`` (H, W, C) by an integer factor until W <= max_width (blocks of f or f - 1
-    texels where the size is not a multiple)."""
+    """Box-filter ``img`` (H, W, C) by about an integer factor f until W <= max_width and H <=
+    max_width / 2 (H // f x W // f blocks of nearly equal size where the size is not a multiple of f;
+    plain texel averages, not weighted by solid angle). Accumulates in float64 without a full-size
+    copy."""
     h, w = img.shape[:2]
-    f = int(np.ceil(w / max_width))
+    f = int(max(np.ceil(w / max_width), np.ceil(h / max(max_width // 2, 1))))
     if f <= 1:
         return img
     rows = np.linspace(0, h, max(h // f, 1) + 1).round().astype(int)
     cols = np.linspace(0, w, max(w // f, 1) + 1).round().astype(int)
-    s = np.add.reduceat(np.add.reduceat(img.astype(np.float64), rows[:-1], axis=0), cols[:-1], axis=1)
+    s = np.add.reduceat(np.add.reduceat(img, rows[:-1], axis=0, dtype=np.float64), cols[:-1], axis=1)
     area = np.diff(rows)[:, None, None] * np.diff(cols)[None, :, None]
     return (s / area).astype(np.float32)
 
@@ -109,7 +113,7 @@ def build_environment_table(radiance: np.ndarray, max_width: int = MAX_WIDTH) ->
         raise EnvironmentMapError("the environment holds NaN or infinite radiance")
     if np.any(img < 0):
         raise EnvironmentMapError(f"the environment holds negative radiance (down to {float(img.min()):.3g})")
-    img = downsample(img.astype(np.float32), max_width)
+    img = downsample(np.asarray(img, np.float32), max_width)
     h, w = img.shape[:2]
     weight = img.astype(np.float64).mean(axis=2) * texel_solid_angles(h, w)[:, None]
     total = weight.sum()

@@ -206,7 +206,7 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
     import bpy
 
     from material_structures.addon.fabric.verify import hdri_world
-    from material_structures.addon.fabric.world_light import world_light_status, world_tables
+    from material_structures.addon.fabric.world_light import world_light_status, world_strength, world_tables
     from material_structures.core.exr_io import read_exr
     from material_structures.core.fabric import closure_accuracy as A
     from material_structures.render import dark_world, reset_scene
@@ -217,8 +217,11 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
     world = dark_world(scene, strength=2.0)  # constant white x 2
     folder, w, h, status = world_tables(scene)
     assert folder and status.startswith("exact")
-    assert np.allclose(read_exr(f"{folder}/radiance.exr")[..., :3], 2.0)
+    assert np.allclose(read_exr(f"{folder}/radiance.exr")[..., :3], 1.0)  # the strength is a shader input
+    assert world_strength(scene) == 2.0
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 3.0
+    assert world_tables(scene)[0] == folder  # dimming rebuilds nothing
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 0.5, 0.25, 1.0)
     assert world_tables(scene)[0] not in ("", folder)
     world = hdri_world(scene, A.sky_hdri(16, 32), str(tmp_path / "sky.exr"))
     folder, w, h, status = world_tables(scene)
@@ -229,6 +232,13 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
     assert folder == "" and "Environment Texture" in status
     assert world_light_status(scene).startswith("World light: fitted closures")
     bpy.data.worlds.remove(world)
+    # a bad image: one line in the panel, remembered (not re-read on every update), closures instead
+    bad = A.sky_hdri(16, 32)
+    bad[3, 4, 0] = np.nan
+    world = hdri_world(scene, bad, str(tmp_path / "bad.exr"))
+    folder, *_ , status = world_tables(scene)
+    assert folder == "" and "NaN" in status
+    assert "NaN" in world_light_status(scene) and "fitted closures" in world_light_status(scene)
 
 
 def test_fitted_closures_fast_preview_point_lamp(addon_module):
