@@ -248,3 +248,15 @@ def test_fitted_closures_fast_preview_point_lamp(addon_module):
     rel = _errors(rgb, ref, mask)
     assert np.median(rel) <= 0.05  # numpy closure model: 0.016
     assert np.percentile(rel, 90) <= 0.10
+
+
+def test_mapping_rotation_is_blenders_xyz_euler(addon_module):
+    """The world Mapping's rotation matrix against Blender's own Euler (XYZ) conversion."""
+    from mathutils import Euler
+
+    from material_structures.addon.fabric.world_light import _euler_xyz
+
+    rng = np.random.default_rng(0)
+    for angles in rng.uniform(-np.pi, np.pi, size=(5, 3)):
+        want = np.array(Euler(tuple(angles), "XYZ").to_matrix())
+        np.testing.assert_allclose(_euler_xyz(*angles), want, atol=1e-6)
