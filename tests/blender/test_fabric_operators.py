@@ -176,3 +176,41 @@ def test_fabric_material_cli_writes_a_blend(tmp_path):
         timeout=300,
     )
     assert bad.returncode == 2 and "params.json" in bad.stderr
+
+
+def test_syncing_an_unchanged_scene_writes_nothing(addon_module, tmp_path):
+    """The depsgraph handler copies lamps and the world into the shader; once they are in, another
+    sync must not write the sockets again (a float64 value never equals its float32 socket: every
+    sync would tag the material and restart the viewport render)."""
+    from material_structures.addon.fabric.material import fabric_script_nodes
+    from material_structures.addon.fabric.verify import hdri_world
+    from material_structures.core.fabric import closure_accuracy as A
+
+    scene, _obj = _scene_with_plane()
+    bpy.ops.material_structures.fabric_new_material(preset="VELVET")
+    light = bpy.data.lights.new("Key", "POINT")
+    light.energy = 10.0  # its intensity 10 / 4 pi is not a float32
+    lamp = bpy.data.objects.new("Key", light)
+    scene.collection.objects.link(lamp)
+    world = hdri_world(scene, A.sky_hdri(16, 32), str(tmp_path / "sky.exr"), rotation_z_deg=37.0)
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.7
+    bpy.context.view_layer.update()
+    bpy.context.view_layer.update()
+    node = next(fabric_script_nodes())
+    assert node.inputs["WorldTable"].default_value and node.inputs["WorldWidth"].default_value == 32
+    assert node.inputs["WorldStrength"].default_value == pytest.approx(0.7)
+    assert node.inputs["WorldAxisX"].default_value[1] == pytest.approx(-np.sin(np.radians(37.0)), abs=1e-6)
+    seen = []
+
+    def spy(_scene, depsgraph):
+        seen.extend(type(u.id).__name__ for u in depsgraph.updates)
+
+    from material_structures.addon.fabric.material import sync_fabric_lamps
+
+    bpy.app.handlers.depsgraph_update_post.append(spy)
+    try:
+        sync_fabric_lamps(scene)  # what the handler does on the next change anywhere in the scene
+        bpy.context.view_layer.update()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(spy)
+    assert not seen, seen
