@@ -122,24 +122,26 @@ def write_lamp_inputs(node, lamps: list[ShaderLamp]) -> None:
         if f"{prefix}Type" not in node.inputs:
             return
         lamp = lamps[k - 1] if k <= len(lamps) else None
-        _set(node, f"{prefix}Type", lamp.type_code if lamp else 0)
+        set_if_changed(node, f"{prefix}Type", lamp.type_code if lamp else 0)
         if lamp:
-            _set(node, f"{prefix}Position", lamp.position)
-            _set(node, f"{prefix}Direction", lamp.direction)
-            _set(node, f"{prefix}Color", (*lamp.color, 1.0))
-            _set(node, f"{prefix}SpotCos", lamp.spot_cos)
-            _set(node, f"{prefix}SpotBlend", lamp.spot_blend)
+            set_if_changed(node, f"{prefix}Position", lamp.position)
+            set_if_changed(node, f"{prefix}Direction", lamp.direction)
+            set_if_changed(node, f"{prefix}Color", (*lamp.color, 1.0))
+            set_if_changed(node, f"{prefix}SpotCos", lamp.spot_cos)
+            set_if_changed(node, f"{prefix}SpotBlend", lamp.spot_blend)
             if f"{prefix}AxisU" in node.inputs:
-                _set(node, f"{prefix}AxisU", lamp.axis_u)
-                _set(node, f"{prefix}AxisV", lamp.axis_v)
+                set_if_changed(node, f"{prefix}AxisU", lamp.axis_u)
+                set_if_changed(node, f"{prefix}AxisV", lamp.axis_v)
 
 
-def _set(node, name, value) -> None:
+def set_if_changed(node, name, value) -> None:
+    """Write ``value`` into the node's input ``name`` unless it holds it already, compared as the socket
+    stores it (a needless write tags the material: a depsgraph update, and handler recursion)."""
     sock = node.inputs[name]
     current = sock.default_value
     try:  # compared as the socket stores it (float32): a float64 value would never look equal
         same = bool(np.array_equal(np.asarray(current, np.float32), np.asarray(value, np.float32)))
     except (TypeError, ValueError):
         same = current == value
-    if not same:  # avoid needless depsgraph updates (and handler recursion)
+    if not same:
         sock.default_value = value

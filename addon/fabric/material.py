@@ -25,7 +25,7 @@ from ...render import load_osl_script
 from ..common import add_eevee_fallback, add_group_input, group_material, group_node, wire_lamp_shader_group
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .maps import CLOSURE_KEYS, closure_maps_to_images, load_fit_folder, maps_to_images
-from .world_light import world_rotation, world_strength, world_tables, write_world_inputs
+from .world_light import world_light_inputs, write_world_inputs
 
 GROUP_NAME = "SGGX Fabric"
 VIEWPORT_OUTPUT = "Viewport"
@@ -443,12 +443,11 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
     nodes = list(fabric_script_nodes())
     for node in nodes:
         write_lamp_inputs(node, lamps)
-    folder, width, height = "", 0, 0
-    if nodes and exact_path_renders(scene):  # tables only where the exact path renders
-        folder, width, height, _status = world_tables(scene)
-    rotation, strength = world_rotation(scene), world_strength(scene)
-    for node in nodes:
-        write_world_inputs(node, folder, width, height, rotation, strength)
+    if nodes:  # tables only where the exact path renders
+        folder, width, height, _status, rotation, strength = world_light_inputs(
+            scene, tables=exact_path_renders(scene))
+        for node in nodes:
+            write_world_inputs(node, folder, width, height, rotation, strength)
     receivers = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
     in_shader = {obj.name for obj, _ in pairs}
     for obj in scene.objects:

@@ -25,6 +25,7 @@ import numpy as np
 from ...core.exr_io import write_exr
 from ...core.fabric.environment_sampling import EnvironmentMapError, build_environment_table, shader_files
 from ...render import blender_version, osl_flip_t
+from ..lamp_sync import set_if_changed
 
 CACHE_DIR = "material_structures_world"
 _cache: dict = {}  # world key -> (folder, width, height, status); folder "" when it cannot be sampled
@@ -90,9 +91,18 @@ def _mapping_rotation(vector_socket):
     return r.T if node.vector_type == "TEXTURE" else r
 
 
-def world_rotation(scene) -> np.ndarray:
-    """M of the world's Environment Texture lookup (lookup direction = M d; identity when none)."""
-    return _world_source(scene)[2]
+def _world_background(world):
+    """The node feeding the active World Output's Surface; None for a world without nodes (a colour),
+    or a reason string when nothing feeds it."""
+    tree = world.node_tree
+    if tree is None or (blender_version()[0] < 5 and not world.use_nodes):  # 5.x worlds always use nodes
+        return None
+    out = next((n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
+    out = out or next((n for n in tree.nodes if n.type == "OUTPUT_WORLD"), None)
+    surface = out.inputs["Surface"] if out is not None else None
+    if surface is None or not surface.is_linked:
+        return "the world has no surface"
+    return surface.links[0].from_node
 
 
 def _world_source(scene):
@@ -102,18 +112,12 @@ def _world_source(scene):
     world = scene.world
     if world is None:
         return None, "no world", eye
-    tree = world.node_tree
-    if blender_version()[0] < 5 and not world.use_nodes:  # 5.x worlds always use their nodes
-        tree = None
-    if tree is None:
+    bg = _world_background(world)
+    if bg is None:
         color = tuple(float(c) for c in world.color)
         return ("color", color), lambda: np.broadcast_to(np.float32(color), (2, 4, 3)).copy(), eye
-    out = next((n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
-    out = out or next((n for n in tree.nodes if n.type == "OUTPUT_WORLD"), None)
-    surface = out.inputs["Surface"] if out is not None else None
-    if surface is None or not surface.is_linked:
-        return None, "the world has no surface", eye
-    bg = surface.links[0].from_node
+    if isinstance(bg, str):
+        return None, bg, eye
     if bg.type != "BACKGROUND" or bg.inputs["Strength"].is_linked:
         return None, "the world is not a Background node with a fixed strength", eye
     col = bg.inputs["Color"]
@@ -133,16 +137,10 @@ def _world_source(scene):
 
 def world_strength(scene) -> float:
     """The world Background's strength (1 for a world without nodes)."""
-    world = scene.world
-    tree = world.node_tree if world is not None else None
-    if tree is None or (blender_version()[0] < 5 and not world.use_nodes):
+    bg = _world_background(scene.world) if scene.world is not None else None
+    if bg is None or isinstance(bg, str) or bg.type != "BACKGROUND":
         return 1.0
-    out = next((n for n in tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
-    out = out or next((n for n in tree.nodes if n.type == "OUTPUT_WORLD"), None)
-    if out is None or not out.inputs["Surface"].is_linked:
-        return 1.0
-    bg = out.inputs["Surface"].links[0].from_node
-    return float(bg.inputs["Strength"].default_value) if bg.type == "BACKGROUND" else 1.0
+    return float(bg.inputs["Strength"].default_value)
 
 
 def _write_tables(radiance: np.ndarray):
@@ -164,19 +162,24 @@ def _write_tables(radiance: np.ndarray):
     return folder, w, h
 
 
-def world_tables(scene, build: bool = True) -> tuple[str, int, int, str]:
-    """(folder, width, height, status) of the scene's world tables; folder "" when the shader cannot
-    sample the world (status says why) or the world is black. ``build=False`` (panels) only reads
-    what the last sync made. A failure (a bad image, a full disk) is remembered for that world, so it
-    is tried again only when the world changes."""
-    key, load, _rotation = _world_source(scene)
+def world_light_inputs(scene, build: bool = True, tables: bool = True):
+    """(folder, width, height, status, M, strength) of the scene's world, parsed once: the tables'
+    folder ("" when the shader cannot sample the world, status says why, or the world is black),
+    the lookup rotation M (lookup direction = M d) and the Background's strength. ``build=False``
+    (panels) only reads what the last sync made; ``tables=False`` (no Cycles + OSL) makes none. A
+    failure (a bad image, a full disk) is remembered for that world, so it is tried again only when
+    the world changes."""
+    key, load, rotation = _world_source(scene)
+    strength = world_strength(scene)
+    if not tables:
+        return "", 0, 0, "not rendered with Cycles and OSL", rotation, strength
     if key is None:
-        return "", 0, 0, load
-    if not world_strength(scene) > 0:
-        return "", 0, 0, "the world is black"
+        return "", 0, 0, load, rotation, strength
+    if not strength > 0:
+        return "", 0, 0, "the world is black", rotation, strength
     hit = _cache.get(key)
     if hit is None and not build:
-        return "", 0, 0, "tables are made at the next render"
+        return "", 0, 0, "tables are made at the next render", rotation, strength
     if hit is None or (hit[0] and not all(os.path.exists(os.path.join(hit[0], f))
                                           for f in ("radiance.exr", "alias.exr"))):
         try:
@@ -189,13 +192,18 @@ def world_tables(scene, build: bool = True) -> tuple[str, int, int, str]:
         hit = (folder or "", w, h, status)
         _cache.clear()  # one world at a time is plenty
         _cache[key] = hit
-    return hit
+    return (*hit, rotation, strength)
+
+
+def world_tables(scene, build: bool = True) -> tuple[str, int, int, str]:
+    """(folder, width, height, status) of :func:`world_light_inputs`."""
+    return world_light_inputs(scene, build)[:4]
 
 
 def write_world_inputs(node, folder: str, width: int, height: int, rotation=None, strength: float = 1.0) -> None:
     """Point a fabric script node at the world tables; ``rotation`` M (lookup direction = M d) goes in
-    as its rows (an older node without the inputs is skipped). Values are compared as the sockets
-    store them (float32), so an unchanged world writes nothing (no depsgraph update, no handler loop)."""
+    as its rows (an older node without the inputs is skipped); an unchanged world writes nothing
+    (``lamp_sync.set_if_changed``)."""
     if "WorldTable" not in node.inputs:
         return
     m = np.eye(3) if rotation is None else np.asarray(rotation, float)
@@ -203,16 +211,8 @@ def write_world_inputs(node, folder: str, width: int, height: int, rotation=None
               "WorldStrength": float(strength),
               "WorldAxisX": tuple(m[0]), "WorldAxisY": tuple(m[1]), "WorldAxisZ": tuple(m[2])}
     for name, value in values.items():
-        if name not in node.inputs:
-            continue
-        sock = node.inputs[name]
-        current = sock.default_value
-        if isinstance(value, str | int) and not isinstance(value, bool):
-            same = current == value
-        else:
-            same = np.array_equal(np.asarray(current, np.float32), np.asarray(value, np.float32))
-        if not same:
-            sock.default_value = value
+        if name in node.inputs:
+            set_if_changed(node, name, value)
 
 
 def world_light_status(scene) -> str:

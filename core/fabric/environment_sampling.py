@@ -115,13 +115,14 @@ def build_environment_table(radiance: np.ndarray, max_width: int = MAX_WIDTH) ->
         raise EnvironmentMapError(f"the environment holds negative radiance (down to {float(img.min()):.3g})")
     img = downsample(np.asarray(img, np.float32), max_width)
     h, w = img.shape[:2]
-    weight = img.astype(np.float64).mean(axis=2) * texel_solid_angles(h, w)[:, None]
+    omega = texel_solid_angles(h, w)[:, None]
+    weight = img.astype(np.float64).mean(axis=2) * omega
     total = weight.sum()
     if not total > 0:
         return None
     p = (weight / total).ravel()
     q, alias = _alias_table(p)
-    density = (p.reshape(h, w) / texel_solid_angles(h, w)[:, None])
+    density = p.reshape(h, w) / omega
     return EnvironmentTable(img, q.reshape(h, w), alias.reshape(h, w), density)
 
 
