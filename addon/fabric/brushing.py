@@ -13,7 +13,7 @@ maps segment by segment: a segment that changes sigma or the basis looks the clo
 texels up in the precomputed table (``core.fabric.closure_table``, multilinear in the fibre geometry,
 about 3 us per texel instead of 0.1-0.2 s per distinct geometry for the optimisation) and records the
 closure windows it overwrote, so the stroke's undo restores them. The closure images are uploaded
-with the maps at most every half second during a stroke (six more 2048 x 2048 uploads per segment
+with the maps at most every half second during a stroke (eight more 2048 x 2048 uploads per segment
 would double an update) and at its end. Colour strokes (k_d, k_s) leave the closures as they are:
 the fit is of the k_s = 1 term.
 """
@@ -29,8 +29,8 @@ import numpy as np
 from ...core.fabric import brushing as core_brush
 from ...core.fabric.closure_table import lookup_closure_texels
 from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps, load_params
-from .maps import CLOSURE_CHANNELS, CLOSURE_KEYS, btf_quat_to_mesh
-from .material import material_closure_images, material_map_images
+from .maps import CLOSURE_CHANNELS, CLOSURE_KEYS, WEIGHT_KEYS, btf_quat_to_mesh
+from .material import complete_closure_images, material_map_images
 
 MODES = ("COMB", "RECOLOR", "SMOOTH", "ANISOTROPY", "DATA_DRIVEN")
 MAX_UNDO = 32
@@ -166,8 +166,8 @@ class BrushSession:
         rows, cols = np.nonzero(mask)
         rows, cols = rows + r0, cols + c0
         wts, shp, scl = lookup_closure_texels(self.top["sigma"][rows, cols], self.top["basis"][rows, cols])
-        new = {key: wts[:, j, :] for j, key in enumerate(CLOSURE_KEYS[:4])}
-        new["shape"], new["ggx_scale"] = shp, scl
+        new = {key: wts[:, j, :] for j, key in enumerate(WEIGHT_KEYS)}
+        new["shape"], new["shape2"], new["ggx_scale"] = shp[:, :4], shp[:, 4:6], scl
         h = self.height
         for key in CLOSURE_KEYS:
             if self._stroke is not None:
@@ -214,7 +214,7 @@ class BrushSession:
         return True
 
     def flush(self, closures: bool | None = None) -> None:
-        """Upload the changed images to Blender (what the viewport and renders see). The six closure
+        """Upload the changed images to Blender (what the viewport and renders see). The eight closure
         images (about 10 ms each at 2048 x 2048) go up with the maps at most every
         ``CLOSURE_UPLOAD_S`` during a stroke, and always when ``closures`` is True (stroke end, undo)."""
         now = time.perf_counter()
@@ -250,7 +250,7 @@ _SESSIONS: dict[str, BrushSession] = {}  # material name -> its brush session, f
 def session_for(mat) -> BrushSession:
     """The brush session of ``mat`` (rebuilt when its images changed)."""
     images = material_map_images(mat)
-    closures = material_closure_images(mat)
+    closures = complete_closure_images(mat)
     session = _SESSIONS.get(mat.name)
     if session is not None:
         same = all(session.images.get(k) == images.get(k) for k in session.images) and all(

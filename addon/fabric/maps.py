@@ -51,27 +51,30 @@ def load_fit_folder(params_dir: str) -> FabricMaps:
 
 
 # The fitted closure maps (core.fabric.closure_fit.ClosureMaps) as images: one RGBA image per closure
-# holding its four view-basis coefficients, the shape (r_s, s_v, k_v, k_g) and the GGX scale (R).
-# They are frame-free (built from n and the fibre axes), so BTF and mesh frame share them.
-CLOSURE_KEYS = ("diffuse", "sheen", "velvet", "ggx", "shape", "ggx_scale")
-CLOSURE_CHANNELS = {"diffuse": 4, "sheen": 4, "velvet": 4, "ggx": 4, "shape": 4, "ggx_scale": 1}
+# holding its four view-basis coefficients, the shape (r_s, s_v, k_v, k_g), the GGX scale (R) and the
+# second velvet's shape (s_v2, k_v2). They are frame-free (built from n and the fibre axes), so BTF and
+# mesh frame share them.
+CLOSURE_KEYS = ("diffuse", "sheen", "velvet", "ggx", "shape", "ggx_scale", "velvet2", "shape2")
+WEIGHT_KEYS = ("diffuse", "sheen", "velvet", "ggx", "velvet2")  # ClosureMaps.weights[:, :, j] order
+CLOSURE_CHANNELS = {"diffuse": 4, "sheen": 4, "velvet": 4, "ggx": 4, "shape": 4, "ggx_scale": 1, "velvet2": 4,
+                    "shape2": 2}
 
 
 def closure_arrays(cm: ClosureMaps) -> dict:
-    """The six (H, W, C) arrays of the closure images, by key (row 0 = top)."""
-    out = {key: cm.weights[:, :, j, :] for j, key in enumerate(CLOSURE_KEYS[:4])}
-    out["shape"], out["ggx_scale"] = cm.shape, cm.ggx_scale
+    """The (H, W, C) arrays of the closure images, by key (row 0 = top)."""
+    out = {key: cm.weights[:, :, j, :] for j, key in enumerate(WEIGHT_KEYS)}
+    out["shape"], out["shape2"], out["ggx_scale"] = cm.shape[:, :, :4], cm.shape[:, :, 4:6], cm.ggx_scale
     return out
 
 
 def closure_maps_to_images(cm: ClosureMaps, prefix: str) -> dict:
-    """Six new packed Non-Color images of fitted closure maps, owned by the material about to use them."""
+    """New packed Non-Color images of fitted closure maps, owned by the material about to use them."""
     arrays = closure_arrays(cm)
     return {key: array_to_image(arrays[key], f"{prefix} fit {key}", replace=False) for key in CLOSURE_KEYS}
 
 
 def images_to_closure_maps(images: dict) -> ClosureMaps:
-    """Read the six closure images back (inverse of :func:`closure_maps_to_images`)."""
+    """Read the closure images back (inverse of :func:`closure_maps_to_images`)."""
     a = {key: image_to_array(images[key], CLOSURE_CHANNELS[key]) for key in CLOSURE_KEYS}
-    return ClosureMaps(weights=np.stack([a[k] for k in CLOSURE_KEYS[:4]], axis=2), shape=a["shape"],
-                       ggx_scale=a["ggx_scale"])
+    return ClosureMaps(weights=np.stack([a[k] for k in WEIGHT_KEYS], axis=2),
+                       shape=np.concatenate([a["shape"], a["shape2"]], axis=2), ggx_scale=a["ggx_scale"])

@@ -19,10 +19,18 @@ from __future__ import annotations
 import os
 
 import bpy
+import numpy as np
 
-from ...core.fabric.closure_fit import CLOSURE_FILES, FIT_KEY_BUDGET, fit_closure_maps, load_closure_maps
+from ...core.fabric.closure_fit import CLOSURE_FILES, FIT_KEY_BUDGET, SHAPE_FILES, fit_closure_maps, load_closure_maps
 from ...render import load_osl_script
-from ..common import add_eevee_fallback, add_group_input, group_material, group_node, wire_lamp_shader_group
+from ..common import (
+    add_eevee_fallback,
+    add_group_input,
+    array_to_image,
+    group_material,
+    group_node,
+    wire_lamp_shader_group,
+)
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .maps import CLOSURE_KEYS, closure_maps_to_images, load_fit_folder, maps_to_images
 from .world_light import world_light_inputs, write_world_inputs
@@ -64,7 +72,13 @@ FIT_INPUTS = [
 ]
 # Exact world light (world_light.py): on by default; off gives the world to the fitted closures.
 WORLD_INPUTS = [("ExactWorld", "NodeSocketInt", 1, 0, 1)]
-FIT_INPUTS = FIT_INPUTS + WORLD_INPUTS  # added to groups from older files like the fit inputs
+# The second velvet of the fitted mix (weight 0, i.e. the mix of older files, until its images are linked).
+VELVET2_INPUTS = [
+    ("FitVelvet2", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
+    ("FitVelvet2A", "NodeSocketFloat", 0.0, 0.0, 1e4),
+    ("FitShape2", "NodeSocketColor", (0.4, 0.0, 0.0, 1.0), None, None),
+]
+FIT_INPUTS = FIT_INPUTS + WORLD_INPUTS + VELVET2_INPUTS  # added to groups from older files like the fit inputs
 GROUP_INPUTS = GROUP_INPUTS + FIT_INPUTS
 SHADER_INPUTS = [name for name, *_ in GROUP_INPUTS] + ["Tangent"]
 # closure image key -> (group input of its Color output, group input of its Alpha output)
@@ -75,7 +89,10 @@ CLOSURE_SOCKETS = {
     "ggx": ("FitGGX", "FitGGXA"),
     "shape": ("FitShape", "FitShapeA"),
     "ggx_scale": ("FitGGXScale", None),
+    "velvet2": ("FitVelvet2", "FitVelvet2A"),
+    "shape2": ("FitShape2", None),
 }
+ONE_CHANNEL = {"ggx_scale"}  # closure images read through their R channel into a float input
 
 
 def _load_script(tree, scene):
@@ -236,7 +253,7 @@ def create_fabric_material(
 
     ``maps`` may hold Blender images under ``"kd"``, ``"ks"``, ``"sigma"`` (R = sigma_x,
     G = sigma_y) and ``"basis"`` (RGBA = quaternion w, x, y, z); each is read with closest-texel
-    sampling at the UV map and overrides the constant. ``closures``: the six fitted closure images
+    sampling at the UV map and overrides the constant. ``closures``: the fitted closure images
     (``maps.closure_maps_to_images``, keys ``maps.CLOSURE_KEYS``) that world and indirect light see.
     """
     scene = scene or bpy.context.scene
@@ -262,15 +279,42 @@ def link_closure_images(mat, closures: dict) -> None:
     tree = mat.node_tree
     gnode = fabric_group_node(mat)
     old = material_closure_images(mat)
-    if set(old) == set(CLOSURE_KEYS):
-        for node in tree.nodes:
-            if node.type == "TEX_IMAGE" and node.name.startswith(CLOSURE_NODE_PREFIX):
-                node.image = closures[node.name[len(CLOSURE_NODE_PREFIX):]]
-        gnode.inputs["UseFittedClosures"].default_value = 1
-        return
+    for node in tree.nodes:
+        if node.type == "TEX_IMAGE" and node.name.startswith(CLOSURE_NODE_PREFIX):
+            node.image = closures[node.name[len(CLOSURE_NODE_PREFIX):]]
+    missing = [key for key in CLOSURE_KEYS if key not in old]
+    if missing:
+        y = -900 - 60 * (len(CLOSURE_KEYS) - len(missing))
+        _add_closure_nodes(mat, {key: closures[key] for key in missing}, y=y)
+    gnode.inputs["UseFittedClosures"].default_value = 1
+
+
+def complete_closure_images(mat) -> dict:
+    """The closure images of ``mat``, completed for a material from a file made before the second velvet:
+    its (missing) images are added at weight 0, which is the mix its closures were fitted as. Returns
+    the images by key; empty (and nothing added) for a material without fitted closures."""
+    have = material_closure_images(mat)
+    missing = [key for key in CLOSURE_KEYS if key not in have]
+    if not have or not missing or set(missing) - {"velvet2", "shape2"}:
+        return have
+    w, h = have["shape"].size
+    name = have["shape"].name.rsplit(" fit ", 1)[0]
+    arrays = {"velvet2": np.zeros((h, w, 4), np.float32),
+              "shape2": np.broadcast_to(np.array([0.4, 0.0], np.float32), (h, w, 2))}
+    added = {key: array_to_image(arrays[key], f"{name} fit {key}", replace=False) for key in missing}
+    _add_closure_nodes(mat, added, y=-900 - 60 * len(have))
+    return material_closure_images(mat)
+
+
+def _add_closure_nodes(mat, closures: dict, y: int) -> None:
+    tree = mat.node_tree
+    gnode = fabric_group_node(mat)
+    if any(CLOSURE_SOCKETS[key][0] not in gnode.inputs for key in closures):
+        ensure_fit_inputs(gnode.node_tree)  # a group from a file made before these inputs
     uv = next((n for n in tree.nodes if n.type == "UVMAP"), None) or tree.nodes.new("ShaderNodeUVMap")
-    y = -900
     for key in CLOSURE_KEYS:
+        if key not in closures:
+            continue
         tex = tree.nodes.new("ShaderNodeTexImage")
         tex.name = tex.label = CLOSURE_NODE_PREFIX + key
         tex.image = closures[key]
@@ -281,7 +325,7 @@ def link_closure_images(mat, closures: dict) -> None:
         y -= 60
         tree.links.new(uv.outputs["UV"], tex.inputs["Vector"])
         color_in, alpha_in = CLOSURE_SOCKETS[key]
-        if alpha_in is None:  # one channel: R
+        if key in ONE_CHANNEL:
             sep = tree.nodes.new("ShaderNodeSeparateColor")
             sep.location = (-400, y + 60)
             sep.hide = True
@@ -289,8 +333,8 @@ def link_closure_images(mat, closures: dict) -> None:
             tree.links.new(sep.outputs[0], gnode.inputs[color_in])
         else:
             tree.links.new(tex.outputs["Color"], gnode.inputs[color_in])
-            tree.links.new(tex.outputs["Alpha"], gnode.inputs[alpha_in])
-    gnode.inputs["UseFittedClosures"].default_value = 1
+            if alpha_in is not None:
+                tree.links.new(tex.outputs["Alpha"], gnode.inputs[alpha_in])
 
 
 def material_closure_images(mat) -> dict:
@@ -315,7 +359,7 @@ def fit_closure_images(maps, prefix: str, progress=None, cache: dict | None = No
 
 def _folder_closures(params_dir: str, shape):
     """Closure maps saved beside a fit folder's maps (the fitter writes them), if complete and of its size."""
-    names = [*CLOSURE_FILES, "closure_shape.exr", "closure_ggx_scale.exr"]
+    names = [*CLOSURE_FILES, *SHAPE_FILES]
     if not all(os.path.isfile(os.path.join(params_dir, n)) for n in names):
         return None
     try:

@@ -35,12 +35,12 @@ from .maps import CLOSURE_KEYS, images_to_closure_maps, images_to_maps, maps_to_
 from .material import (
     GROUP_NAME,
     MARKER,
+    complete_closure_images,
     create_fabric_material,
     ensure_fabric_group,
     fabric_material,
     fit_closure_images,
     import_fit_material,
-    material_closure_images,
     material_map_images,
     sync_fabric_lamps,
 )
@@ -122,7 +122,7 @@ class MS_OT_fabric_save_maps(FolderPicker, bpy.types.Operator):
             maps = images_to_maps(material_map_images(mat))
             folder = bpy.path.abspath(self.directory)
             save_params(folder, maps, {"source": "Blender: " + mat.name})
-            closures = material_closure_images(mat)
+            closures = complete_closure_images(mat)
             if set(closures) == set(CLOSURE_KEYS):
                 save_closure_maps(folder, images_to_closure_maps(closures))
         except (OSError, ValueError) as exc:

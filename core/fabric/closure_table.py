@@ -14,7 +14,7 @@ Only nodes with sigma_x <= sigma_y are fitted (the rest follow); a tilt of 0, or
 makes the twist irrelevant.
 
 Interpolated parameters are those of the mix in ``closure_fit`` (view-basis coefficients, sheen
-roughness, velvet sigma and tilt, GGX tilt and alpha scale); between nodes the mix is not the fit of
+roughness, both velvets' sigma and tilt, GGX tilt and alpha scale); between nodes the mix is not the fit of
 that key but a blend of its neighbours' fits: its accuracy against the exact fit is measured in
 docs/accuracy.md. The table is built by ``python -m material_structures.core.fabric.closure_table``
 (a few minutes) and ships as ``closure_table.npz`` beside this module.
@@ -33,7 +33,7 @@ LOG_SIGMA = np.linspace(np.log(0.05), np.log(4.0), 12)
 TILT = np.arange(0.0, 90.0 + 1e-9, 10.0)
 TWIST = np.arange(0.0, 90.0 + 1e-9, 22.5)
 NODES = (LOG_SIGMA, LOG_SIGMA, TILT, TWIST)
-N_PARAMS = 21  # 16 view-basis coefficients, 4 shape parameters, 1 GGX alpha scale
+N_PARAMS = 27  # 20 view-basis coefficients, 6 shape parameters, 1 GGX alpha scale
 TABLE_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "closure_table.npz")
 
 
@@ -85,7 +85,7 @@ def build_table(progress=None, workers: int = 1, chunk: int = 16) -> dict:
 def _fit_chunk(keys: np.ndarray) -> np.ndarray:
     sigma, quat = _canonical_params(keys)
     w, s, c, _ = fit_keys(sigma, quat, chunk=len(keys))
-    return np.concatenate([w.reshape(len(keys), 16), s, c], axis=1)
+    return np.concatenate([w.reshape(len(keys), 20), s, c], axis=1)
 
 
 def _dense(keys: np.ndarray, params: np.ndarray) -> np.ndarray:
@@ -115,7 +115,7 @@ def load_table(path: str = TABLE_PATH) -> np.ndarray:
 
 
 def interpolate(keys: np.ndarray, grid: np.ndarray | None = None) -> np.ndarray:
-    """Multilinear interpolation of the fitted parameters at continuous canonical keys (N, 4) -> (N, 21)."""
+    """Multilinear interpolation of the fitted parameters at continuous canonical keys (N, 4) -> (N, 27)."""
     grid = load_table() if grid is None else grid
     k = _reduce(np.asarray(keys, dtype=np.float64))
     lo, frac = [], []
@@ -136,14 +136,14 @@ def interpolate(keys: np.ndarray, grid: np.ndarray | None = None) -> np.ndarray:
 
 def lookup_closure_texels(sigma, basis, grid: np.ndarray | None = None):
     """Closure parameters of N texels by table lookup; returns what ``closure_fit.fit_closure_texels``
-    returns: (weights (N, 4, 4), shape (N, 4), ggx_scale (N, 1)) float32."""
+    returns: (weights (N, 5, 4), shape (N, 6), ggx_scale (N, 1)) float32."""
     sigma = np.asarray(sigma, float).reshape(-1, 2)
     basis = np.asarray(basis, float).reshape(-1, 4)
     keys = canonical_keys(sigma, basis, quantum=(1e-9, 1e-9, 1e-9))
     p = interpolate(keys, grid)
     n = len(p)
-    return (p[:, :16].reshape(n, 4, 4).astype(np.float32), p[:, 16:20].astype(np.float32),
-            p[:, 20:21].astype(np.float32))
+    return (p[:, :20].reshape(n, 5, 4).astype(np.float32), p[:, 20:26].astype(np.float32),
+            p[:, 26:27].astype(np.float32))
 
 
 def main() -> None:

@@ -89,7 +89,7 @@ def test_import_reads_closures_the_fitter_saved_and_save_writes_them(addon_modul
     from material_structures.core.fabric.closure_fit import ClosureMaps, load_closure_maps, save_closure_maps
 
     _write_fit(tmp_path / "fit")
-    marked = ClosureMaps(weights=np.full((3, 4, 4, 4), 0.25, np.float32), shape=np.full((3, 4, 4), 0.5, np.float32),
+    marked = ClosureMaps(weights=np.full((3, 4, 5, 4), 0.25, np.float32), shape=np.full((3, 4, 6), 0.5, np.float32),
                          ggx_scale=np.full((3, 4, 1), 1.4, np.float32))
     save_closure_maps(tmp_path / "fit", marked)
     _, obj = _scene_with_plane()
@@ -98,6 +98,35 @@ def test_import_reads_closures_the_fitter_saved_and_save_writes_them(addon_modul
     np.testing.assert_array_equal(got.weights, marked.weights)
     assert bpy.ops.material_structures.fabric_save_maps(directory=str(tmp_path / "saved")) == {"FINISHED"}
     np.testing.assert_array_equal(load_closure_maps(tmp_path / "saved").ggx_scale, marked.ggx_scale)
+
+
+def test_material_from_before_the_second_velvet_is_completed_at_weight_zero(addon_module, tmp_path):
+    """A fabric material saved before the mix had a second velvet has six closure images. Saving its
+    maps (and brushing it) first adds the two missing images with w_v2 = 0, which is the mix those
+    closures were fitted as: the five weights and the first four shape values are kept bit for bit.
+    Without the completion the save would skip the closures (it writes them only when all are there)."""
+    from material_structures.addon.fabric.maps import CLOSURE_KEYS, images_to_closure_maps
+    from material_structures.addon.fabric.material import complete_closure_images, material_closure_images
+    from material_structures.core.fabric.closure_fit import load_closure_maps
+
+    _, obj = _scene_with_plane()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    mat = obj.active_material
+    full = images_to_closure_maps(material_closure_images(mat))
+    for node in list(mat.node_tree.nodes):  # what a file from before holds
+        if node.type == "TEX_IMAGE" and node.name in ("fit_velvet2", "fit_shape2"):
+            mat.node_tree.nodes.remove(node)
+    assert len(material_closure_images(mat)) == 6
+    assert bpy.ops.material_structures.fabric_save_maps(directory=str(tmp_path / "saved")) == {"FINISHED"}
+    assert sorted(material_closure_images(mat)) == sorted(CLOSURE_KEYS)
+    back = load_closure_maps(tmp_path / "saved")
+    np.testing.assert_array_equal(back.weights[..., :4, :], full.weights[..., :4, :])
+    np.testing.assert_array_equal(back.shape[..., :4], full.shape[..., :4])
+    assert np.all(back.weights[..., 4, :] == 0.0)
+    new_nodes = ("fit_velvet2", "fit_shape2")
+    links = {link.to_socket.name for link in mat.node_tree.links if link.from_node.name in new_nodes}
+    assert links == {"FitVelvet2", "FitVelvet2A", "FitShape2"}
+    assert complete_closure_images(mat).keys() == material_closure_images(mat).keys()  # nothing added twice
 
 
 def test_import_and_save_roundtrip(addon_module, tmp_path):
@@ -111,7 +140,7 @@ def test_import_and_save_roundtrip(addon_module, tmp_path):
     assert sorted(images) == ["basis", "kd", "ks", "sigma"]
     from material_structures.addon.fabric.material import material_closure_images
 
-    assert len(material_closure_images(mat)) == 6  # fitted on import (no closure maps in the folder)
+    assert len(material_closure_images(mat)) == 8  # fitted on import (no closure maps in the folder)
     assert all(img.packed_file is not None for img in images.values())  # saved inside the .blend
     assert bpy.ops.material_structures.fabric_save_maps(directory=str(tmp_path / "saved")) == {"FINISHED"}
     back = load_params(tmp_path / "saved")

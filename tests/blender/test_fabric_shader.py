@@ -242,11 +242,12 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
 
 
 def test_fitted_closures_fast_preview_point_lamp(addon_module):
-    """Fast Preview with the fitted closures, fibre-like flakes (the old sheen stand-in: 16.7 %)."""
-    rgb, ref, mask = render_patch_vs_core(sigma=(2.5, 2.5), quat=tilted_quat(10.0, 40.0), fast_preview=True,
+    """Fast Preview with the fitted closures, fibre-like flakes tilted 30 degrees, the hardest case of
+    ``bench fabric-shader`` (the old sheen stand-in: 28 %; the mix with one velvet: 5.5 %)."""
+    rgb, ref, mask = render_patch_vs_core(sigma=(2.5, 2.5), quat=tilted_quat(30.0, 40.0), fast_preview=True,
                                           fitted_closures=True)
     rel = _errors(rgb, ref, mask)
-    assert np.median(rel) <= 0.05  # numpy closure model: 0.016
+    assert np.median(rel) <= 0.05  # numpy closure model: 0.029
     assert np.percentile(rel, 90) <= 0.10
 
 

@@ -37,7 +37,7 @@ def test_table_holds_the_current_fit():
     pick = np.random.default_rng(0).choice(len(keys), 6, replace=False)
     sigma, quat = _canonical_params(exact[pick])
     p = params[pick]
-    stored = (p[:, :16].reshape(-1, 4, 4), p[:, 16:20], p[:, 20:21])
+    stored = (p[:, :20].reshape(-1, 5, 4), p[:, 20:26], p[:, 26:27])
     assert np.all(_rel(_mix(sigma, quat, stored), _mix(sigma, quat, fit_keys(sigma, quat)[:3])) <= 5e-3)
 
 

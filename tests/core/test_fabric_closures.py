@@ -181,8 +181,7 @@ def test_fit_is_invariant_to_rotation_about_the_normal():
 @pytest.mark.parametrize(("sigma", "tilt"), [((0.3, 0.8), 20.0), ((2.5, 2.5), 0.0), ((2.5, 2.5), 30.0)])
 def test_fitted_mix_beats_the_fixed_approximation_under_the_point_lamp(sigma, tilt):
     """Benchmark geometry, point lamp: fitted mix within 5 % median, 10 % p90 of eq. 3.9 (measured
-    0.045/0.068, 0.021/0.040, 0.055/0.072 with the per-view weighting of the fit: the last is over
-    target, bounded at 0.07 median here)."""
+    0.045/0.068, 0.011/0.020, 0.029/0.056; with one velvet the last was 0.055/0.072 and fails)."""
     pts, wo = A.patch_points()
     kd, ks = np.array([0.05, 0.03, 0.02]), np.array([0.7, 0.4, 0.3])
     q, s = tilted_quat(tilt, 40.0), np.asarray(sigma)
@@ -192,7 +191,7 @@ def test_fitted_mix_beats_the_fixed_approximation_under_the_point_lamp(sigma, ti
     new = A.rel_stats(A.point_light_radiance(lambda wi, v: closure_eval(wi, v, kd, ks, s, q, p), pts, wo), ref)
     old = A.rel_stats(A.point_light_radiance(lambda wi, v: legacy_closure_eval(wi, v, kd, ks, s, q), pts, wo), ref)
     assert new["median"] < old["median"]
-    assert new["median"] <= (0.07 if tilt >= 30 and sigma[0] > 1 else 0.05)
+    assert new["median"] <= 0.05
     assert new["p90"] <= 0.10
 
 
