@@ -131,8 +131,23 @@ def _world_source(scene):
     if isinstance(rotation, str):
         return None, rotation, eye
     image = tex.image
-    key = ("image", image.name, image.filepath, tuple(image.size), image.is_dirty, image.colorspace_settings.name)
+    key = ("image", image.name, image.filepath, tuple(image.size), image.is_dirty, image.colorspace_settings.name,
+           _file_version(image))
     return key, lambda: _image_radiance(image), rotation
+
+
+def _file_version(image) -> tuple:
+    """What changes when the image's file is replaced on disk (so Image > Reload of an edited HDRI gives new
+    tables): its modification time and size; the packed size for a packed image."""
+    if image.packed_file is not None:
+        return ("packed", image.packed_file.size)
+    import bpy
+
+    try:
+        st = os.stat(bpy.path.abspath(image.filepath, library=image.library))
+    except (OSError, ValueError):
+        return ()
+    return (st.st_mtime_ns, st.st_size)
 
 
 def world_strength(scene) -> float:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -207,7 +209,7 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
 
     from material_structures.addon.fabric.verify import hdri_world
     from material_structures.addon.fabric.world_light import world_light_status, world_strength, world_tables
-    from material_structures.core.exr_io import read_exr
+    from material_structures.core.exr_io import read_exr, write_exr
     from material_structures.core.fabric import closure_accuracy as A
     from material_structures.render import dark_world, reset_scene
 
@@ -231,6 +233,15 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
     folder, *_ , status = world_tables(scene)
     assert folder == "" and "Environment Texture" in status
     assert world_light_status(scene).startswith("World light: fitted closures")
+    bpy.data.worlds.remove(world)
+    # the HDRI's file edited and reloaded (same name, path and size): new tables
+    world = hdri_world(scene, A.sky_hdri(16, 32), str(tmp_path / "edited.exr"))
+    before = world_tables(scene)[0]
+    write_exr(str(tmp_path / "edited.exr"), A.interior_hdri(16, 32))
+    os.utime(tmp_path / "edited.exr", ns=(1, 10**18))  # a later time, even on a coarse file-system clock
+    next(n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT").image.reload()
+    after = world_tables(scene)[0]
+    assert after and after != before
     bpy.data.worlds.remove(world)
     # a bad image: one line in the panel, remembered (not re-read on every update), closures instead
     bad = A.sky_hdri(16, 32)
