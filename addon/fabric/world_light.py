@@ -173,8 +173,33 @@ def _write_tables(radiance: np.ndarray):
         path = os.path.join(folder, name)
         if not os.path.exists(path):
             write_exr(path, arr)  # written under a temporary name, then renamed
+    os.utime(folder)  # in use: kept by _prune_tables of every session
+    _prune_tables(os.path.dirname(folder), keep=folder)
     h, w = table.shape
     return folder, w, h
+
+
+PRUNE_AFTER_S = 14 * 24 * 3600  # table folders no session has used for this long are removed
+
+
+def _prune_tables(root: str, keep: str, now: float | None = None) -> None:
+    """Remove the table folders under ``root`` unused for ``PRUNE_AFTER_S`` (each HDRI ever lit with
+    leaves up to 12 MB here); ``keep`` and anything that cannot be removed stay."""
+    import shutil
+    import time
+
+    now = time.time() if now is None else now
+    try:
+        entries = list(os.scandir(root))
+    except OSError:
+        return
+    for entry in entries:
+        try:
+            if entry.path != keep and entry.is_dir(follow_symlinks=False) and \
+                    now - entry.stat(follow_symlinks=False).st_mtime > PRUNE_AFTER_S:
+                shutil.rmtree(entry.path, ignore_errors=True)
+        except OSError:
+            continue
 
 
 def world_light_inputs(scene, build: bool = True, tables: bool = True):

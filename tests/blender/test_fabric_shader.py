@@ -252,6 +252,17 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
     assert "NaN" in world_light_status(scene) and "fitted closures" in world_light_status(scene)
 
 
+def test_world_table_folders_unused_for_two_weeks_are_removed(addon_module, tmp_path):
+    from material_structures.addon.fabric.world_light import PRUNE_AFTER_S, _prune_tables
+
+    for name, age in (("old", PRUNE_AFTER_S + 60), ("recent", PRUNE_AFTER_S - 60), ("in-use", 10 * PRUNE_AFTER_S)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "radiance.exr").write_bytes(b"x")
+        os.utime(tmp_path / name, (1e9 - age, 1e9 - age))
+    _prune_tables(str(tmp_path), keep=str(tmp_path / "in-use"), now=1e9)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in-use", "recent"]
+
+
 def test_fitted_closures_fast_preview_point_lamp(addon_module):
     """Fast Preview with the fitted closures, fibre-like flakes tilted 30 degrees, the hardest case of
     ``bench fabric-shader`` (the old sheen stand-in: 28 %; the mix with one velvet: 5.5 %)."""
