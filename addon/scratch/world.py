@@ -5,8 +5,8 @@ Approximation (opt-in: the scene setting World Lights, ``scene.material_structur
 = K``, free lamp slots permitting; it is stored in the scene's ID property ``ms_scratch_world_lamps``,
 where files and scripts from before it was a setting put it, so those keep working):
 
-1. the environment image (the world's Environment Texture, equirectangular) is reduced to a
-   64 x 32 luminance map of the upper hemisphere;
+1. the environment image (the world's Environment Texture, equirectangular, read as the fabric's
+   exact world light reads it: ``addon/world_environment.py``) is reduced to a 64 x 32 luminance map;
 2. K seed directions are picked greedily, brightest first, at least ``MIN_SEPARATION_DEG`` apart;
    every texel above ``THRESHOLD`` x the brightest joins its nearest seed (angular Voronoi) if it
    lies within ``MIN_SEPARATION_DEG`` of it;
@@ -25,7 +25,9 @@ import math
 
 import numpy as np
 
+from ...core.fabric.environment_sampling import EnvironmentMapError
 from ..lamp_sync import ShaderLamp
+from ..world_environment import world_source, world_strength
 
 WORLD_LAMPS_PROP = "ms_scratch_world_lamps"  # scene ID property holding World Lights (K)
 MAX_WORLD_LAMPS = 4  # the shader's lamp slots
@@ -60,9 +62,13 @@ def downsample(rgb: np.ndarray, w: int = MAP_W, h: int = MAP_H) -> np.ndarray:
     return out / np.maximum(cnt, 1)
 
 
-def bright_regions(env: np.ndarray, k: int) -> list[dict]:
-    """Up to ``k`` regions {direction, omega, radiance (3,)} of a (h, w, 3) radiance map (step 2-3)."""
+def bright_regions(env: np.ndarray, k: int, rotation=None) -> list[dict]:
+    """Up to ``k`` regions {direction, omega, radiance (3,)} of a (h, w, 3) radiance map (step 2-3);
+    ``rotation`` M (lookup direction = M d, the world's Mapping) turns the map's directions into the
+    world's before the upper hemisphere is taken."""
     d, omega = equirect_directions(env.shape[1], env.shape[0])
+    if rotation is not None:
+        d = d @ np.asarray(rotation, float)  # rows: d = M^T (lookup direction)
     lum = env @ np.array([0.2126, 0.7152, 0.0722])
     up = d[..., 2] > 0.0
     lum = np.where(up, lum, 0.0)
@@ -103,22 +109,20 @@ def region_sphere(region: dict, distance: float = DISTANCE) -> tuple[np.ndarray,
 
 
 def world_environment(scene):
-    """(h, w, 3) radiance map of the scene world's Environment Texture x Background strength, or None."""
-    world = scene.world if scene is not None else None
-    if world is None or world.node_tree is None:
+    """((h, w, 3) radiance map of the world's environment image x Background strength, row 0 = top, in
+    lookup directions; the lookup rotation M: lookup direction = M d) or None for a world without an
+    environment image the add-on can read (``addon/world_environment.py``: an equirectangular Environment
+    Texture on the Background, optionally turned by a Mapping)."""
+    if scene is None or scene.world is None:
         return None
-    env = next((n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT" and n.image is not None), None)
-    bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
-    if env is None or bg is None:
+    key, load, rotation = world_source(scene)
+    if key is None or key[0] != "image":
         return None
-    img = env.image
-    w, h = img.size
-    if w == 0 or h == 0:
+    try:
+        rgb = load()  # linear, row 0 = bottom
+    except EnvironmentMapError:
         return None
-    px = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(px)
-    rgb = px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)  # row 0 = top
-    return downsample(rgb) * float(bg.inputs["Strength"].default_value)
+    return downsample(np.asarray(rgb[::-1], np.float64)) * world_strength(scene), rotation
 
 
 def world_lamp_count(scene) -> int:
@@ -138,11 +142,12 @@ def world_lamps_with_radii(scene, slots: int) -> list:
     k = min(world_lamp_count(scene), slots)
     if k <= 0:
         return []
-    env = world_environment(scene)
-    if env is None:
+    found = world_environment(scene)
+    if found is None:
         return []
+    env, rotation = found
     out = []
-    for reg in bright_regions(env, k):
+    for reg in bright_regions(env, k, rotation):
         c, r, rad = region_sphere(reg)
         intensity = rad * math.pi * r * r  # the shader's sphere radiance is I / (pi r^2)
         lamp = ShaderLamp(1, tuple(map(float, c)), tuple(map(float, -reg["direction"])),

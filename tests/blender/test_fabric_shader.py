@@ -277,9 +277,9 @@ def test_mapping_rotation_is_blenders_xyz_euler(addon_module):
     """The world Mapping's rotation matrix against Blender's own Euler (XYZ) conversion."""
     from mathutils import Euler
 
-    from material_structures.addon.fabric.world_light import _euler_xyz
+    from material_structures.addon.world_environment import euler_xyz
 
     rng = np.random.default_rng(0)
     for angles in rng.uniform(-np.pi, np.pi, size=(5, 3)):
         want = np.array(Euler(tuple(angles), "XYZ").to_matrix())
-        np.testing.assert_allclose(_euler_xyz(*angles), want, atol=1e-6)
+        np.testing.assert_allclose(euler_xyz(*angles), want, atol=1e-6)

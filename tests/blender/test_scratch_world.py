@@ -67,6 +67,36 @@ def test_world_lamps_reach_the_shader(addon_module):
     assert node.inputs["Lamp3Type"].default_value == 0
 
 
+
+def test_world_lamps_follow_a_turned_hdri_and_ignore_unused_images(addon_module):
+    """The world's Mapping turns the HDRI 90 degrees about Z: the sun lamp turns with it (the world is
+    read as the fabric's exact world light reads it). An Environment Texture that feeds nothing gives
+    no lamps (it used to be picked up)."""
+    import bpy
+
+    from material_structures.addon.scratch.material import scratch_script_nodes, sync_scratch_lamps
+    from material_structures.addon.scratch.verify import render_plate_vs_core
+
+    render_plate_vs_core(lamps=(("POINT", (0.5, 0.3, 1.2), 200.0, 0.08),), resolution=(8, 8))
+    scene = bpy.context.scene
+    env_world(scene)
+    tree = scene.world.node_tree
+    tex = next(n for n in tree.nodes if n.type == "TEX_ENVIRONMENT")
+    coord, mapping = tree.nodes.new("ShaderNodeTexCoord"), tree.nodes.new("ShaderNodeMapping")
+    tree.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(90.0))
+    scene["ms_scratch_world_lamps"] = 1
+    sync_scratch_lamps(scene)
+    node = next(scratch_script_nodes())
+    pos = np.array(node.inputs["Lamp2Position"].default_value)
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # M: lookup = M d, so d = M^T SUN
+    assert math.degrees(math.acos(min(1.0, pos @ (rz.T @ SUN) / np.linalg.norm(pos)))) < 3.0
+    bg = next(n for n in tree.nodes if n.type == "BACKGROUND")
+    tree.links.remove(bg.inputs["Color"].links[0])  # the texture stays in the tree, unused
+    sync_scratch_lamps(scene)
+    assert node.inputs["Lamp2Type"].default_value == 0
+
 @pytest.mark.slow
 def test_world_approximation_error_is_measured():
     """Measured (64 x 32 map, sun 6 deg + sky): median ~0.26, p99 ~0.79 (K = 1 or 2). The
