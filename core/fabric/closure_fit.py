@@ -339,7 +339,7 @@ def fit_keys(sigma, quat, n_light=FIT_LIGHTS, n_view=FIT_VIEWS, chunk=32):
 KEY_QUANTUM = (0.005, 0.25, 1.0)  # canonical_keys' default: log sigma, tilt (deg), twist (deg)
 
 
-FIT_KEY_BUDGET = 128  # distinct fibre geometries fitted per map (70-230 ms each); beyond: the closure table
+FIT_KEY_BUDGET = 128  # distinct fibre geometries fitted per map (about 0.15 s each); beyond: the closure table
 
 
 def fit_closure_texels(sigma, basis, cache: dict | None = None, progress=None, max_keys: int | None = None,
@@ -348,7 +348,7 @@ def fit_closure_texels(sigma, basis, cache: dict | None = None, progress=None, m
     shape (N, 6), ggx_scale (N, 1)) float32.
 
     Texels are reduced to canonical quantised keys (``canonical_keys``) and each distinct key is fitted
-    once (``fit_keys``, 70-230 ms per key on one core). ``max_keys``: when the texels hold more
+    once (``fit_keys``, about 0.15 s per key on one core in batches). ``max_keys``: when the texels hold more
     distinct keys (a measured map varies continuously: every texel would be its own key), every texel's
     closures come from the precomputed table instead (``closure_table.lookup_closure_texels``, about
     3 us per texel, interpolated between fitted geometries), and ``info["table"]`` is True.
