@@ -408,7 +408,8 @@ def fit_closure_maps(sigma_map, basis_map, cache: dict | None = None, progress=N
 
 CLOSURE_FILES = ("closure_w_diffuse.exr", "closure_w_sheen.exr", "closure_w_velvet.exr", "closure_w_ggx.exr",
                  "closure_w_velvet2.exr")
-SHAPE_FILES = ("closure_shape.exr", "closure_shape2.exr", "closure_ggx_scale.exr")
+SHAPE_FILE, SHAPE2_FILE, GGX_SCALE_FILE = "closure_shape.exr", "closure_shape2.exr", "closure_ggx_scale.exr"
+SHAPE_FILES = (SHAPE_FILE, SHAPE2_FILE, GGX_SCALE_FILE)
 
 
 def save_closure_maps(out_dir, cm: ClosureMaps) -> None:
@@ -423,20 +424,20 @@ def save_closure_maps(out_dir, cm: ClosureMaps) -> None:
     os.makedirs(out_dir, exist_ok=True)
     for j, name in enumerate(CLOSURE_FILES):
         write_exr(os.path.join(out_dir, name), cm.weights[:, :, j, :])
-    write_exr(os.path.join(out_dir, "closure_shape.exr"), cm.shape[:, :, :4])
-    write_exr(os.path.join(out_dir, "closure_shape2.exr"), cm.shape[:, :, 4:6], channels=("R", "G"))
-    write_exr(os.path.join(out_dir, "closure_ggx_scale.exr"), cm.ggx_scale, channels=("R",))
+    write_exr(os.path.join(out_dir, SHAPE_FILE), cm.shape[:, :, :4])
+    write_exr(os.path.join(out_dir, SHAPE2_FILE), cm.shape[:, :, 4:6], channels=("R", "G"))
+    write_exr(os.path.join(out_dir, GGX_SCALE_FILE), cm.ggx_scale, channels=("R",))
 
 
 def load_closure_maps(params_dir) -> ClosureMaps:
-    """Read what ``save_closure_maps`` wrote (raises OSError when a file is missing)."""
+    """Read what ``save_closure_maps`` wrote (``ExrError``, a ValueError, when a file is missing or bad)."""
     import os
 
     from ..exr_io import read_exr
 
     w = np.stack([read_exr(os.path.join(params_dir, n), channels=("R", "G", "B", "A")) for n in CLOSURE_FILES], 2)
-    shape = read_exr(os.path.join(params_dir, "closure_shape.exr"), channels=("R", "G", "B", "A"))
-    shape2 = read_exr(os.path.join(params_dir, "closure_shape2.exr"), channels=("R", "G"))
-    scale = read_exr(os.path.join(params_dir, "closure_ggx_scale.exr"), channels=("R",))
+    shape = read_exr(os.path.join(params_dir, SHAPE_FILE), channels=("R", "G", "B", "A"))
+    shape2 = read_exr(os.path.join(params_dir, SHAPE2_FILE), channels=("R", "G"))
+    scale = read_exr(os.path.join(params_dir, GGX_SCALE_FILE), channels=("R",))
     return ClosureMaps(weights=w.astype(np.float32), shape=np.concatenate([shape, shape2], 2).astype(np.float32),
                        ggx_scale=scale.reshape(scale.shape[0], scale.shape[1], 1).astype(np.float32))
