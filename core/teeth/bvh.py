@@ -44,6 +44,8 @@ PACKET = 63  # rays per packet of ``packet_hits`` (bits of an int64 mask)
 WIDTH = 8  # children per node of the ray-query tree (one AVX-512 register of float64 per box plane)
 LANES = 4  # triangles per leaf block of the ray-query layout (one AVX register of float64)
 SLACK = 1.0 + 1e-12  # a box is hit where t0 <= t1 * SLACK (rounding of the slab distances)
+SLACK32 = np.float32(1.0 + 2.0**-18)  # the same for the single ray's float32 slab test (``_slab_mask``)
+BOX_PAD = 2.0**-16  # the ray-query boxes' padding, relative to the scene's largest coordinate (float32 tests)
 
 
 class TriangleBVH:
@@ -118,14 +120,17 @@ class TriangleBVH:
 
     def ray_arrays(self, triangles: np.ndarray) -> tuple:
         """The layout ``first_hit`` and ``hits_until_stop`` read: the binary tree collapsed into a
-        ``WIDTH``-wide one (wide box (M, 6, WIDTH): rows lo x, y, z, hi x, y, z, one column per child,
-        empty children with every plane at +inf; wide child (M, WIDTH): a wide node index (>= 0), or a
+        ``WIDTH``-wide one (wide box (M, 6, WIDTH) float32: rows lo x, y, z, hi x, y, z, one column per child,
+        each box padded by ``BOX_PAD`` times the largest coordinate and rounded outwards, so that the float32
+        slab test of ``_slab_mask`` never misses a box the ray enters (see there); empty children with every
+        plane at +inf; wide child (M, WIDTH): a wide node index (>= 0), or a
         leaf ~(first block << 5 | triangle count); leaf triangles in blocks of ``LANES`` (B, 9, LANES): rows
         v0, v1 - v0, v2 - v0 (x, y, z each), one lane per triangle, a leaf's triangles in leaf order over
         ceil(count / LANES) consecutive blocks, unused lanes NaN (no comparison holds for them); order
         (B, LANES): the lanes' triangle ids, -1 where unused)."""
         tv = np.asarray(triangles, dtype=np.float64)
         wbox, wchild = self._collapse()
+        wbox = _outward_float32(wbox, BOX_PAD * max(1.0, float(np.abs(tv).max(initial=0.0))))
         leaves = np.flatnonzero(self.count > 0)
         leaves = leaves[np.argsort(self.start[leaves], kind="stable")]
         n_blk = (self.count[leaves] + LANES - 1) // LANES
@@ -179,6 +184,17 @@ class TriangleBVH:
             boxes.append(box)
             childs.append(child)
         return np.ascontiguousarray(np.array(boxes)), np.ascontiguousarray(np.array(childs))
+
+
+def _outward_float32(wbox: np.ndarray, pad: float) -> np.ndarray:
+    """Wide boxes (M, 6, WIDTH) as float32, lo rows moved down and hi rows up by ``pad`` and then to the next
+    float32 outwards where rounding moved them in; empty children (+inf) stay +inf."""
+    lo = (wbox[:, :3] - pad).astype(np.float32)
+    hi = (wbox[:, 3:] + pad).astype(np.float32)
+    lo = np.where(lo.astype(np.float64) > wbox[:, :3] - pad, np.nextafter(lo, np.float32(-np.inf)), lo)
+    hi = np.where(hi.astype(np.float64) < wbox[:, 3:] + pad, np.nextafter(hi, np.float32(np.inf)), hi)
+    lo = np.where(np.isinf(wbox[:, :3]), np.float32(np.inf), lo)
+    return np.ascontiguousarray(np.concatenate([lo, hi], axis=1), dtype=np.float32)
 
 
 def _area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -336,8 +352,8 @@ def _by_width(context, builder: ir.IRBuilder, wty, wb: ir.Value, i: ir.Value, te
     test runs, outputs beyond column WIDTH / 2 are left as they were and their mask bits are 0 (the full test
     may report a ray with tmax = inf as entering an empty child, t0 = t1 = inf: an empty leaf either way)."""
     half = WIDTH // 2
-    p = _row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, 0), ir.Constant(_I64, half)], ir.DoubleType())
-    narrow = builder.fcmp_ordered("==", builder.load(p, align=8), ir.Constant(ir.DoubleType(), float("inf")))
+    p = _row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, 0), ir.Constant(_I64, half)], ir.FloatType())
+    narrow = builder.fcmp_ordered("==", builder.load(p, align=4), ir.Constant(ir.FloatType(), float("inf")))
     with builder.if_else(narrow) as (then, otherwise):
         with then:
             m_narrow = test(half)
@@ -353,10 +369,13 @@ def _by_width(context, builder: ir.IRBuilder, wty, wb: ir.Value, i: ir.Value, te
 
 @intrinsic
 def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
-    """``_wide_slabs`` in vector form: the WIDTH entry distances t0 go into ``dist`` (all of them, also of the
-    missed boxes), the return value has bit c set where the ray enters child c: t0 <= t1 SLACK and t0 < inf
-    (exactly the children ``_wide_slabs`` gives a finite distance)."""
-    if not (_c_array(wbox, types.float64, 3) and _c_array(dist, types.float64, 1)):
+    """``_wide_slabs`` in vector form, in float32 (one AVX register holds a plane of all WIDTH children): the
+    WIDTH entry distances t0 go into ``dist`` (all of them, also of the missed boxes), the return value has bit c
+    set where the ray enters child c: t0 <= t1 SLACK32 and t0 < inf (exactly the children ``_wide_slabs`` gives a
+    finite distance). The origin, inverse direction and limits are rounded to float32; the boxes' padding
+    (``ray_arrays``) covers the origin's rounding and SLACK32 the relative rounding of the distances, so a box the
+    ray enters within (tmin, tmax) is never missed (a few more may be visited; the triangles decide the hits)."""
+    if not (_c_array(wbox, types.float32, 3) and _c_array(dist, types.float64, 1)):
         return None
     i64, f64 = types.int64, types.float64  # the arguments are cast to these at the call
     sig = i64(wbox, i64, i64, i64, i64, f64, f64, f64, f64, f64, f64, f64, f64, dist)
@@ -365,38 +384,38 @@ def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tma
         wb, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist = args
         wty, dty = signature.args[0], signature.args[13]
         zero, three = ir.Constant(_I64, 0), ir.Constant(_I64, 3)
+        f32 = ir.FloatType()
+        ox, oy, oz, ix, iy, iz, tmin, tmax = (builder.fptrunc(v, f32) for v in (ox, oy, oz, ix, iy, iz, tmin, tmax))
 
         def far(n):
             return builder.select(builder.icmp_signed("<", n, three), builder.add(n, three), builder.sub(n, three))
 
-        def test(w):  # the first w children (the others empty)
-            vt = ir.VectorType(ir.DoubleType(), w)
+        vt = ir.VectorType(f32, WIDTH)
 
-            def plane(r, o, inv):
-                row = builder.load(_row_ptr(context, builder, wty, wb, [i, r, zero], vt), align=8)
-                return builder.fmul(builder.fsub(row, _splat(builder, o, vt)), _splat(builder, inv, vt))
+        def plane(r, o, inv):
+            row = builder.load(_row_ptr(context, builder, wty, wb, [i, r, zero], vt), align=4)
+            return builder.fmul(builder.fsub(row, _splat(builder, o, vt)), _splat(builder, inv, vt))
 
-            ax, ay, az = plane(nx, ox, ix), plane(ny, oy, iy), plane(nz, oz, iz)
-            bx, by, bz = plane(far(nx), ox, ix), plane(far(ny), oy, iy), plane(far(nz), oz, iz)
-            t0 = _vmax(builder, _splat(builder, tmin, vt), _vmax(builder, ax, _vmax(builder, ay, az)))
-            t1 = _vmin(builder, _splat(builder, tmax, vt), _vmin(builder, bx, _vmin(builder, by, bz)))
-            hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, ir.Constant(vt, [SLACK] * w)))
-            fin = builder.fcmp_ordered("<", t0, ir.Constant(vt, [float("inf")] * w))
-            builder.store(t0, _row_ptr(context, builder, dty, dist, [zero], vt), align=8)
-            return builder.zext(builder.bitcast(builder.and_(hit, fin), ir.IntType(w)), _I64)
-
-        return test(WIDTH)  # one ray: a narrow branch as in the packets' test saved nothing (mispredictions)
+        ax, ay, az = plane(nx, ox, ix), plane(ny, oy, iy), plane(nz, oz, iz)
+        bx, by, bz = plane(far(nx), ox, ix), plane(far(ny), oy, iy), plane(far(nz), oz, iz)
+        t0 = _vmax(builder, _splat(builder, tmin, vt), _vmax(builder, ax, _vmax(builder, ay, az)))
+        t1 = _vmin(builder, _splat(builder, tmax, vt), _vmin(builder, bx, _vmin(builder, by, bz)))
+        hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, ir.Constant(vt, [float(SLACK32)] * WIDTH)))
+        fin = builder.fcmp_ordered("<", t0, ir.Constant(vt, [float("inf")] * WIDTH))
+        t0d = builder.fpext(t0, ir.VectorType(ir.DoubleType(), WIDTH))
+        builder.store(t0d, _row_ptr(context, builder, dty, dist, [zero], t0d.type), align=8)
+        return builder.zext(builder.bitcast(builder.and_(hit, fin), ir.IntType(WIDTH)), _I64)
 
     return sig, codegen
 
 
 @intrinsic
 def _packet_box_masks(typingctx, wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
-    """The packet's box test of wide node i: for every ray b of ``live`` (inverse direction and current
-    limit in pinv[b]) and child c, the slab test of ``packet_hits`` (t0 <= t1 SLACK, near and far plane by
-    min / max, planes offset by the shared origin once per node); cmask[c] gets the rays that enter child c,
-    the return value has bit c set where cmask[c] != 0."""
-    if not (_c_array(wbox, types.float64, 3) and _c_array(pinv, types.float64, 2)
+    """The packet's box test of wide node i, in float32 as ``_slab_mask``: for every ray b of ``live`` (inverse
+    direction and current limit in pinv[b]) and child c, the slab test of ``packet_hits`` (t0 <= t1 SLACK32, near
+    and far plane by min / max, planes offset by the shared origin once per node); cmask[c] gets the rays that
+    enter child c, the return value has bit c set where cmask[c] != 0."""
+    if not (_c_array(wbox, types.float32, 3) and _c_array(pinv, types.float64, 2)
             and _c_array(cmask, types.int64, 1)):
         return None
     i64, f64 = types.int64, types.float64
@@ -406,20 +425,22 @@ def _packet_box_masks(typingctx, wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
         wb, i, ox, oy, oz, pinv, live, tmin, cmask = args
         wty, pty, cty = signature.args[0], signature.args[5], signature.args[8]
         zero = ir.Constant(_I64, 0)
+        f32 = ir.FloatType()
+        ox, oy, oz, tmin = (builder.fptrunc(v, f32) for v in (ox, oy, oz, tmin))
 
         def test(w):  # the first w children (the others empty)
-            vt, vi = ir.VectorType(ir.DoubleType(), w), ir.VectorType(_I64, w)
+            vt, vi = ir.VectorType(f32, w), ir.VectorType(_I64, w)
             diff = []
             for r, o in enumerate((ox, oy, oz, ox, oy, oz)):
-                row = builder.load(_row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, r), zero], vt), align=8)
+                row = builder.load(_row_ptr(context, builder, wty, wb, [i, ir.Constant(_I64, r), zero], vt), align=4)
                 diff.append(builder.fsub(row, _splat(builder, o, vt)))
             vtmin = _splat(builder, tmin, vt)
-            slack = ir.Constant(vt, [SLACK] * w)
+            slack = ir.Constant(vt, [float(SLACK32)] * w)
 
             def ray(b, acc):  # ray b of the packet against the w children
                 p = _row_ptr(context, builder, pty, pinv, [b, zero], ir.DoubleType())
-                inv = [_splat(builder, builder.load(builder.gep(p, [ir.Constant(_I64, k)]), align=8), vt)
-                       for k in range(4)]
+                inv = [_splat(builder, builder.fptrunc(builder.load(builder.gep(p, [ir.Constant(_I64, k)]), align=8),
+                                                       f32), vt) for k in range(4)]
                 lo = [builder.fmul(diff[k], inv[k]) for k in range(3)]
                 hi = [builder.fmul(diff[k + 3], inv[k]) for k in range(3)]
                 near = [_vmin(builder, lo[k], hi[k]) for k in range(3)]
@@ -551,37 +572,44 @@ def _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist) -
     """Slab test of the ray against the WIDTH child boxes of wide node i (nx, ny, nz: near-plane rows from
     ``_inverse``): entry distances into dist, inf where the ray misses a box within (tmin, tmax). With
     t_a = (plane_a - o_a) / d_a: t0 = max(tmin, t_near x, t_near y, t_near z), t1 = min(tmax, t_far x, y, z),
-    hit where t0 <= t1 SLACK. The scalar reference of ``_slab_mask``, which the queries use."""
+    hit where t0 <= t1 SLACK32, all in float32 (the float64 arguments rounded once). The scalar reference of
+    ``_slab_mask``, which the queries use."""
     fx, fy, fz = (nx + 3) % 6, (ny + 3) % 6, (nz + 3) % 6
+    ox, oy, oz = np.float32(ox), np.float32(oy), np.float32(oz)
+    ix, iy, iz = np.float32(ix), np.float32(iy), np.float32(iz)
+    tmin, tmax = np.float32(tmin), np.float32(tmax)
     for c in range(WIDTH):
         t0 = max(tmin, max((wbox[i, nx, c] - ox) * ix, max((wbox[i, ny, c] - oy) * iy, (wbox[i, nz, c] - oz) * iz)))
         t1 = min(tmax, min((wbox[i, fx, c] - ox) * ix, min((wbox[i, fy, c] - oy) * iy, (wbox[i, fz, c] - oz) * iz)))
-        dist[c] = t0 if t0 <= t1 * SLACK else np.inf
+        dist[c] = t0 if t0 <= t1 * SLACK32 else np.inf
 
 
 @njit(cache=True, _nrt=False)
 def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) -> int:
-    """Scalar reference of ``_packet_box_masks`` (the packet's box loop before it was written as vector IR):
-    with d = box plane - origin and a = d ix (per axis, both planes), t0 = max(tmin, max_axes min(a_lo, a_hi)),
-    t1 = min(tlim, min_axes max(a_lo, a_hi)); ray b enters child c where t0 <= t1 SLACK. ``diff``: (6, WIDTH)
-    scratch."""
+    """Scalar reference of ``_packet_box_masks`` (the packet's box loop before it was written as vector IR), in
+    float32 as ``_wide_slabs``: with d = box plane - origin and a = d ix (per axis, both planes), t0 = max(tmin,
+    max_axes min(a_lo, a_hi)), t1 = min(tlim, min_axes max(a_lo, a_hi)); ray b enters child c where t0 <= t1
+    SLACK32. ``diff``: (6, WIDTH) scratch (its float64 entries hold the float32 differences exactly)."""
+    o32 = (np.float32(ox), np.float32(oy), np.float32(oz))
+    tmin = np.float32(tmin)
     for c in range(WIDTH):
         for r in range(6):
-            diff[r, c] = wbox[i, r, c] - (ox if r % 3 == 0 else oy if r % 3 == 1 else oz)
+            diff[r, c] = wbox[i, r, c] - o32[r % 3]
         cmask[c] = 0
     m = live
     while m != 0:
         b = trailing_zeros(m)
         m &= m - 1
-        ix, iy, iz, tlim = pinv[b, 0], pinv[b, 1], pinv[b, 2], pinv[b, 3]
+        ix, iy, iz, tlim = np.float32(pinv[b, 0]), np.float32(pinv[b, 1]), np.float32(pinv[b, 2]), \
+            np.float32(pinv[b, 3])
         bit = np.int64(1) << b
         for c in range(WIDTH):
-            ax, bx = diff[0, c] * ix, diff[3, c] * ix
-            ay, by = diff[1, c] * iy, diff[4, c] * iy
-            az, bz = diff[2, c] * iz, diff[5, c] * iz
+            ax, bx = np.float32(diff[0, c]) * ix, np.float32(diff[3, c]) * ix
+            ay, by = np.float32(diff[1, c]) * iy, np.float32(diff[4, c]) * iy
+            az, bz = np.float32(diff[2, c]) * iz, np.float32(diff[5, c]) * iz
             t0 = max(tmin, max(min(ax, bx), max(min(ay, by), min(az, bz))))
             t1 = min(tlim, min(max(ax, bx), min(max(ay, by), max(az, bz))))
-            cmask[c] |= bit & -np.int64(t0 <= t1 * SLACK)
+            cmask[c] |= bit & -np.int64(t0 <= t1 * SLACK32)
     kids = 0
     for c in range(WIDTH):
         if cmask[c] != 0:

@@ -2,8 +2,9 @@
 intrinsics) against their scalar references (``bvh._wide_slabs``, ``bvh.packet_box_masks_scalar``) on random
 rays and boxes, including the awkward cases: axis-parallel rays (inverse 1e300), empty children (+inf
 planes), origins on a box plane, flat boxes, finite and infinite tmax, NaN slab distances. Tolerance: none;
-the hit masks must be equal and every entry distance equal to the last bit, since the tracer's images are
-meant to stay bit-identical to the scalar traversal's."""
+the hit masks must be equal and every entry distance equal to the last bit. The single ray's float32 test is
+also checked to be conservative: with the boxes padded as ``ray_arrays`` pads them it enters every box the
+exact float64 slab test enters."""
 
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ def _vector_packet(wbox, i, ox, oy, oz, pinv, live, tmin, cmask):
 
 
 def _boxes(rng: np.random.Generator, n: int) -> np.ndarray:
-    """(n, 6, WIDTH) wide-node boxes: random, some flat along an axis; node k has 1 + k % WIDTH children, then
+    """(n, 6, WIDTH) float32 wide-node boxes: random, some flat along an axis; node k has 1 + k % WIDTH children, then
     empty ones (+inf), as ``ray_arrays`` stores them (``_packet_box_masks`` relies on it); node 0 is empty."""
     w = bvh.WIDTH
     lo = rng.normal(size=(n, 3, w))
@@ -44,7 +45,7 @@ def _boxes(rng: np.random.Generator, n: int) -> np.ndarray:
     for node in range(n):
         box[node, :, 1 + node % w:] = np.inf
     box[0, :, :] = np.inf
-    return np.ascontiguousarray(box)
+    return np.ascontiguousarray(box, dtype=np.float32)
 
 
 def _ray(rng: np.random.Generator, box: np.ndarray, k: int, origin: np.ndarray | None = None) -> tuple:
@@ -134,9 +135,66 @@ def test_packet_box_masks_equal_the_scalar_packet_loop():
 
 def test_vector_box_tests_reject_non_contiguous_arrays():
     """The intrinsics load and store whole rows, so they only type for C-contiguous arrays."""
-    wbox = np.zeros((2, 6, 2 * bvh.WIDTH))[:, :, ::2]
+    wbox = np.zeros((2, 6, 2 * bvh.WIDTH), dtype=np.float32)[:, :, ::2]
     with pytest.raises(numba.core.errors.TypingError):
         _vector_slabs(wbox, 0, 0, 1, 2, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 1.0, np.empty(bvh.WIDTH))
+
+
+def test_float32_slab_test_enters_every_box_the_exact_test_enters():
+    """Boxes in a scene of coordinates up to 40 (the teeth scenes' millimetres), padded and rounded as
+    ``ray_arrays`` does; rays from inside the scene, from its boxes' faces and corners and from far away (a
+    camera 400 away), short and long, some grazing a face: every child whose exact slab interval (float64, no
+    slack) meets (tmin, tmax) must be in the float32 test's mask. A test without the padding misses some."""
+    rng = np.random.default_rng(21)
+    n, w = 64, bvh.WIDTH
+    lo = rng.uniform(-40.0, 40.0, size=(n, 3, w))
+    hi = lo + rng.exponential(0.3, size=(n, 3, w)) * (rng.random((n, 3, w)) > 0.1)
+    exact = np.concatenate([lo, hi], axis=1)
+    pad = bvh.BOX_PAD * 40.0
+    padded = bvh._outward_float32(exact, pad)
+    unpadded = bvh._outward_float32(exact, 0.0)
+    assert padded.dtype == np.float32 and (padded[:, :3] <= exact[:, :3] - pad).all()
+    assert (padded[:, 3:] >= exact[:, 3:] + pad).all()
+    vd = np.empty(w)
+    missed = missed_unpadded = entered = 0
+    for k in range(40000):
+        i = k % n
+        c = rng.integers(w)
+        target = exact[i, :3, c] + rng.random(3) * (exact[i, 3:, c] - exact[i, :3, c])
+        if k % 4 == 0:
+            o = rng.uniform(-400.0, 400.0, size=3)
+        elif k % 4 == 1:  # from a face or a corner of the box
+            o = np.where(rng.random(3) < 0.5, exact[i, :3, c], exact[i, 3:, c])
+            o[k % 3] = target[k % 3]
+        else:
+            o = target + rng.normal(size=3) * 10.0 ** rng.uniform(-4, 1)
+        d = target - o if k % 5 else rng.normal(size=3)
+        if k % 7 == 0:  # grazing: along a face
+            d[k % 3] = 0.0
+        nrm = np.linalg.norm(d)
+        if nrm == 0.0:
+            continue
+        d /= nrm
+        with np.errstate(divide="ignore"):
+            inv = [1.0 / x if x != 0.0 else 1e300 for x in d]
+        near = [a if v >= 0.0 else a + 3 for a, v in enumerate(inv)]
+        tmin = 1e-6 if k % 2 else 0.0
+        tmax = np.inf if k % 3 == 0 else float(rng.exponential(20.0))
+        with np.errstate(invalid="ignore", over="ignore"):
+            ta = (exact[i, :3] - o[:, None]) * np.array(inv)[:, None]
+            tb = (exact[i, 3:] - o[:, None]) * np.array(inv)[:, None]
+            t0 = np.maximum(np.nanmax(np.minimum(ta, tb), axis=0), tmin)
+            t1 = np.minimum(np.nanmin(np.maximum(ta, tb), axis=0), tmax)
+        want = t0 <= t1
+        mask = _vector_slabs(padded, i, *near, *o, *inv, tmin, tmax, vd)
+        mask0 = _vector_slabs(unpadded, i, *near, *o, *inv, tmin, tmax, vd)
+        for cc in np.flatnonzero(want):
+            entered += 1
+            missed += not (mask >> cc) & 1
+            missed_unpadded += not (mask0 >> cc) & 1
+    assert entered > 20000
+    assert missed == 0
+    assert missed_unpadded > 0  # the check can fail: without the padding, float32 rounding loses boxes
 
 
 @njit(cache=False)
