@@ -68,6 +68,13 @@ def _trees(cs: CompiledScene) -> tuple:
     return _TREES[key]
 
 
+def _same_textures(cs: CompiledScene) -> bool:
+    """Whether the sampling and evaluation scenes' a_t textures are equal (every forward render)."""
+    return len(cs.tex_s) == len(cs.tex_e) and all(
+        np.array_equal(np.asarray(ts, dtype=np.float64), np.asarray(te, dtype=np.float64))
+        for ts, te in zip(cs.tex_s, cs.tex_e, strict=True))
+
+
 def pack_scene(cs: CompiledScene) -> tuple:
     """The arrays of ``cs`` the kernels read: (geometry, media, textures)."""
     tri_delta = np.zeros((len(cs.tris_s), 3, 3, 3))
@@ -79,7 +86,7 @@ def pack_scene(cs: CompiledScene) -> tuple:
            cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
            cs.dentin_tooth, tri_delta) + nodes + dnodes + (
                droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED,
-               np.array([np.array_equal(cs.tris_s, cs.tris_e)]))
+               np.array([np.array_equal(cs.tris_s, cs.tris_e), _same_textures(cs)]))
     has_cavity = bool(cs.has_cavity)
     med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
            cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"], cs.ph["De"],
@@ -738,6 +745,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             nd[c] = d[c]
         new_m = mk
         alive = True
+        lme_rr = np.nan  # log mean_c exp(logp_c) at the end of this vertex where already known (the roulette's)
         if scatter:
             # ---- volume scattering vertex
             n_vert += 1
@@ -789,7 +797,10 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             mu = _sample_hg_mu(gsel, u2)
             _direction_from_mu(d, mu, 2.0 * np.pi * u3, nd)
             f_e = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
-            f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
+            if mix_s[0] == mix_e[0] and mix_s[1] == mix_e[1] and mix_s[2] == mix_e[2]:
+                f_s = f_e  # sampling and evaluation phase functions agree (every forward render)
+            else:
+                f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
             lf_e = np.log(f_e)
             lf_s = lf_e if f_s == f_e else np.log(f_s)
             for c in range(3):
@@ -797,6 +808,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 logp[c] += lf_s
                 if roulette:
                     logfs[c] += lf_s
+            lme_rr = lme + lf_s  # log mean_c p_c after the phase term, which every channel shares
             if use_g or use_s:  # pushed at level b + 1: weight R_{b+1}
                 _phase_records(med, mv, mu, mix_e, lw_e, dl, dqdc, ab[b + 1], g_lvl, sx_lvl, jmap)
         elif end_tri >= 0:
@@ -811,14 +823,19 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 else:
                     new_m = geo[4][end_tri] if cosv < 0.0 else geo[5][end_tri]
                     col0 = _a_t(geo, tex, end_tri, o, d, True, a, idx, wts)
-                    for c in range(3):
-                        logf[c] += np.log(a[c])
+                    la0, la1, la2 = np.log(a[0]), np.log(a[1]), np.log(a[2])
+                    logf[0] += la0
+                    logf[1] += la1
+                    logf[2] += la2
                     if use_g or use_s:
                         _a_t_records(col0, a, idx, wts, ab[b], g_lvl, sx_lvl, jmap)
                     if roulette:
-                        _a_t(geo, tex, end_tri, o, d, False, a, idx, wts)
-                        for c in range(3):
-                            logfs[c] += np.log(a[c])
+                        if not geo[24][1]:  # the sampling scene's a_t differs from the evaluation scene's
+                            _a_t(geo, tex, end_tri, o, d, False, a, idx, wts)
+                            la0, la1, la2 = np.log(a[0]), np.log(a[1]), np.log(a[2])
+                        logfs[0] += la0
+                        logfs[1] += la1
+                        logfs[2] += la2
             elif kd == KIND_OPAQUE:
                 # ---- opaque Lambertian oral cavity
                 n_vert += 1
@@ -834,6 +851,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                         tmp[c] = 1.0 / rho_e[c]
                     _emit_diag(col_rho, tmp, ab[b], g_lvl, sx_lvl, jmap)
                 lme = _logmeanexp3(logp)
+                lme_rr = lme
                 for c in range(3):
                     wv[c] = np.exp(logf[c] - lme)
                 ns, nc = _nee(geo, med, tex, x, d, mk, wv, nrm, scatter, ones, 1.0, 0.0, dqdc, lp, li, inv_spp, row,
@@ -850,7 +868,9 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
         # ---- Russian roulette at theta_0 (see ``path_tracer.RenderSettings``)
         if alive and roulette and b + 1 >= rr_depth:
             ur = _rand(rs)
-            beta = np.exp(max(logfs[0], max(logfs[1], logfs[2])) - _logmeanexp3(logp))
+            if lme_rr != lme_rr:  # not set at this vertex (a boundary): NaN
+                lme_rr = _logmeanexp3(logp)
+            beta = np.exp(max(logfs[0], max(logfs[1], logfs[2])) - lme_rr)
             q = 0.0 if np.isnan(beta) else min(beta, 1.0)
             if ur < q:
                 lq = np.log(q)
