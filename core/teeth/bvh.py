@@ -11,11 +11,11 @@ visit tests all children at once), each leaf's triangles in leaf order in blocks
 rows, one lane per triangle). The box and triangle tests are AVX vector code written as LLVM IR through
 numba intrinsics (``_slab_mask``, ``_packet_box_masks``, ``_leaf_hits``, ``_packet_leaf_hits``; numba does not
 vectorise these loops itself), each lane doing the scalar references' operations in their order
-(``_wide_slabs``, ``packet_box_masks_scalar``, ``leaf_hits_scalar``). The same triangles are tested with the
-same arithmetic as in a binary traversal, so hits and distances are the same numbers; only fewer nodes are
-visited.
+(``_wide_slabs``, ``packet_box_masks_scalar``, ``leaf_hits_scalar``). Every triangle a ray hits is tested with
+the same float64 arithmetic as in a binary traversal (the padded float32 boxes only let a few more be tested), so
+hits and distances are the same numbers; only fewer nodes are visited.
 
-Queries (numba, per ray / point, float64 throughout):
+Queries (numba, per ray / point; float64 except the box tests, which run in float32 on padded boxes):
 * ``first_hit``: nearest triangle with tmin < t < tmax (Moeller-Trumbore; the distance is the plane
   distance of eq. 5.28, smooth in the vertices), children visited near-first, boxes by the slab test.
 * ``hits_until_stop``: every hit up to the first stopping triangle, unsorted (the shadow rays' and
@@ -41,10 +41,9 @@ LEAF_SIZE = 4  # at most, for the median fallback; the SAH decides below
 SAH_BINS = 16
 STACK_SIZE = 64
 PACKET = 63  # rays per packet of ``packet_hits`` (bits of an int64 mask)
-WIDTH = 8  # children per node of the ray-query tree (one AVX-512 register of float64 per box plane)
+WIDTH = 8  # children per node of the ray-query tree (one AVX register of float32 per box plane)
 LANES = 4  # triangles per leaf block of the ray-query layout (one AVX register of float64)
-SLACK = 1.0 + 1e-12  # a box is hit where t0 <= t1 * SLACK (rounding of the slab distances)
-SLACK32 = np.float32(1.0 + 2.0**-18)  # the same for the single ray's float32 slab test (``_slab_mask``)
+SLACK32 = np.float32(1.0 + 2.0**-18)  # a box is hit where t0 <= t1 * SLACK32 (float32 rounding of the distances)
 BOX_PAD = 2.0**-16  # the ray-query boxes' padding, relative to the scene's largest coordinate (float32 tests)
 
 
@@ -193,7 +192,6 @@ def _outward_float32(wbox: np.ndarray, pad: float) -> np.ndarray:
     hi = (wbox[:, 3:] + pad).astype(np.float32)
     lo = np.where(lo.astype(np.float64) > wbox[:, :3] - pad, np.nextafter(lo, np.float32(-np.inf)), lo)
     hi = np.where(hi.astype(np.float64) < wbox[:, 3:] + pad, np.nextafter(hi, np.float32(np.inf)), hi)
-    lo = np.where(np.isinf(wbox[:, :3]), np.float32(np.inf), lo)
     return np.ascontiguousarray(np.concatenate([lo, hi], axis=1), dtype=np.float32)
 
 

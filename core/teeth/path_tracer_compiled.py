@@ -68,35 +68,12 @@ def _trees(cs: CompiledScene) -> tuple:
     return _TREES[key]
 
 
-def _same_textures(cs: CompiledScene) -> bool:
-    """Whether the sampling and evaluation scenes' a_t textures are equal (every forward render)."""
-    return len(cs.tex_s) == len(cs.tex_e) and all(
-        np.array_equal(np.asarray(ts, dtype=np.float64), np.asarray(te, dtype=np.float64))
-        for ts, te in zip(cs.tex_s, cs.tex_e, strict=True))
-
-
 def pack_scene(cs: CompiledScene) -> tuple:
     """The arrays of ``cs`` the kernels read: (geometry, media, textures)."""
     tri_delta = np.zeros((len(cs.tris_s), 3, 3, 3))
     for i, dp in enumerate(cs.dentin):
         ids = np.flatnonzero(cs.dentin_tooth == i)
         tri_delta[ids] = np.transpose(dp.deltas[:, dp.faces[cs.dentin_face[ids]], :], (1, 0, 2, 3))
-    nodes, dnodes, droots = _trees(cs)
-    geo = (np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
-           cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
-           cs.dentin_tooth, tri_delta) + nodes + dnodes + (
-               droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED,
-               np.array([np.array_equal(cs.tris_s, cs.tris_e), _same_textures(cs)]))
-    has_cavity = bool(cs.has_cavity)
-    med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
-           cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"], cs.ph["De"],
-           cs.col_alb["E"], cs.col_alb["D"], cs.col_ph["E"], cs.col_ph["D"], cs.c_col,
-           cs.rho_s if has_cavity else np.ones(3), cs.rho_e if has_cavity else np.ones(3),
-           int(cs.col_rho) if has_cavity else -1, float(cs.spread))
-    # the logs of the unblended coefficients (most vertices lie where l(q) is 0 or 1 to the last bit), computed by
-    # the kernels' own log so that a table entry equals the log the vertex would compute
-    med = med + tuple(_log_table(np.ascontiguousarray(v, dtype=np.float64)) for v in (
-        cs.sigma_s, cs.sigma_e, cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], med[20], med[21]))
     offs, hs, ws, flat_s, flat_e = [], [], [], [], []
     n = 0
     for ts, te in zip(cs.tex_s, cs.tex_e, strict=True):
@@ -110,6 +87,22 @@ def pack_scene(cs: CompiledScene) -> tuple:
     tex = (np.concatenate(flat_s) if flat_s else np.ones((1, 3)), np.concatenate(flat_e) if flat_e else np.ones((1, 3)),
            np.array(offs, dtype=np.int64), np.array(hs, dtype=np.int64), np.array(ws, dtype=np.int64),
            np.array(cs.tex_col, dtype=np.int64))
+    nodes, dnodes, droots = _trees(cs)
+    geo = (np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
+           cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
+           cs.dentin_tooth, tri_delta) + nodes + dnodes + (
+               droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED,
+               np.array([np.array_equal(cs.tris_s, cs.tris_e), np.array_equal(tex[0], tex[1])]))
+    has_cavity = bool(cs.has_cavity)
+    med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
+           cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"], cs.ph["De"],
+           cs.col_alb["E"], cs.col_alb["D"], cs.col_ph["E"], cs.col_ph["D"], cs.c_col,
+           cs.rho_s if has_cavity else np.ones(3), cs.rho_e if has_cavity else np.ones(3),
+           int(cs.col_rho) if has_cavity else -1, float(cs.spread))
+    # the logs of the unblended coefficients (most vertices lie where l(q) is 0 or 1 to the last bit), computed by
+    # the kernels' own log so that a table entry equals the log the vertex would compute
+    med = med + tuple(_log_table(np.ascontiguousarray(v, dtype=np.float64)) for v in (
+        cs.sigma_s, cs.sigma_e, cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], med[20], med[21]))
     return geo, med, tex
 
 
