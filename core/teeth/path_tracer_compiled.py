@@ -479,7 +479,7 @@ def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
             _emit(c_col[tooth] + m, val, val, val, w, g, sx, jmap)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     """Signed distance to the tooth's dentin on the sampling and evaluation geometry, dq_e/dc into dqdc
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
@@ -536,7 +536,7 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
 
 
 # ------------------------------------------------------------------------------------------ one path
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li, inv_spp, row, cam, pix, b,
          img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch):
     """Connect vertex x to every light; splat, and the connection's own d log f terms (``path_tracer._nee``).
@@ -739,6 +739,8 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
         new_m = mk
         alive = True
         lme_rr = np.nan  # log mean_c exp(logp_c) at the end of this vertex where already known (the roulette's)
+        connect = False  # a scattering or an opaque vertex: connected to the lights
+        nee_m, nee_mix, nee_lw, nee_dl = mk, ones, 1.0, 0.0
         if scatter:
             # ---- volume scattering vertex
             n_vert += 1
@@ -781,29 +783,8 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             lme = _logmeanexp3(logp)
             for c in range(3):
                 wv[c] = np.exp(logf[c] - lme)
-            ns, nc = _nee(geo, med, tex, x, d, mv, wv, nrm, scatter, mix_e, lw_e, dl, dqdc, lp, li, inv_spp, row,
-                          cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
-            n_shadow += ns
-            casts += nc
-            # continue: sample the phase function with the sampling parameters
-            gsel = mix_s[0] if u1 < mix_s[2] else mix_s[1]
-            mu = _sample_hg_mu(gsel, u2)
-            _direction_from_mu(d, mu, 2.0 * np.pi * u3, nd)
-            f_e = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
-            if mix_s[0] == mix_e[0] and mix_s[1] == mix_e[1] and mix_s[2] == mix_e[2]:
-                f_s = f_e  # sampling and evaluation phase functions agree (every forward render)
-            else:
-                f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
-            lf_e = np.log(f_e)
-            lf_s = lf_e if f_s == f_e else np.log(f_s)
-            for c in range(3):
-                logf[c] += lf_e
-                logp[c] += lf_s
-                if roulette:
-                    logfs[c] += lf_s
-            lme_rr = lme + lf_s  # log mean_c p_c after the phase term, which every channel shares
-            if use_g or use_s:  # pushed at level b + 1: weight R_{b+1}
-                _phase_records(med, mv, mu, mix_e, lw_e, dl, dqdc, ab[b + 1], g_lvl, sx_lvl, jmap)
+            nee_m, nee_mix, nee_lw, nee_dl = mv, mix_e, lw_e, dl
+            connect = True
         elif end_tri >= 0:
             kd = kind[end_tri]
             if kd == KIND_DIELECTRIC:
@@ -847,17 +828,42 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 lme_rr = lme
                 for c in range(3):
                     wv[c] = np.exp(logf[c] - lme)
-                ns, nc = _nee(geo, med, tex, x, d, mk, wv, nrm, scatter, ones, 1.0, 0.0, dqdc, lp, li, inv_spp, row,
-                              cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
-                n_shadow += ns
-                casts += nc
-                mu = np.sqrt(1.0 - u4)
-                _direction_from_mu(nrm, mu, 2.0 * np.pi * u5, nd)
-                new_m = MED_AIR
+                nee_m, nee_mix, nee_lw, nee_dl = mk, ones, 1.0, 0.0
+                connect = True
             else:
                 alive = False
         else:
             alive = False
+        if connect:
+            # ---- next-event estimation from the vertex (one call site: ``_nee`` is inlined here)
+            ns, nc = _nee(geo, med, tex, x, d, nee_m, wv, nrm, scatter, nee_mix, nee_lw, nee_dl, dqdc, lp, li, inv_spp,
+                          row, cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
+            n_shadow += ns
+            casts += nc
+            if scatter:
+                # continue: sample the phase function with the sampling parameters
+                gsel = mix_s[0] if u1 < mix_s[2] else mix_s[1]
+                mu = _sample_hg_mu(gsel, u2)
+                _direction_from_mu(d, mu, 2.0 * np.pi * u3, nd)
+                f_e = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+                if mix_s[0] == mix_e[0] and mix_s[1] == mix_e[1] and mix_s[2] == mix_e[2]:
+                    f_s = f_e  # sampling and evaluation phase functions agree (every forward render)
+                else:
+                    f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
+                lf_e = np.log(f_e)
+                lf_s = lf_e if f_s == f_e else np.log(f_s)
+                for c in range(3):
+                    logf[c] += lf_e
+                    logp[c] += lf_s
+                    if roulette:
+                        logfs[c] += lf_s
+                lme_rr = lme + lf_s  # log mean_c p_c after the phase term, which every channel shares
+                if use_g or use_s:  # pushed at level b + 1: weight R_{b+1}
+                    _phase_records(med, mv, mu, mix_e, lw_e, dl, dqdc, ab[b + 1], g_lvl, sx_lvl, jmap)
+            else:  # the oral cavity: cosine-weighted about the normal facing the path
+                mu = np.sqrt(1.0 - u4)
+                _direction_from_mu(nrm, mu, 2.0 * np.pi * u5, nd)
+                new_m = MED_AIR
         # ---- Russian roulette at theta_0 (see ``path_tracer.RenderSettings``)
         if alive and roulette and b + 1 >= rr_depth:
             ur = _rand(rs)
