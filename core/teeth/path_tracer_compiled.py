@@ -651,7 +651,7 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
     return n_shadow, casts
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp, row,
                 cam, pix, img_on, gradpass, out_rows, adj, ab, grad, jac, jmap, scratch, path_vecs, rs):
     """One camera path (``path_tracer._trace_chunk`` for a single path). Returns (vertices, shadow rays,
@@ -888,6 +888,63 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
     return n_vert, n_shadow, casts, capped, levels
 
 
+@njit(cache=True, _nrt=False)
+def _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li, inv_spp,
+                adj, want_grad, jmap, r0, r1, s0, s1, out_rows, g, jac, jac_off, ab, mode, scratch, path_vecs, rs, o, d,
+                counts) -> None:
+    """One part of ``_trace_rows``: rows r0..r1, samples s0..s1 of each, counters into ``counts``. Allocates
+    nothing (runs without reference counting) and holds the only call of ``_trace_path``, which is inlined
+    here: a call would pass every field of every array of the scene's tuples on the stack, per path."""
+    fxy, rot, center, width = cams
+    yes, no = mode[0] == 0, mode[0] == 1
+    for row in range(r0, r1):
+        cam = cam_of[row]
+        pix = pix_of[row]
+        for smp in range(s0, s1):
+            path = row * spp + smp
+            _seed(rs, seed, path)
+            jx = _rand(rs) if jitter else 0.5
+            jy = _rand(rs) if jitter else 0.5
+            px = pix % width[cam] + jx
+            py = pix // width[cam] + jy
+            dcx = (px - fxy[cam, 2]) / fxy[cam, 0]
+            dcy = (py - fxy[cam, 3]) / fxy[cam, 1]
+            nn = 0.0
+            for c in range(3):
+                d[c] = dcx * rot[cam, 0, c] + dcy * rot[cam, 1, c] + rot[cam, 2, c]
+                nn += d[c] * d[c]
+            nn = np.sqrt(nn)
+            for c in range(3):
+                d[c] /= nn
+                o[c] = center[cam, c]
+            # one call site (``_trace_path`` is inlined here): the image, or the gradient's two passes
+            nv = ns = nc = cap = lv = 0
+            for ps in range(2 if want_grad else 1):
+                if not want_grad:
+                    gp, img, jj = mode[0], yes, jac
+                elif ps == 0:  # ab is zero here: zeroed once, and after each replay as far as it was used
+                    gp, img, jj = mode[1], yes, jac
+                else:
+                    gp, img, jj = mode[2], no, jac_off
+                nv_, ns_, nc_, cap_, lv_ = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette,
+                                                       rr_depth, lp, li, inv_spp, row, cam, pix, img, gp, out_rows,
+                                                       adj, ab, g, jj, jmap, scratch, path_vecs, rs)
+                if ps == 0:
+                    nv, ns, nc, cap, lv = nv_, ns_, nc_, cap_, lv_
+                    if want_grad:
+                        for lvl in range(lv, -1, -1):  # suffix sums R_L = sum_{b >= L} A_b
+                            for c in range(3):
+                                ab[lvl, c] += ab[lvl + 1, c]
+            if want_grad:
+                for lvl in range(lv + 1):
+                    for c in range(3):
+                        ab[lvl, c] = 0.0
+            counts[0] += nv
+            counts[1] += ns
+            counts[2] += nc
+            counts[3] += cap
+
+
 @njit(cache=True, parallel=True)
 def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li,
                 adj, want_grad, jmap, n_j, out_parts, grad_blocks, jac, counters):
@@ -896,7 +953,6 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
     into out_parts[h]. numba gives each thread one contiguous run of the parts (its omp layer ignores
     parallel_chunksize), so with 2 halves each of 2 threads traces half the samples of every row: the
     same work, where row blocks differ (on the forward scene the first half of the rows holds 43 % of it)."""
-    fxy, rot, center, width = cams
     n_rows = cam_of.shape[0]
     n_l = lp.shape[0]
     inv_spp = 1.0 / spp
@@ -928,52 +984,14 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
         # the passes (0 image, 1 image + vertex contributions, 2 replay) as run-time values: literal
         # arguments would compile a copy of _trace_path for each
         mode = np.arange(3)
-        yes, no = mode[0] == 0, mode[0] == 1
         ab = np.zeros((depth_cap + 2, 3))
         g = grad_blocks[part] if want_grad else np.empty(0)
         rs = np.empty(1, dtype=np.uint64)
         o = np.empty(3)
         d = np.empty(3)
-        for row in range(r0, r1):
-            cam = cam_of[row]
-            pix = pix_of[row]
-            for smp in range(s0, s1):
-                path = row * spp + smp
-                _seed(rs, seed, path)
-                jx = _rand(rs) if jitter else 0.5
-                jy = _rand(rs) if jitter else 0.5
-                px = pix % width[cam] + jx
-                py = pix // width[cam] + jy
-                dcx = (px - fxy[cam, 2]) / fxy[cam, 0]
-                dcy = (py - fxy[cam, 3]) / fxy[cam, 1]
-                nn = 0.0
-                for c in range(3):
-                    d[c] = dcx * rot[cam, 0, c] + dcy * rot[cam, 1, c] + rot[cam, 2, c]
-                    nn += d[c] * d[c]
-                nn = np.sqrt(nn)
-                for c in range(3):
-                    d[c] /= nn
-                    o[c] = center[cam, c]
-                if not want_grad:
-                    nv, ns, nc, cap, _ = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth,
-                                                     lp, li, inv_spp, row, cam, pix, yes, mode[0], out_rows, adj, ab, g,
-                                                     jac, jmap, scratch, path_vecs, rs)
-                else:  # ab is zero here: zeroed once, and after each replay as far as it was used
-                    nv, ns, nc, cap, lv = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette,
-                                                      rr_depth, lp, li, inv_spp, row, cam, pix, yes, mode[1], out_rows,
-                                                      adj, ab, g, jac, jmap, scratch, path_vecs, rs)
-                    for lvl in range(lv, -1, -1):  # suffix sums R_L = sum_{b >= L} A_b
-                        for c in range(3):
-                            ab[lvl, c] += ab[lvl + 1, c]
-                    _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp,
-                                row, cam, pix, no, mode[2], out_rows, adj, ab, g, jac_off, jmap, scratch, path_vecs, rs)
-                    for lvl in range(lv + 1):
-                        for c in range(3):
-                            ab[lvl, c] = 0.0
-                counters[part, 0] += nv
-                counters[part, 1] += ns
-                counters[part, 2] += nc
-                counters[part, 3] += cap
+        _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li,
+                    inv_spp, adj, want_grad, jmap, r0, r1, s0, s1, out_rows, g, jac, jac_off, ab, mode, scratch,
+                    path_vecs, rs, o, d, counters[part])
 
 
 def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, pix_of: np.ndarray, spp: int,
