@@ -40,6 +40,7 @@ from .bvh import (
     ray_triangle,
 )
 from .compiled_scene import KIND_DIELECTRIC, KIND_INDEX_MATCHED, KIND_OPAQUE, MED_AIR, MED_DENTIN, CompiledScene
+from .dentin_reach_grid import dentin_reach_grid, may_be_within_reach
 from .path_tracer import MAX_CROSSINGS, MAX_PATH_VERTICES  # the reference's limits, the same estimator
 from .ray_queries import RAY_EPS
 
@@ -53,18 +54,21 @@ SAMPLE_HALVES = 2  # each row's samples traced in 2 halves in parallel (see ``_t
 N_BLOCKS = 64  # row blocks traced in parallel; fixed so that sums do not depend on the thread count
 
 
-_TREES: dict = {}  # (sampling geometry, dentin assignment) digest -> BVH arrays; a fit re-packs every iteration
+_TREES: dict = {}  # (sampling geometry, dentin assignment, spread) digest -> BVH arrays; a fit re-packs every iteration
 
 
 def _trees(cs: CompiledScene) -> tuple:
-    """(scene BVH arrays, dentin BVH arrays, dentin roots) of ``cs``'s sampling geometry, cached by content."""
-    key = hashlib.sha1(cs.tris_s.tobytes() + cs.dentin_tooth.tobytes()).hexdigest()
+    """(scene BVH arrays, dentin BVH arrays, dentin roots, dentin reach grid) of ``cs``'s sampling geometry,
+    cached by content."""
+    key = hashlib.sha1(cs.tris_s.tobytes() + cs.dentin_tooth.tobytes()
+                       + np.float64(cs.spread).tobytes()).hexdigest()
     if key not in _TREES:
         dentin_trees = [TriangleBVH(cs.tris_s, np.flatnonzero(cs.dentin_tooth == i)) for i in range(len(cs.dentin))]
         dnodes, droots = TriangleBVH.merge(dentin_trees)
+        grid = dentin_reach_grid(cs.tris_s, cs.dentin_tooth, len(cs.dentin), BLEND_REACH * float(cs.spread))
         if len(_TREES) >= 8:
             _TREES.pop(next(iter(_TREES)))
-        _TREES[key] = (TriangleBVH(cs.tris_s).ray_arrays(cs.tris_s), dnodes, droots)
+        _TREES[key] = (TriangleBVH(cs.tris_s).ray_arrays(cs.tris_s), dnodes, droots, grid)
     return _TREES[key]
 
 
@@ -87,12 +91,12 @@ def pack_scene(cs: CompiledScene) -> tuple:
     tex = (np.concatenate(flat_s) if flat_s else np.ones((1, 3)), np.concatenate(flat_e) if flat_e else np.ones((1, 3)),
            np.array(offs, dtype=np.int64), np.array(hs, dtype=np.int64), np.array(ws, dtype=np.int64),
            np.array(cs.tex_col, dtype=np.int64))
-    nodes, dnodes, droots = _trees(cs)
+    nodes, dnodes, droots, grid = _trees(cs)
     geo = (np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
            cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
            cs.dentin_tooth, tri_delta) + nodes + dnodes + (
                droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED,
-               np.array([np.array_equal(cs.tris_s, cs.tris_e), np.array_equal(tex[0], tex[1])]))
+               np.array([np.array_equal(cs.tris_s, cs.tris_e), np.array_equal(tex[0], tex[1])])) + grid
     has_cavity = bool(cs.has_cavity)
     med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
            cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"], cs.ph["De"],
@@ -485,6 +489,9 @@ def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
     0 or 1 to the last bit and dl/dq is 0), returns +-reach for both and dq/dc = 0."""
     tris_s, tris_e, tri_delta, dnodes, droots = geo[0], geo[1], geo[10], geo[15:21], geo[21]
+    if not may_be_within_reach(geo[25:30], tooth, p):  # what the search below would find: no triangle
+        dqdc[:] = 0.0
+        return sign * reach, sign * reach
     tri, dist = closest_triangle(dnodes, droots[tooth], tris_s, p, stack, bary, reach)
     if tri < 0:
         dqdc[:] = 0.0
