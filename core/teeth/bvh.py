@@ -685,6 +685,11 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
     return best, best_t
 
 
+# ``first_hit`` compiled into its caller: for the free flights, one call per path vertex, where a call passes every
+# field of the tree's arrays on the stack
+first_hit_inlined = njit(cache=True, inline="always")(first_hit.py_func)
+
+
 @njit(cache=True, _nrt=False)
 def closest_point_triangle(tris, k, p, out) -> float:
     """Closest point on triangle k to p: barycentrics into ``out`` (3,), returns the distance."""

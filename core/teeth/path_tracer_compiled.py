@@ -35,6 +35,7 @@ from .bvh import (
     closest_point_triangle,
     closest_triangle,
     first_hit,
+    first_hit_inlined,
     hits_until_stop,
     packet_hits,
     ray_triangle,
@@ -347,7 +348,7 @@ def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, 
     while True:
         sig = sigma_s[meds[k], hero]
         t_sc = tcur + (tau_star - tau_cum[hero]) / max(sig, 1e-300) if sig > 0.0 else np.inf
-        tri, t = first_hit(nodes, o, d, tmin, t_sc, stack, wdist)
+        tri, t = first_hit_inlined(nodes, o, d, tmin, t_sc, stack, wdist)
         casts += 1
         if tri < 0:
             return k, -1, np.inf, t_sc < np.inf, casts
