@@ -35,3 +35,39 @@ def test_missing_reference_fails_with_instructions(tmp_path):
             reference_dir=str(tmp_path),
             output_dir=str(tmp_path),
         )
+
+
+def test_cpu_class_has_its_own_references(tmp_path):
+    from regression import cpu_class
+
+    refs, outs = str(tmp_path / "refs"), str(tmp_path / "out")
+    img = np.random.default_rng(2).uniform(size=(4, 3, 4)).astype(np.float32)
+    other = img.copy()
+    other[1, 1, 0] += 0.01
+    compare_to_reference("y", img, update=True, reference_dir=refs, output_dir=outs, cls="")
+    # a class without references of its own compares against the default ones
+    compare_to_reference("y", img, update=False, reference_dir=refs, output_dir=outs, cls="avx512")
+    with pytest.raises(RegressionMismatch):
+        compare_to_reference("y", other, update=False, reference_dir=refs, output_dir=outs, cls="avx512")
+    # make refs on such a machine writes no reference of its own where its render matches the default one
+    compare_to_reference("y", img, update=True, reference_dir=refs, output_dir=outs, cls="avx512")
+    assert not (tmp_path / "refs" / "avx512" / "y.exr").exists()
+    # ... and one where it differs, which it then uses; the default class keeps its own
+    compare_to_reference("y", other, update=True, reference_dir=refs, output_dir=outs, cls="avx512")
+    assert (tmp_path / "refs" / "avx512" / "y.exr").is_file()
+    compare_to_reference("y", other, update=False, reference_dir=refs, output_dir=outs, cls="avx512")
+    with pytest.raises(RegressionMismatch):
+        compare_to_reference("y", img, update=False, reference_dir=refs, output_dir=outs, cls="avx512")
+    compare_to_reference("y", img, update=False, reference_dir=refs, output_dir=outs, cls="")
+    with pytest.raises(RegressionMismatch):
+        compare_to_reference("y", other, update=False, reference_dir=refs, output_dir=outs, cls="")
+    # the class from Linux's CPU flags
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nflags\t\t: fpu sse avx2 avx512f avx512vl\n")
+    assert cpu_class(str(info)) == "avx512"
+    info.write_text("processor\t: 0\nflags\t\t: fpu sse avx2 fma\n")
+    assert cpu_class(str(info)) == ""
+    assert cpu_class(str(tmp_path / "missing")) == ""
+    # a class's reference that is no longer needed is removed by the next update that matches the default
+    compare_to_reference("y", img, update=True, reference_dir=refs, output_dir=outs, cls="avx512")
+    assert not (tmp_path / "refs" / "avx512" / "y.exr").exists()
