@@ -63,15 +63,16 @@ def compare_to_reference(
     """Assert ``|image - ref| <= atol + rtol * |ref|`` everywhere (exact when both are 0), ``ref`` the
     reference of the CPU class ``cls`` (the host's by default; see the module docstring).
 
-    With ``update`` the reference of that class is (re)written and the comparison is skipped.
+    With ``update`` the reference of that class is (re)written and the comparison is skipped; a new reference
+    (none for any class yet) is written as the default one, whatever the class.
     """
     image = np.asarray(image, dtype=np.float32)
     cls = cpu_class() if cls is None else cls
     if update:
         default = os.path.join(reference_dir, f"{name}.exr")
-        if cls:  # a class keeps its own reference only where the default one does not match its render
+        if cls and os.path.isfile(default):  # a class keeps its own only where the default does not match
             own = os.path.join(reference_dir, cls, f"{name}.exr")
-            if os.path.isfile(default) and _matches(image, default, atol, rtol):
+            if _matches(image, default, atol, rtol):
                 if os.path.isfile(own):
                     os.remove(own)
                 return
@@ -103,7 +104,10 @@ def compare_to_reference(
 
 
 def _matches(image: np.ndarray, ref_path: str, atol: float, rtol: float) -> bool:
-    ref = read_exr(ref_path, channels=_channel_names(image), allow_nan=True)
+    try:
+        ref = read_exr(ref_path, channels=_channel_names(image), allow_nan=True)
+    except (OSError, ValueError):  # other channels (ExrError is a ValueError): not a match
+        return False
     return ref.shape == image.shape and bool(np.all(np.abs(image - ref) <= atol + rtol * np.abs(ref)))
 
 

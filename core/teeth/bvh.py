@@ -686,8 +686,9 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
 
 
 # ``first_hit`` compiled into its caller: for the free flights, one call per path vertex, where a call passes every
-# field of the tree's arrays on the stack
-first_hit_inlined = njit(cache=True, inline="always")(first_hit.py_func)
+# field of the tree's arrays on the stack. Not cached itself (it would share ``first_hit``'s cache file); note that a
+# caller's cache is not invalidated by an edit of this module (delete core/teeth/__pycache__/*.nb? after one)
+first_hit_inlined = njit(cache=False, inline="always")(first_hit.py_func)
 
 
 @njit(cache=True, _nrt=False)

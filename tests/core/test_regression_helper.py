@@ -10,7 +10,7 @@ from regression import RegressionMismatch, compare_to_reference
 def test_identical_passes_changed_fails(tmp_path):
     refs, outs = str(tmp_path / "refs"), str(tmp_path / "out")
     img = np.random.default_rng(1).uniform(size=(6, 5, 4)).astype(np.float32)
-    compare_to_reference("x", img, update=True, reference_dir=refs, output_dir=outs)
+    compare_to_reference("x", img, update=True, reference_dir=refs, output_dir=outs, cls="")
     compare_to_reference("x", img.copy(), update=False, reference_dir=refs, output_dir=outs)
     changed = img.copy()
     changed[2, 3, 1] += 1e-3
@@ -68,6 +68,10 @@ def test_cpu_class_has_its_own_references(tmp_path):
     info.write_text("processor\t: 0\nflags\t\t: fpu sse avx2 fma\n")
     assert cpu_class(str(info)) == ""
     assert cpu_class(str(tmp_path / "missing")) == ""
+    # a new reference made on a machine of another class becomes the default one
+    compare_to_reference("z", img, update=True, reference_dir=refs, output_dir=outs, cls="avx512")
+    assert (tmp_path / "refs" / "z.exr").is_file() and not (tmp_path / "refs" / "avx512" / "z.exr").exists()
+    compare_to_reference("z", img, update=False, reference_dir=refs, output_dir=outs, cls="")
     # a class's reference that is no longer needed is removed by the next update that matches the default
     compare_to_reference("y", img, update=True, reference_dir=refs, output_dir=outs, cls="avx512")
     assert not (tmp_path / "refs" / "avx512" / "y.exr").exists()

@@ -104,7 +104,8 @@ def test_tracer_gives_the_same_image_and_gradient_without_the_grid(monkeypatch):
     from material_structures.core.teeth.synthetic import scene_target
 
     sc = make_scene(n_teeth=2)
-    sc.blend_spread = 1e-5
+    # a blend whose reach (0.08 mm) still gets a grid (under two cells) but holds enough vertices to matter
+    sc.blend_spread = 2e-3
     cams, lights = default_rig(target=scene_target(sc), width=24, height=16, fov_x_deg=4.8)
     cams, lights = cams[:1], lights[:2]
     adj = np.random.default_rng(1).standard_normal((1, 2, 16, 24, 3))
@@ -117,9 +118,14 @@ def test_tracer_gives_the_same_image_and_gradient_without_the_grid(monkeypatch):
 
     img, grad = run()
     real = ptc.dentin_reach_grid
+    assert real(ptc.CompiledScene(sc).tris_s, ptc.CompiledScene(sc).dentin_tooth, 2, 40.0 * 2e-3)[2][0, 0] > 0
     monkeypatch.setattr(ptc, "dentin_reach_grid", lambda *a: (lambda g: g[:2] + (0 * g[2],) + g[3:])(real(*a)))
-    img0, grad0 = run()
+    img0, grad0 = run()  # no grid: every vertex searched
+    # negative control: a grid that marks nothing (every search skipped) changes the image, so the blend is seen
+    monkeypatch.setattr(ptc, "dentin_reach_grid", lambda *a: (lambda g: g[:4] + (0 * g[4],))(real(*a)))
+    img_skip, _ = run()
     ptc._TREES.clear()
     assert img.stats["path_vertices"] > 1000
     np.testing.assert_array_equal(img.images, img0.images)
     np.testing.assert_array_equal(grad.grad, grad0.grad)
+    assert not np.array_equal(img.images, img_skip.images)
