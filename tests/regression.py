@@ -5,8 +5,9 @@ them deliberately. On a mismatch the new render and an absolute-difference image
 ``tests/output/NAME.new.exr`` and ``tests/output/NAME.diff.exr`` and the failure names them.
 
 A lit Cycles render with a fixed seed is bit-identical from run to run on one machine, but not across CPU
-instruction sets: on a CPU with AVX-512, Embree and OSL's JIT run other code, a few of the 4-sample paths end
-elsewhere, and a handful of pixels differ by their noise (up to 0.016 here, against the lit scenes' 0.002). Such a
+instruction sets: on a CPU with AVX-512 (where Embree and OSL's JIT can take other code paths; which of them it is
+was not isolated), a handful of pixels of the 4-sample renders differ by up to 0.016, against the lit scenes' 0.002
+(six of eighteen library renders, 1-28 of 6912 values each, measured 2026-11-27 against AVX2 references). Such a
 CPU class has its own references, ``tests/references/CLASS/NAME.exr``, only for the renders that differ: ``make
 refs`` run on a machine of that class writes one where its render does not match the default reference within the
 test's tolerance (and removes one that is no longer needed); everything else compares against
