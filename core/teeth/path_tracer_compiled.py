@@ -490,10 +490,9 @@ def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
     0 or 1 to the last bit and dl/dq is 0), returns +-reach for both and dq/dc = 0."""
     tris_s, tris_e, tri_delta, dnodes, droots = geo[0], geo[1], geo[10], geo[15:21], geo[21]
-    if not may_be_within_reach(geo[25:30], tooth, p):  # what the search below would find: no triangle
-        dqdc[:] = 0.0
-        return sign * reach, sign * reach
-    tri, dist = closest_triangle(dnodes, droots[tooth], tris_s, p, stack, bary, reach)
+    tri, dist = -1, reach  # where the reach grid rules dentin out, the search would find no triangle either
+    if may_be_within_reach(geo[25:30], tooth, p):
+        tri, dist = closest_triangle(dnodes, droots[tooth], tris_s, p, stack, bary, reach)
     if tri < 0:
         dqdc[:] = 0.0
         return sign * reach, sign * reach
@@ -748,7 +747,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
         alive = True
         lme_rr = np.nan  # log mean_c exp(logp_c) at the end of this vertex where already known (the roulette's)
         connect = False  # a scattering or an opaque vertex: connected to the lights
-        nee_m, nee_mix, nee_lw, nee_dl = mk, ones, 1.0, 0.0
+        nee_m, nee_mix, nee_lw, nee_dl = mk, ones, 1.0, 0.0  # the opaque vertex's; a scattering vertex sets its own
         if scatter:
             # ---- volume scattering vertex
             n_vert += 1
@@ -836,8 +835,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 lme_rr = lme
                 for c in range(3):
                     wv[c] = np.exp(logf[c] - lme)
-                nee_m, nee_mix, nee_lw, nee_dl = mk, ones, 1.0, 0.0
-                connect = True
+                connect = True  # with the connection's defaults set above: medium mk, no phase function
             else:
                 alive = False
         else:

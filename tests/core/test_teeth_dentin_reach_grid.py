@@ -45,6 +45,15 @@ def _scene():
     return CompiledScene(sc)
 
 
+def _trees_and_grid(cs: CompiledScene, reach: float) -> tuple:
+    """The dentin trees the tracer searches (nodes, roots) and the reach grid, as ``path_tracer_compiled._trees``."""
+    from material_structures.core.teeth.bvh import TriangleBVH
+
+    trees = [TriangleBVH(cs.tris_s, np.flatnonzero(cs.dentin_tooth == i)) for i in range(len(cs.dentin))]
+    dnodes, droots = TriangleBVH.merge(trees)
+    return dnodes, droots, dentin_reach_grid(cs.tris_s, cs.dentin_tooth, len(cs.dentin), reach)
+
+
 def _points_near_dentin(cs: CompiledScene, tooth: int, scale: float, n: int, rng) -> np.ndarray:
     """Points on random dentin triangles of ``tooth`` pushed off by a random offset of up to ``scale`` per axis."""
     ids = np.flatnonzero(cs.dentin_tooth == tooth)
@@ -56,12 +65,8 @@ def _points_near_dentin(cs: CompiledScene, tooth: int, scale: float, n: int, rng
 
 @pytest.mark.parametrize("reach", [4e-4, 0.01, 0.08])
 def test_grid_flags_every_point_the_search_finds_dentin_near(reach):
-    from material_structures.core.teeth.bvh import TriangleBVH
-
     cs = _scene()
-    trees = [TriangleBVH(cs.tris_s, np.flatnonzero(cs.dentin_tooth == i)) for i in range(len(cs.dentin))]
-    dnodes, droots = TriangleBVH.merge(trees)
-    grid = dentin_reach_grid(cs.tris_s, cs.dentin_tooth, len(cs.dentin), reach)
+    dnodes, droots, grid = _trees_and_grid(cs, reach)
     rng = np.random.default_rng(7)
     for tooth in range(len(cs.dentin)):
         assert grid[2][tooth, 0] > 0  # a grid was built at this reach
@@ -76,13 +81,9 @@ def test_grid_flags_every_point_the_search_finds_dentin_near(reach):
 
 
 def test_grid_lets_most_of_the_tooth_skip_the_search():
-    from material_structures.core.teeth.bvh import TriangleBVH
-
     cs = _scene()
     reach = 40.0 * 1e-5
-    trees = [TriangleBVH(cs.tris_s, np.flatnonzero(cs.dentin_tooth == i)) for i in range(len(cs.dentin))]
-    dnodes, droots = TriangleBVH.merge(trees)
-    grid = dentin_reach_grid(cs.tris_s, cs.dentin_tooth, len(cs.dentin), reach)
+    dnodes, droots, grid = _trees_and_grid(cs, reach)
     rng = np.random.default_rng(3)
     pts_all = cs.tris_s[cs.dentin_tooth == 0].reshape(-1, 3)
     pts = rng.uniform(pts_all.min(axis=0) - 1.0, pts_all.max(axis=0) + 1.0, (50000, 3))
@@ -118,7 +119,8 @@ def test_tracer_gives_the_same_image_and_gradient_without_the_grid(monkeypatch):
 
     img, grad = run()
     real = ptc.dentin_reach_grid
-    assert real(ptc.CompiledScene(sc).tris_s, ptc.CompiledScene(sc).dentin_tooth, 2, 40.0 * 2e-3)[2][0, 0] > 0
+    cs = CompiledScene(sc)
+    assert real(cs.tris_s, cs.dentin_tooth, 2, 40.0 * 2e-3)[2][0, 0] > 0
     monkeypatch.setattr(ptc, "dentin_reach_grid", lambda *a: (lambda g: g[:2] + (0 * g[2],) + g[3:])(real(*a)))
     img0, grad0 = run()  # no grid: every vertex searched
     # negative control: a grid that marks nothing (every search skipped) changes the image, so the blend is seen
