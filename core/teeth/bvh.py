@@ -233,7 +233,7 @@ def _sah_split(cen: np.ndarray, tlo: np.ndarray, thi: np.ndarray) -> np.ndarray 
     return best[1]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _inverse(d) -> tuple[float, float, float, int, int, int]:
     """Inverse direction of a ray and, per axis, the box row of its near plane (0-2: lo where the direction is
     positive, 3-5: hi), the far plane being the other one."""
@@ -243,7 +243,7 @@ def _inverse(d) -> tuple[float, float, float, int, int, int]:
     return ix, iy, iz, 0 if ix >= 0.0 else 3, 1 if iy >= 0.0 else 4, 2 if iz >= 0.0 else 5
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _leaf_triangle(tblk, blk, lane, o, d) -> tuple[float, float, float]:
     """(t, u, v) of the ray with the plane of the triangle in lane ``lane`` of leaf block ``blk``, as
     ``ray_triangle`` (the same operations on the stored edges, so the same numbers); u is returned as 2
@@ -265,7 +265,7 @@ def _leaf_triangle(tblk, blk, lane, o, d) -> tuple[float, float, float]:
     return t, u, v
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def leaf_hits_scalar(tblk, blk, o, d, tmin, tout) -> int:
     """Scalar reference of ``_leaf_hits``: bit l set where lane l's triangle is hit with tmin < t (u, v >= 0,
     u + v <= 1), its t in tout[l] (t of every lane with u in [0, 1]; the others' entries are not used)."""
@@ -365,14 +365,8 @@ def _by_width(context, builder: ir.IRBuilder, wty, wb: ir.Value, i: ir.Value, te
     return res
 
 
-@intrinsic
-def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
-    """``_wide_slabs`` in vector form, in float32 (one AVX register holds a plane of all WIDTH children): the
-    WIDTH entry distances t0 go into ``dist`` (all of them, also of the missed boxes), the return value has bit c
-    set where the ray enters child c: t0 <= t1 SLACK32 and t0 < inf (exactly the children ``_wide_slabs`` gives a
-    finite distance). The origin, inverse direction and limits are rounded to float32; the boxes' padding
-    (``ray_arrays``) covers the origin's rounding and SLACK32 the relative rounding of the distances, so a box the
-    ray enters within (tmin, tmax) is never missed (a few more may be visited; the triangles decide the hits)."""
+def _slab_intrinsic(wbox, dist, store_dist: bool):
+    """Signature and code of ``_slab_mask`` (with ``store_dist``) and ``_slab_hit_mask``."""
     if not (_c_array(wbox, types.float32, 3) and _c_array(dist, types.float64, 1)):
         return None
     i64, f64 = types.int64, types.float64  # the arguments are cast to these at the call
@@ -400,11 +394,30 @@ def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tma
         t1 = _vmin(builder, _splat(builder, tmax, vt), _vmin(builder, bx, _vmin(builder, by, bz)))
         hit = builder.fcmp_ordered("<=", t0, builder.fmul(t1, ir.Constant(vt, [float(SLACK32)] * WIDTH)))
         fin = builder.fcmp_ordered("<", t0, ir.Constant(vt, [float("inf")] * WIDTH))
-        t0d = builder.fpext(t0, ir.VectorType(ir.DoubleType(), WIDTH))
-        builder.store(t0d, _row_ptr(context, builder, dty, dist, [zero], t0d.type), align=8)
+        if store_dist:
+            t0d = builder.fpext(t0, ir.VectorType(ir.DoubleType(), WIDTH))
+            builder.store(t0d, _row_ptr(context, builder, dty, dist, [zero], t0d.type), align=8)
         return builder.zext(builder.bitcast(builder.and_(hit, fin), ir.IntType(WIDTH)), _I64)
 
     return sig, codegen
+
+
+@intrinsic
+def _slab_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
+    """``_wide_slabs`` in vector form, in float32 (one AVX register holds a plane of all WIDTH children): the
+    WIDTH entry distances t0 go into ``dist`` (all of them, also of the missed boxes), the return value has bit c
+    set where the ray enters child c: t0 <= t1 SLACK32 and t0 < inf (exactly the children ``_wide_slabs`` gives a
+    finite distance). The origin, inverse direction and limits are rounded to float32; the boxes' padding
+    (``ray_arrays``) covers the origin's rounding and SLACK32 the relative rounding of the distances, so a box the
+    ray enters within (tmin, tmax) is never missed (a few more may be visited; the triangles decide the hits)."""
+    return _slab_intrinsic(wbox, dist, True)
+
+
+@intrinsic
+def _slab_hit_mask(typingctx, wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist):
+    """``_slab_mask`` without storing the entry distances (``dist`` is left as it was): for traversals that
+    visit the children in any order."""
+    return _slab_intrinsic(wbox, dist, False)
 
 
 @intrinsic
@@ -565,7 +578,7 @@ def _packet_leaf_hits(typingctx, tblk, blk, ox, oy, oz, dirs, r0, rays, tmin, pm
     return sig, codegen
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist) -> None:
     """Slab test of the ray against the WIDTH child boxes of wide node i (nx, ny, nz: near-plane rows from
     ``_inverse``): entry distances into dist, inf where the ray misses a box within (tmin, tmax). With
@@ -582,7 +595,7 @@ def _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist) -
         dist[c] = t0 if t0 <= t1 * SLACK32 else np.inf
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) -> int:
     """Scalar reference of ``_packet_box_masks`` (the packet's box loop before it was written as vector IR), in
     float32 as ``_wide_slabs``: with d = box plane - origin and a = d ix (per axis, both planes), t0 = max(tmin,
@@ -615,7 +628,7 @@ def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) 
     return kids
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
     """Push the children of wide node i in the bit mask ``mask`` (from ``_slab_mask``), the nearest by entry
     distance ``dist`` on top; new sp."""
@@ -637,7 +650,20 @@ def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
     return sp
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
+def _push_unsorted(wchild, i, mask, stack, sp) -> int:
+    """Push the children of wide node i in the bit mask ``mask`` in column order; new sp."""
+    cap = stack.shape[0]
+    m = mask
+    while m != 0 and sp < cap:
+        c = trailing_zeros(m)
+        m &= m - 1
+        stack[sp] = wchild[i, c]
+        sp += 1
+    return sp
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
     """(t, u, v) of the ray o + t d with the plane of triangle k; barycentrics (1 - u - v, u, v)."""
     e1x, e1y, e1z = tris[k, 1, 0] - tris[k, 0, 0], tris[k, 1, 1] - tris[k, 0, 1], tris[k, 1, 2] - tris[k, 0, 2]
@@ -655,7 +681,7 @@ def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
     return t, u, v
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
     """Nearest triangle hit by o + t d with tmin < t < tmax: (triangle or -1, t). ``ray_nodes``: a tree's
     ``ray_arrays``; ``stack``: int64 scratch of ``STACK_SIZE``, ``dist``: float64 scratch of ``WIDTH``."""
@@ -688,10 +714,10 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
 # ``first_hit`` compiled into its caller: for the free flights, one call per path vertex, where a call passes every
 # field of the tree's arrays on the stack. Not cached itself (it would share ``first_hit``'s cache file); note that a
 # caller's cache is not invalidated by an edit of this module (delete core/teeth/__pycache__/*.nb? after one)
-first_hit_inlined = njit(cache=False, inline="always")(first_hit.py_func)
+first_hit_inlined = njit(cache=False, inline="always", error_model="numpy")(first_hit.py_func)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def closest_point_triangle(tris, k, p, out) -> float:
     """Closest point on triangle k to p: barycentrics into ``out`` (3,), returns the distance."""
     ax, ay, az = tris[k, 0, 0], tris[k, 0, 1], tris[k, 0, 2]
@@ -735,7 +761,7 @@ def closest_point_triangle(tris, k, p, out) -> float:
     return np.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _box_dist2(lo, hi, i, p) -> float:
     s = 0.0
     for a in range(3):
@@ -746,7 +772,7 @@ def _box_dist2(lo, hi, i, p) -> float:
     return s
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tuple[int, float]:
     """Triangle of the tree at ``root`` nearest to point p, (triangle, distance), or (-1, max_dist) when
     none is closer than ``max_dist``. ``stack``, ``bary``: scratch (``STACK_SIZE`` int64, 3 float64)."""
@@ -777,12 +803,14 @@ def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tupl
     return best, best_d
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, buf_t) -> int:
     """Every triangle hit by o + t d with tmin < t < tmax up to the nearest one with ``stops[k]``, in one
     traversal (boxes beyond the nearest stopping hit found so far are skipped). Hits go unsorted into
-    ``buf_tri``, ``buf_t``; a few beyond the final stopping hit may be among them. Returns the number
-    of hits, which exceeds the buffer when it overflowed (the extra ones are not stored)."""
+    ``buf_tri``, ``buf_t``; some beyond the final stopping hit may be among them. Returns the number
+    of hits, which exceeds the buffer when it overflowed (the extra ones are not stored). Children are
+    pushed in column order, not nearest first: most shadow rays reach their light unblocked and visit every
+    box they cross in any order, so sorting cost more than the culling it bought."""
     wbox, wchild, tblk, tord = ray_nodes
     ix, iy, iz, nx, ny, nz = _inverse(d)
     ox, oy, oz = o[0], o[1], o[2]
@@ -813,12 +841,12 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
                         if stops[k]:
                             tlim = t
             continue
-        mask = _slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
-        sp = _push_masked(wchild, i, mask, dist, stack, sp)
+        mask = _slab_hit_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
+        sp = _push_unsorted(wchild, i, mask, stack, sp)
     return n
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, cmask, pmask, pt, buf_tri, buf_t,
                 counts):
     """``hits_until_stop`` for the rays o + t dirs[r0 + b] with tmin < t < tmaxs[r0 + b], for every bit b

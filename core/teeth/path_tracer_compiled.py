@@ -17,6 +17,10 @@ contribution A_b of each vertex level b; a second pass replays the same random n
 d log f term pushed at level L with the weight R_L = sum_{b >= L} A_b (the suffix sums of the
 reference), and every connection term with its own connection's weight. Forward mode (the image
 Jacobian) carries the running score d log f per path as the reference does.
+
+Compiled with numba's numpy error model: a float division by zero gives inf or NaN as in numpy instead of
+a test and a branch to raise ZeroDivisionError at every division (no division here has a zero divisor in
+the scenes the tests trace: the images are bit-identical to the Python error model's).
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from .compiled_scene import KIND_DIELECTRIC, KIND_INDEX_MATCHED, KIND_OPAQUE, ME
 from .dentin_reach_grid import dentin_reach_grid, may_be_within_reach
 from .path_tracer import MAX_CROSSINGS, MAX_PATH_VERTICES  # the reference's limits, the same estimator
 from .ray_queries import RAY_EPS
+from .work_queue import take_next
 
 # l(q) = (1 + tanh(q / 2 s)) / 2 is 1 in float64 from q / s = 38.2 on (tanh rounds to 1 beyond 19.1):
 # the dentin distance is searched only this many spreads far
@@ -116,7 +121,7 @@ def _log_table(a):
     return np.log(a)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _log_mix(a, b, log_a, log_b, w) -> float:
     """log(w a + (1 - w) b), the log of a blended coefficient (eq. 5.17); from the tables where w is 0 or 1."""
     if w == 1.0:
@@ -213,7 +218,7 @@ def _blend(q, spread) -> float:
 
 
 # ------------------------------------------------------------------------------------------ score sinks
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _emit(col, v0, v1, v2, w, g, sx, jmap) -> None:
     """One d log f record: g[col] += v . w (reverse mode), sx[jmap[col]] += v (forward mode)."""
     if col < 0:
@@ -228,7 +233,7 @@ def _emit(col, v0, v1, v2, w, g, sx, jmap) -> None:
             sx[j, 2] += v2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _emit_diag(col0, v, w, g, sx, jmap) -> None:
     """Records col0 + c with value v[c] on channel c only."""
     if col0 < 0:
@@ -238,7 +243,7 @@ def _emit_diag(col0, v, w, g, sx, jmap) -> None:
     _emit(col0 + 2, 0.0, 0.0, v[2], w, g, sx, jmap)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _emit_blend(col_e, col_d, v_e, row_e, v_d, row_d, w, tmp, ab_b, g, sx, jmap) -> None:
     """Derivatives of log(w a + (1 - w) b), the log of a blended coefficient (eq. 5.17-5.21), with
     a = v_e[row_e], b = v_d[row_d] per channel: w / mix by a (on columns ``col_e``), (1 - w) / mix by b
@@ -252,7 +257,7 @@ def _emit_blend(col_e, col_d, v_e, row_e, v_d, row_d, w, tmp, ab_b, g, sx, jmap)
 
 
 # ------------------------------------------------------------------------------------------ ray walks
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds) -> int:
     """Record crossing k of triangle tri at t and the medium beyond it; returns k + 1."""
     tri_x[k] = tri
@@ -262,7 +267,7 @@ def _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds) -> int:
     return k + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, wdist, buf_tri, buf_t):
     """Crossings along o + t d (see ``path_tracer._Tracer.through``): path mode passes index-matched
     surfaces and stops at the first other one; shadow mode passes every non-opaque surface up to tmax.
@@ -275,7 +280,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, wdist, buf_tri
     return _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist):
     """``_walk`` from the n hits gathered by ``hits_until_stop`` (or ``packet_hits``) in buf_tri, buf_t."""
     normal_s, kind, inside, outside = geo[2], geo[3], geo[4], geo[5]
@@ -327,7 +332,7 @@ def _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, med
         tcur = t
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, tau_cum, stack, wdist):
     """The free flight of a path in a medium, walked lazily: the crossings of index-matched surfaces along
     o + t d up to the distance where the hero channel's optical depth reaches ``tau_star`` (a scattering
@@ -363,7 +368,7 @@ def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, 
         tmin = t + RAY_EPS
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
     """Crossing distances on the evaluation geometry, ordered and within [0, upper]; which were clipped
     (``path_tracer._Tracer.eval_crossings``)."""
@@ -392,7 +397,7 @@ def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
             t_e[j] = kept
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _crossing_record(geo, med, o, d, tri, m_before, m_after, w, g, sx, jmap) -> None:
     """(S_i - S_e) dt/dc of one dentin crossing (eq. 5.29-5.32)."""
     tris_e, dtooth, tri_delta = geo[1], geo[9], geo[10]
@@ -420,7 +425,7 @@ def _crossing_record(geo, med, o, d, tri, m_before, m_after, w, g, sx, jmap) -> 
               w, g, sx, jmap)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _a_t(geo, tex, tri, o, d, which_e, a, idx, wts) -> int:
     """Bilinear a_t at the boundary hit of o + t d on tri (eq. 5.2): values into a (3), texel indices and
     weights into idx, wts (4); returns the texture's first parameter column."""
@@ -452,7 +457,7 @@ def _a_t(geo, tex, tri, o, d, which_e, a, idx, wts) -> int:
     return tex_col[k]
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _a_t_records(col0, a, idx, wts, w, g, sx, jmap) -> None:
     """d log a_t / d texel = w_i / a_t per channel (eq. 5.10)."""
     for i in range(4):
@@ -462,7 +467,7 @@ def _a_t_records(col0, a, idx, wts, w, g, sx, jmap) -> None:
         _emit(base + 2, 0.0, 0.0, wts[i] / a[2], w, g, sx, jmap)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
     """d log f_p of the blended two-lobe phase function at one vertex and direction (eq. 5.11-5.19)."""
     ph_ee, ph_de, col_ph_e, col_ph_d, med_tooth, c_col = med[13], med[14], med[17], med[18], med[3], med[19]
@@ -484,7 +489,7 @@ def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
             _emit(c_col[tooth] + m, val, val, val, w, g, sx, jmap)
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, _nrt=False, inline="always", error_model="numpy")
 def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     """Signed distance to the tooth's dentin on the sampling and evaluation geometry, dq_e/dc into dqdc
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
@@ -510,7 +515,7 @@ def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     return sign * dist, sign * dist_e
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
     """``_nee``'s shadow rays from x as packets (``bvh.packet_hits``): every light's direction, distance, mu and
     f (phase function or cosine / pi) into pk, and the hits of the rays with f > 0 (a function of its own,
@@ -543,7 +548,7 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
 
 
 # ------------------------------------------------------------------------------------------ one path
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, _nrt=False, inline="always", error_model="numpy")
 def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li, inv_spp, row, cam, pix, b,
          img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch):
     """Connect vertex x to every light; splat, and the connection's own d log f terms (``path_tracer._nee``).
@@ -658,7 +663,7 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
     return n_shadow, casts
 
 
-@njit(cache=True, _nrt=False, inline="always")
+@njit(cache=True, _nrt=False, inline="always", error_model="numpy")
 def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp, row,
                 cam, pix, img_on, gradpass, out_rows, adj, ab, grad, jac, jmap, scratch, path_vecs, rs):
     """One camera path (``path_tracer._trace_chunk`` for a single path). Returns (vertices, shadow rays,
@@ -894,7 +899,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
     return n_vert, n_shadow, casts, capped, levels
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li, inv_spp,
                 adj, want_grad, jmap, r0, r1, s0, s1, out_rows, g, jac, jac_off, ab, mode, scratch, path_vecs, rs, o, d,
                 counts) -> None:
@@ -951,27 +956,23 @@ def _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
             counts[3] += cap
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li,
-                adj, want_grad, jmap, n_j, out_parts, grad_blocks, jac, counters):
+                adj, want_grad, jmap, n_j, out_parts, grad_blocks, jac, counters, n_workers):
     """Trace every row (traced pixel) x spp in parts traced in parallel: part = (sample half, row block),
     n_halves = out_parts.shape[0] (1 or 2) halves of the samples of each of the row blocks; half h adds
-    into out_parts[h]. numba gives each thread one contiguous run of the parts (its omp layer ignores
-    parallel_chunksize), so with 2 halves each of 2 threads traces half the samples of every row: the
-    same work, where row blocks differ (on the forward scene the first half of the rows holds 43 % of it)."""
+    into out_parts[h]. Each thread takes the next untaken part until none is left (``work_queue``), so a thread
+    slowed by other work takes fewer parts; a part's result and where it goes do not depend on which thread
+    traced it, so neither do the sums. The halves keep the parts alike where row blocks differ (on the forward
+    scene the first half of the rows holds 43 % of the work)."""
     n_rows = cam_of.shape[0]
     n_l = lp.shape[0]
     inv_spp = 1.0 / spp
     n_halves = out_parts.shape[0]
     n_blocks = counters.shape[0] // n_halves
-    for part in prange(counters.shape[0]):
-        half = part // n_blocks
-        blk = part - half * n_blocks
-        r0 = blk * n_rows // n_blocks
-        r1 = (blk + 1) * n_rows // n_blocks
-        s0 = half * spp // n_halves
-        s1 = (half + 1) * spp // n_halves
-        out_rows = out_parts[half]
+    n_parts = counters.shape[0]
+    next_part = np.zeros(1, dtype=np.int64)
+    for _worker in prange(n_workers):  # one per thread (get_num_threads() here would make this uncacheable)
         scratch = (np.empty(MAX_CROSSINGS + 1, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
                    np.empty(MAX_CROSSINGS + 2, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
                    np.empty(MAX_CROSSINGS + 1, dtype=np.bool_), np.empty(3), np.empty(4, dtype=np.int64),
@@ -991,13 +992,23 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
         # arguments would compile a copy of _trace_path for each
         mode = np.arange(3)
         ab = np.zeros((depth_cap + 2, 3))
-        g = grad_blocks[part] if want_grad else np.empty(0)
         rs = np.empty(1, dtype=np.uint64)
         o = np.empty(3)
         d = np.empty(3)
-        _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li,
-                    inv_spp, adj, want_grad, jmap, r0, r1, s0, s1, out_rows, g, jac, jac_off, ab, mode, scratch,
-                    path_vecs, rs, o, d, counters[part])
+        while True:
+            part = take_next(next_part)
+            if part >= n_parts:
+                break
+            half = part // n_blocks
+            blk = part - half * n_blocks
+            r0 = blk * n_rows // n_blocks
+            r1 = (blk + 1) * n_rows // n_blocks
+            s0 = half * spp // n_halves
+            s1 = (half + 1) * spp // n_halves
+            g = grad_blocks[part] if want_grad else np.empty(0)
+            _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp,
+                        li, inv_spp, adj, want_grad, jmap, r0, r1, s0, s1, out_parts[half], g, jac, jac_off, ab, mode,
+                        scratch, path_vecs, rs, o, d, counters[part])
 
 
 def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, pix_of: np.ndarray, spp: int,
@@ -1026,7 +1037,7 @@ def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, p
                 np.ascontiguousarray(lp, dtype=np.float64), np.ascontiguousarray(li, dtype=np.float64),
                 np.zeros((0, 0, 0, 3)) if adj is None else np.ascontiguousarray(adj, dtype=np.float64), want_grad,
                 np.full(1, -1, dtype=np.int64) if jmap is None else jmap, max(n_j, 0), out_parts, grad_blocks, jac,
-                counters)
+                counters, get_num_threads())
     out_rows = out_parts[0] if n_halves == 1 else out_parts[0] + out_parts[1]
     grad = grad_blocks.sum(axis=0) if want_grad else None
     return out_rows, grad, (jac if jmap is not None else None), counters.sum(axis=0), get_num_threads()
