@@ -628,6 +628,9 @@ def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) 
     return kids
 
 
+# The traversal loops index their stacks with np.uint64: numba then leaves out the negative-index wraparound
+# (a sign test and an add per access), which a signed index gets even where it is never negative (2.5 % of the
+# forward work, paired)
 @njit(cache=True, inline="always", error_model="numpy")
 def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
     """Push the children of wide node i in the bit mask ``mask`` (from ``_slab_mask``), the nearest by entry
@@ -638,15 +641,15 @@ def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
     while m != 0 and sp < cap:
         c = trailing_zeros(m)
         m &= m - 1
-        tc = dist[c]
+        tc = dist[np.uint64(c)]
         k = sp
-        while k > base and dist[stack[k - 1]] < tc:
-            stack[k] = stack[k - 1]
+        while k > base and dist[stack[np.uint64(k - 1)]] < tc:
+            stack[np.uint64(k)] = stack[np.uint64(k - 1)]
             k -= 1
-        stack[k] = c
+        stack[np.uint64(k)] = c
         sp += 1
     for k in range(base, sp):
-        stack[k] = wchild[i, stack[k]]
+        stack[np.uint64(k)] = wchild[np.uint64(i), np.uint64(stack[np.uint64(k)])]
     return sp
 
 
@@ -658,7 +661,7 @@ def _push_unsorted(wchild, i, mask, stack, sp) -> int:
     while m != 0 and sp < cap:
         c = trailing_zeros(m)
         m &= m - 1
-        stack[sp] = wchild[i, c]
+        stack[np.uint64(sp)] = wchild[np.uint64(i), np.uint64(c)]
         sp += 1
     return sp
 
@@ -694,7 +697,7 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
     sp = 1
     while sp > 0:
         sp -= 1
-        i = stack[sp]
+        i = stack[np.uint64(sp)]
         if i < 0:
             s = ~i
             b0 = s >> 5
@@ -703,8 +706,8 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
                 while hm != 0:  # lanes in order: ties go to the first triangle, as one at a time
                     lane = trailing_zeros(hm)
                     hm &= hm - 1
-                    if dist[lane] < best_t:
-                        best, best_t = tord[blk, lane], dist[lane]
+                    if dist[np.uint64(lane)] < best_t:
+                        best, best_t = tord[np.uint64(blk), np.uint64(lane)], dist[np.uint64(lane)]
             continue
         mask = _slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, best_t, dist)
         sp = _push_masked(wchild, i, mask, dist, stack, sp)
@@ -822,7 +825,7 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
     sp = 1
     while sp > 0:
         sp -= 1
-        i = stack[sp]
+        i = stack[np.uint64(sp)]
         if i < 0:
             s = ~i
             b0 = s >> 5
