@@ -807,13 +807,15 @@ def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tupl
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, buf_t) -> int:
+def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, buf_t, nearest_first) -> int:
     """Every triangle hit by o + t d with tmin < t < tmax up to the nearest one with ``stops[k]``, in one
     traversal (boxes beyond the nearest stopping hit found so far are skipped). Hits go unsorted into
     ``buf_tri``, ``buf_t``; some beyond the final stopping hit may be among them. Returns the number
-    of hits, which exceeds the buffer when it overflowed (the extra ones are not stored). Children are
-    pushed in column order, not nearest first: most shadow rays reach their light unblocked and visit every
-    box they cross in any order, so sorting cost more than the culling it bought."""
+    of hits, which exceeds the buffer when it overflowed (the extra ones are not stored). ``nearest_first``:
+    visit a node's children nearest first, so that a stopping hit found early culls the boxes behind it (a
+    path's flight through air, which usually stops at the nearest tooth); else in column order, for shadow
+    rays: most reach their light unblocked and visit every box they cross in any order, and sorting cost more
+    than the culling it bought."""
     wbox, wchild, tblk, tord = ray_nodes
     ix, iy, iz, nx, ny, nz = _inverse(d)
     ox, oy, oz = o[0], o[1], o[2]
@@ -844,8 +846,12 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
                         if stops[k]:
                             tlim = t
             continue
-        mask = _slab_hit_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
-        sp = _push_unsorted(wchild, i, mask, stack, sp)
+        if nearest_first:
+            mask = _slab_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
+            sp = _push_masked(wchild, i, mask, dist, stack, sp)
+        else:
+            mask = _slab_hit_mask(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tlim, dist)
+            sp = _push_unsorted(wchild, i, mask, stack, sp)
     return n
 
 

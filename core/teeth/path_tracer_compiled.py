@@ -20,7 +20,8 @@ Jacobian) carries the running score d log f per path as the reference does.
 
 Compiled with numba's numpy error model: a float division by zero gives inf or NaN as in numpy instead of
 a test and a branch to raise ZeroDivisionError at every division (no division here has a zero divisor in
-the scenes the tests trace: the images are bit-identical to the Python error model's).
+the scenes the tests trace: the images are bit-identical to the Python error model's). ``trace`` refuses a
+result that is not finite, which is where such a division would show.
 """
 
 from __future__ import annotations
@@ -116,7 +117,7 @@ def pack_scene(cs: CompiledScene) -> tuple:
     return geo, med, tex
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _log_table(a):
     return np.log(a)
 
@@ -132,27 +133,27 @@ def _log_mix(a, b, log_a, log_b, w) -> float:
 
 
 # ------------------------------------------------------------------------------------------ random numbers
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mix64(z):
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
     return z ^ (z >> np.uint64(31))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _rand(rs) -> float:
     """Next uniform in [0, 1) of the splitmix64 stream in rs[0]."""
     rs[0] += np.uint64(0x9E3779B97F4A7C15)
     return float(_mix64(rs[0]) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _seed(rs, seed, path) -> None:
     rs[0] = _mix64(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + _mix64(np.uint64(path) + np.uint64(1)))
 
 
 # ------------------------------------------------------------------------------------------ small math
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fresnel(cos_i, eta) -> float:
     """Unpolarised Fresnel reflectance of the thin boundary (eq. 5.1), |cos_i| used."""
     c = min(abs(cos_i), 1.0)
@@ -163,18 +164,18 @@ def _fresnel(cos_i, eta) -> float:
     return 0.5 * (rs * rs + rp * rp)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _hg(mu, g) -> float:
     den = 1.0 + g * g - 2.0 * g * mu
     return INV_4PI * (1.0 - g * g) / (den * np.sqrt(den))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _hg_dlog(mu, g) -> float:
     return -(2.0 * g / (1.0 - g * g) + 3.0 * (g - mu) / (1.0 + g * g - 2.0 * g * mu))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sample_hg_mu(g, u) -> float:
     if abs(g) < 1e-4:
         return 1.0 - 2.0 * u
@@ -182,7 +183,7 @@ def _sample_hg_mu(g, u) -> float:
     return min(max((1.0 + g * g - s * s) / (2.0 * g), -1.0), 1.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _direction_from_mu(d, mu, phi, out) -> None:
     """Unit direction at cosine mu to d and azimuth phi (frame of Duff et al. 2017) into out."""
     sign = 1.0 if d[2] >= 0.0 else -1.0
@@ -199,13 +200,13 @@ def _direction_from_mu(d, mu, phi, out) -> None:
     out[0], out[1], out[2] = x / n, y / n, z / n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _logmeanexp3(a) -> float:
     m = max(a[0], max(a[1], a[2]))
     return m + np.log((np.exp(a[0] - m) + np.exp(a[1] - m) + np.exp(a[2] - m)) / 3.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _blend(q, spread) -> float:
     """l(q) of eq. 5.15. Beyond |q / (2 spread)| = 20, tanh is +-1 to the last bit (1 - tanh(20) < 1e-17): there
     l is exactly 1 or 0 without the call."""
@@ -276,7 +277,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, wdist, buf_tri
     One traversal gathers the hits up to the first stopping surface; where that cannot decide (buffer
     overflow, a stopping hit within RAY_EPS of a crossing) the walk goes on one ray cast per crossing."""
     stops = geo[22] if shadow else geo[23]
-    n = hits_until_stop(geo[11:15], stops, o, d, RAY_EPS, tmax, stack, wdist, buf_tri, buf_t)
+    n = hits_until_stop(geo[11:15], stops, o, d, RAY_EPS, tmax, stack, wdist, buf_tri, buf_t, not shadow)
     return _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist)
 
 
@@ -591,7 +592,7 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
         if packet:
             hb_n, hb_tri, hb_t = pk_n[lt], pk_tri[lt], pk_t[lt]
         else:
-            hb_n = hits_until_stop(geo[11:15], geo[22], x, w, RAY_EPS, r, stack, wdist, buf_tri, buf_t)
+            hb_n = hits_until_stop(geo[11:15], geo[22], x, w, RAY_EPS, r, stack, wdist, buf_tri, buf_t, False)
             hb_tri, hb_t = buf_tri, buf_t
         k, _, _, blocked, nc = _walk_hits(geo, x, w, mv, True, r, hb_n, hb_tri, hb_t, tri_x, t_x, meds, stack, wdist)
         casts += nc
@@ -1040,4 +1041,8 @@ def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, p
                 counters, get_num_threads())
     out_rows = out_parts[0] if n_halves == 1 else out_parts[0] + out_parts[1]
     grad = grad_blocks.sum(axis=0) if want_grad else None
+    if not (np.isfinite(out_rows).all() and (grad is None or np.isfinite(grad).all())
+            and (jmap is None or np.isfinite(jac).all())):
+        raise ValueError("the teeth tracer computed a value that is not finite: degenerate geometry (a triangle of "
+                         "zero area, a light on a surface) or parameters out of range")
     return out_rows, grad, (jac if jmap is not None else None), counters.sum(axis=0), get_num_threads()

@@ -58,9 +58,10 @@ def test_bvh_first_hit_and_gathered_hits_match_brute_force():
         first_stop = next((k for k in order if stops[k]), None)
         t_stop = np.inf if first_stop is None else tt[first_stop]
         want = {int(k) for k in order if tt[k] <= t_stop}
-        n = hits_until_stop(nodes, stops, o[i], d[i], 0.0, np.inf, stack, dist, buf_tri, buf_t)
-        got = {int(k) for k, tk in zip(buf_tri[:n], buf_t[:n], strict=True) if tk <= t_stop + 1e-9}
-        assert got == want
+        for nearest_first in (True, False):
+            n = hits_until_stop(nodes, stops, o[i], d[i], 0.0, np.inf, stack, dist, buf_tri, buf_t, nearest_first)
+            got = {int(k) for k, tk in zip(buf_tri[:n], buf_t[:n], strict=True) if tk <= t_stop + 1e-9}
+            assert got == want
         n_multi += len(want) > 1
     assert n_multi >= 10  # rays that cross dentin before stopping were among them
 
@@ -102,6 +103,25 @@ def test_compiled_images_match_the_reference_tracer(max_depth, spread):
         mean, se = d.mean(axis=0), d.std(axis=0, ddof=1) / np.sqrt(len(d))
         assert np.all(np.abs(mean) < 4 * se + 1e-9), (lt, mean, se, mean / se)
         assert np.all(se < 0.05 * np.abs(b[lt].reshape(-1, 3).mean(axis=0)))  # the check has power: a 20 % bias fails
+
+
+def test_a_result_that_is_not_finite_is_refused():
+    """A division by zero in the compiled tracer gives inf or NaN (numba's numpy error model); ``trace`` refuses
+    such a result with a one-line error instead of passing it on. Here a light of NaN intensity stands for it."""
+    from material_structures.core.teeth import path_tracer_compiled as ptc
+
+    sc, cams, lights = fd_test_scene()
+    cs = CompiledScene(sc)
+    packed = ptc.pack_scene(cs)
+    lp = np.array([li.position for li in lights], dtype=np.float64)
+    li = np.array([li.intensity for li in lights], dtype=np.float64)
+    rows = np.arange(cams[0].width * cams[0].height)
+    cam_of = np.zeros(len(rows), dtype=np.int64)
+    out = ptc.trace(cs, packed, cams, cam_of, rows, 1, 0, None, 5, True, lp, li, None, None, 0)
+    assert np.isfinite(out[0]).all() and out[0].max() > 0.0  # the same call with finite lights is accepted
+    li[0, 1] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        ptc.trace(cs, packed, cams, cam_of, rows, 1, 0, None, 5, True, lp, li, None, None, 0)
 
 
 def test_compiled_render_does_not_depend_on_the_thread_count():
@@ -153,7 +173,7 @@ def test_packet_shadow_rays_hit_what_single_rays_hit():
         for b in range(n_l):
             if b % 5 == 3:
                 continue
-            n = hits_until_stop(nodes, stops, o, dirs[b], 1e-4, tmax[b], stack, dist, b_tri, b_t)
+            n = hits_until_stop(nodes, stops, o, dirs[b], 1e-4, tmax[b], stack, dist, b_tri, b_t, False)
             assert p_n[b] == n
             got = sorted(zip(p_t[b, :n].tolist(), p_tri[b, :n].tolist(), strict=True))
             assert got == sorted(zip(b_t[:n].tolist(), b_tri[:n].tolist(), strict=True))

@@ -1,6 +1,7 @@
 """``core.teeth.work_queue.take_next``: every part is taken exactly once when threads share the counter."""
 
 import numpy as np
+import pytest
 from numba import get_num_threads, njit, prange
 
 from material_structures.core.teeth.work_queue import take_next
@@ -18,6 +19,8 @@ def _take_all(n_parts, counter, taken, per_worker):
 
 
 def test_every_part_is_taken_once_by_some_thread():
+    if get_num_threads() < 2:
+        pytest.skip("needs two threads to share the counter")
     n_parts = 2_000_000
     counter = np.zeros(1, dtype=np.int64)
     taken = np.zeros(n_parts, dtype=np.int64)
@@ -25,6 +28,7 @@ def test_every_part_is_taken_once_by_some_thread():
     _take_all(n_parts, counter, taken, per_worker)
     assert np.all(taken == 1)
     assert per_worker.sum() == n_parts
+    assert (per_worker > 0).sum() >= 2  # the threads did share the counter
     # each worker stops after one take past the end
     assert counter[0] == n_parts + get_num_threads()
 
