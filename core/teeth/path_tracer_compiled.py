@@ -1033,16 +1033,17 @@ def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, p
     grad_blocks = np.zeros((n_halves * n_blocks if want_grad else 0, cs.layout.size))
     jac = np.zeros((n_rows, n_l, 3, n_j)) if jmap is not None else np.zeros((0, n_l, 3, 0))
     counters = np.zeros((n_halves * n_blocks, 4), dtype=np.int64)
+    n_threads = get_num_threads()
     _trace_rows(geo, med, tex, cams, np.asarray(cam_of, dtype=np.int64), np.asarray(pix_of, dtype=np.int64),
                 int(spp), int(seed), depth_cap, roulette, int(rr_depth), bool(jitter),
                 np.ascontiguousarray(lp, dtype=np.float64), np.ascontiguousarray(li, dtype=np.float64),
                 np.zeros((0, 0, 0, 3)) if adj is None else np.ascontiguousarray(adj, dtype=np.float64), want_grad,
                 np.full(1, -1, dtype=np.int64) if jmap is None else jmap, max(n_j, 0), out_parts, grad_blocks, jac,
-                counters, get_num_threads())
+                counters, n_threads)
     out_rows = out_parts[0] if n_halves == 1 else out_parts[0] + out_parts[1]
     grad = grad_blocks.sum(axis=0) if want_grad else None
     if not (np.isfinite(out_rows).all() and (grad is None or np.isfinite(grad).all())
             and (jmap is None or np.isfinite(jac).all())):
         raise ValueError("the teeth tracer computed a value that is not finite: degenerate geometry (a triangle of "
                          "zero area, a light on a surface) or parameters out of range")
-    return out_rows, grad, (jac if jmap is not None else None), counters.sum(axis=0), get_num_threads()
+    return out_rows, grad, (jac if jmap is not None else None), counters.sum(axis=0), n_threads
