@@ -37,8 +37,9 @@ RECOVERY_FREE = ("*.enamel.sigma_t", "*.enamel.albedo", "*.dentin.sigma_t", "*.d
 # The Gauss-Newton matrix is the pooled estimate of 8 passes (its Monte Carlo bias, extra curvature that
 # made the steps along the valley's flattest directions 3-10 % of Newton's, divided by 8), damped by
 # 0.01; the guard reacts to a doubled loss only (windows vary by +-10 % from noise). The dentin
-# coefficients keep Adam and random-walk along their valley with the dentin materials; the result is the
-# mean of the last 30 % of 300 iterations (average_tail), over which that walk averages out
+# coefficients keep Adam, on a gradient by central differences with common random numbers
+# (dentin_shape_gradient: the path-space one is noise, and biased at a sharp boundary); the result is the
+# mean of the last 30 % of 300 iterations (average_tail)
 RECOVERY_SETTINGS = {**asdict(FitSettings()), "workers": 2}
 
 

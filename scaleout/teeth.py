@@ -19,14 +19,15 @@ from ..core.teeth.path_tracer import RenderSettings
 
 
 def view_loss_gradient(scene, capture, camera: int, light_ids, st: RenderSettings, seed: int, layout, norm: float,
-                       loss_block: int = 1, image_spp: int = 0):
+                       loss_block: int = 1, image_spp: int = 0, shape: bool = True):
     """Loss share and physical-parameter gradient of one camera (runs on a worker): the fit's estimator
     (``fit_gradient.pass_pair``) for this camera, scaled by its share of the global normaliser ``norm``,
     with seeds from (seed, camera)."""
     seed_a, seed_b = [int(s) for s in np.random.SeedSequence([seed, camera]).generate_state(2)]
     # this camera's share of the global mean: its own mean times (its values / all values)
     share = max(float(np.count_nonzero(capture.masks[camera])) * len(light_ids) * 3.0, 1.0) / norm
-    return pass_pair(scene, capture, [camera], light_ids, st, seed_a, seed_b, layout, loss_block, image_spp, share)
+    return pass_pair(scene, capture, [camera], light_ids, st, seed_a, seed_b, layout, loss_block, image_spp, share,
+                     shape)
 
 
 def loss_normaliser(capture, n_lights: int) -> float:
@@ -50,7 +51,8 @@ class DaskGradient:
     def _scatter_capture(self):
         [self.capture_future] = self.client.scatter([self.capture], broadcast=True, hash=False)
 
-    def __call__(self, scene, capture, light_ids, st, seed, layout, loss_block: int = 1, image_spp: int = 0):
+    def __call__(self, scene, capture, light_ids, st, seed, layout, loss_block: int = 1, image_spp: int = 0,
+                 shape: bool = True):
         from distributed.client import FutureCancelledError
 
         light_ids = np.asarray(light_ids)
@@ -61,7 +63,7 @@ class DaskGradient:
             [scene_future] = self.client.scatter([scene], broadcast=True, hash=False)
             futures = [
                 self.client.submit(view_loss_gradient, scene_future, self.capture_future, c, light_ids, st, seed,
-                                   layout, norm, loss_block, image_spp, pure=False, retries=3)
+                                   layout, norm, loss_block, image_spp, shape, pure=False, retries=3)
                 for c in range(len(capture.cameras))
             ]
             try:
@@ -76,6 +78,7 @@ class DaskGradient:
             "path_vertices": int(sum(r[2]["path_vertices"] for r in results)),
             "render_seconds": float(sum(r[2]["render_seconds"] for r in results)),
             "gradient_seconds": float(sum(r[2]["gradient_seconds"] for r in results)),
+            "shape_seconds": float(sum(r[2]["shape_seconds"] for r in results)),
             "loss_single_pass": float(sum(r[2]["loss_single_pass"] for r in results)),
         }
         return loss, grad, stats
@@ -84,10 +87,12 @@ class DaskGradient:
 def local_gradient(capture):
     """The same per-camera decomposition evaluated in this process (reference for the Dask path)."""
 
-    def gradient(scene, capture_, light_ids, st, seed, layout, loss_block: int = 1, image_spp: int = 0):
+    def gradient(scene, capture_, light_ids, st, seed, layout, loss_block: int = 1, image_spp: int = 0,
+                 shape: bool = True):
         light_ids = np.asarray(light_ids)
         norm = loss_normaliser(capture_, len(light_ids))
-        results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm, loss_block, image_spp)
+        results = [view_loss_gradient(scene, capture_, c, light_ids, st, seed, layout, norm, loss_block, image_spp,
+                                      shape)
                    for c in range(len(capture_.cameras))]
         return (float(sum(r[0] for r in results)), np.sum([r[1] for r in results], axis=0),
                 {"path_vertices": int(sum(r[2]["path_vertices"] for r in results))})

@@ -6,7 +6,8 @@ The measurements behind each default are in docs/teeth-fit.md. In short, per ite
 lights of the capture, pass A (the image that forms the adjoint, eq. 5.7-5.8) at 32 samples per pixel
 and pass B (the gradient) at 4, the L2 loss of 8 x 8 box-filtered images; Adam (eq. 2.38-2.39) on the
 dual domains xi = log sigma_t, kappa = log10(1 - albedo) (eq. 5.22-5.24) for 80 iterations, then
-Gauss-Newton steps for the materials (the dentin coefficients keep Adam); 300 iterations; the result
+Gauss-Newton steps for the materials (the dentin coefficients keep Adam, on a gradient by central
+differences with common random numbers: ``dentin_shape_gradient``); 300 iterations; the result
 is the mean of the last 30 % of the iterates (Polyak-Ruppert averaging). A few lights never enter the
 fit and check it afterwards (``held_out_lights``).
 

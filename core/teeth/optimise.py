@@ -225,7 +225,9 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         gn = np.zeros_like(free)
         is_c = layout.kinds() == "c"
         if s.optimiser == "gauss-newton":
-            gn = free & ~is_c  # the dentin coefficients keep Adam: their Jacobian columns are mostly noise
+            # the dentin coefficients keep Adam on their difference gradient (dentin_shape_gradient): their
+            # path-space Jacobian columns, which the matrix would need, are noise
+            gn = free & ~is_c
         gn_idx = np.flatnonzero(gn)
         # the last phase's iterations from this one on enter the averaged result (average_tail)
         avg_from = tail_start(n_it, s.average_tail) if pi == len(phases) - 1 else n_it
@@ -241,6 +243,8 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
             kw = {"loss_block": s.loss_block} if s.loss_block > 1 else {}
             if s.image_spp > 0:
                 kw["image_spp"] = s.image_spp
+            if not free[is_c].any() and (gradient is None or "shape" in inspect.signature(gradient).parameters):
+                kw["shape"] = False  # no dentin coefficient is fitted: skip their two renders
             gn_on = len(gn_idx) > 0 and it >= s.gn_start
             if gn_on and (hmat is None or it - precond_it >= s.gn_every):
                 t_gn = time.perf_counter()
