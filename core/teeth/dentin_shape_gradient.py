@@ -23,9 +23,9 @@ spread it gave -3.3 +- 0.8 and -2.05 +- 0.12 for two coefficients where independ
 -0.28 +- 0.04 and -0.07 +- 0.04 (its reweighted finite differences, which the gradient tests compare it
 with, agree with it, so those tests cannot see this); these differences gave -0.25 +- 0.07 and
 0.07 +- 0.09. On the Mitsuba acceptance capture at the truth (4 independent 16-spp passes of all 54
-lights, 8 x 8 tiles) the product of two passes' path-space c columns was 0.3 % of one pass's square or
-less (pure noise), against 13-32 % for central differences with common random numbers at the same
-sample count; 0.1 off the truth, the fit's per-iteration c gradient (6 lights, 4 spp) had a 10-60x
+lights, 8 x 8 tiles) the product of two passes' path-space c columns was at most 0.1 % of one pass's
+square, most of them negative (pure noise), against 13-32 % for central differences with common random
+numbers at the same sample count; 0.1 off the truth, the fit's per-iteration c gradient (6 lights, 4 spp) had a 10-60x
 lower standard deviation by differences (docs/teeth-fit.md).
 """
 
