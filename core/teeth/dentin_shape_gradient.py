@@ -31,8 +31,6 @@ lower standard deviation by differences (docs/teeth-fit.md).
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from .capture import Camera, PointLight
@@ -68,13 +66,12 @@ def shape_gradient(scene: TeethScene, cameras: list[Camera], lights: list[PointL
     x = scene_to_vector(scene, layout)
     lo, hi = RANGES["c"]
     centre = np.clip(x[cols], lo + step, hi - step)
-    st = replace(settings, jitter=True)
     images = []
     for sign in (1.0, -1.0):
         xs = x.copy()
         xs[cols] = centre + sign * step * u
         sc = vector_to_scene(scene, xs, layout)
-        images.append(render(sc, cameras, lights, st, pixels=pixels, light_ids=light_ids,
+        images.append(render(sc, cameras, lights, settings, pixels=pixels, light_ids=light_ids,
                              compiled=CompiledScene(sc, layout=layout)).images)
     d = float(np.sum(adjoint * (images[0] - images[1]))) / (2.0 * step)
     return d * u
