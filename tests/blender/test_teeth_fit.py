@@ -176,7 +176,10 @@ def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp
     fake = SimpleNamespace(_timer=object(), report=lambda *a: None)
     fake._cleanup = lambda ctx: ops.MS_OT_teeth_fit._cleanup(fake, ctx)
     fake._finish = lambda ctx, job, state: ops.MS_OT_teeth_fit._finish(fake, ctx, job, state)
-    ops.set_current_job(FitJob(capture_dir, str(tmp_path / "fit"), iterations=4, init="scene").start())
+    # 3 iterations and no held-out render: where numba is missing (the 4.5 job) each iteration of the numpy
+    # tracer takes about 28 s, and the deadline below is a guard against a hung job, not a speed test
+    ops.set_current_job(FitJob(capture_dir, str(tmp_path / "fit"), iterations=3, init="scene",
+                               extra=["--held-out-lights", "0"]).start())
     timer = SimpleNamespace(type="TIMER")
     result, deadline = {"PASS_THROUGH"}, time.time() + 120
     while result == {"PASS_THROUGH"} and time.time() < deadline:
@@ -184,7 +187,7 @@ def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp
         result = ops.MS_OT_teeth_fit.modal(fake, context, timer)
     assert result == {"FINISHED"}
     texts = [t for t in rec.status if t]
-    assert texts and texts[-1].startswith("Teeth fit: iteration 4/4")
+    assert texts and texts[-1].startswith("Teeth fit: iteration 3/3")
     assert rec.status[-1] is None and rec.ended and rec.timer_removed  # status bar restored
     assert max(rec.progress) == 1000
     assert enamel.ms_tooth.has_fit and "done" in bpy.context.scene.ms_teeth_fit.status
