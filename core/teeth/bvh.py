@@ -93,6 +93,30 @@ class TriangleBVH:
         self.order = order[perm]
         self.root = 0
 
+    def refit(self, triangles: np.ndarray) -> TriangleBVH:
+        """This tree's topology (node structure, leaf triangles) with every box recomputed from
+        ``triangles``, the same triangles at new positions: each leaf's box bounds its triangles, each
+        inner node's its two children. Queries stay exact (a box still bounds everything below it); only
+        the tree's quality follows the topology's geometry. A fit moves the dentin vertices every
+        iteration (eq. 5.5), and refitting costs about 1 % of a build."""
+        tris = np.asarray(triangles, dtype=np.float64)
+        out = object.__new__(TriangleBVH)
+        out.left, out.start, out.count, out.order, out.root = self.left, self.start, self.count, self.order, self.root
+        lo, hi = np.empty_like(self.lo), np.empty_like(self.hi)
+        leaves = np.flatnonzero(self.count > 0)
+        leaves = leaves[np.argsort(self.start[leaves], kind="stable")]  # their ranges tile ``order`` in this order
+        if len(leaves):
+            tlo, thi = tris[self.order].min(axis=1), tris[self.order].max(axis=1)  # in leaf order
+            lo[leaves] = np.minimum.reduceat(tlo, self.start[leaves], axis=0)
+            hi[leaves] = np.maximum.reduceat(thi, self.start[leaves], axis=0)
+        # children come after their parent (the build appends them), so a reverse sweep sees them first
+        for node in np.flatnonzero(self.count == 0)[::-1]:
+            a = self.left[node]
+            lo[node] = np.minimum(lo[a], lo[a + 1])
+            hi[node] = np.maximum(hi[a], hi[a + 1])
+        out.lo, out.hi = lo, hi
+        return out
+
     @staticmethod
     def merge(trees: list[TriangleBVH]) -> tuple[tuple, np.ndarray]:
         """One node array holding ``trees``: ((lo, hi, left, start, count, order), roots)."""

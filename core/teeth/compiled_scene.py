@@ -89,6 +89,7 @@ class CompiledScene:
         self.col_ph = {k: np.zeros((n_media, 3), dtype=np.int64) for k in ("E", "D")}
 
         tris_s, tris_e, kinds, inside, outside, eta, tex_id, uvs = [], [], [], [], [], [], [], []
+        rest = []  # (index into tris_s, the dentin triangles at c = 0) per tooth
         dtooth, dface = [], []
         self.tex_s, self.tex_e, self.tex_col = [], [], []
         self.dentin: list[DentinProximity] = []
@@ -133,6 +134,7 @@ class CompiledScene:
             faces = te.dentin_shape.base.faces
             vs, ve = ts.dentin_vertices(), te.dentin_vertices()
             nd = len(faces)
+            rest.append((len(tris_s), ts.dentin_shape.base.vertices[faces]))
             tris_s.append(vs[faces])
             tris_e.append(ve[faces])
             kinds.append(np.full(nd, KIND_INDEX_MATCHED))
@@ -184,6 +186,11 @@ class CompiledScene:
             self.rho_e = scene.cavity.albedo.copy()
             self.col_rho = L.col("cavity.albedo")
         self.tris_s = np.concatenate(tris_s)
+        for part, tris in rest:
+            tris_s[part] = tris
+        # the sampling geometry with every dentin at its base shape: the BVHs' topology is built on this
+        # (path_tracer_compiled._trees), so it does not depend on the coefficients or on earlier renders
+        self.tris_rest = np.concatenate(tris_s)
         self.tris_e = np.concatenate(tris_e)
         self.kind = np.concatenate(kinds).astype(np.int64)
         self.inside = np.concatenate(inside).astype(np.int64)
