@@ -98,7 +98,7 @@ class TriangleBVH:
         ``triangles``, the same triangles at new positions: each leaf's box bounds its triangles, each
         inner node's its two children. Queries stay exact (a box still bounds everything below it); only
         the tree's quality follows the topology's geometry. A fit moves the dentin vertices every
-        iteration (eq. 5.5), and refitting costs about 1 % of a build."""
+        iteration (eq. 5.5), and a refit costs 2-3 % of a build."""
         tris = np.asarray(triangles, dtype=np.float64)
         out = object.__new__(TriangleBVH)
         out.left, out.start, out.count, out.order, out.root = self.left, self.start, self.count, self.order, self.root
