@@ -22,7 +22,7 @@ sum t_k (eq. 5.23), and the dentin-shape term (S_i - S_e) dt/dc for every dentin
 is continuous in the dentin coefficients, so these per-path terms are the complete derivative of
 the expected image (no boundary term is dropped) -- in expectation. The blend term lives within the
 blend's width of the dentin surface: for a sharp boundary (spread 1e-5 mm, as in a photograph) no
-practical number of samples reaches it, and the estimate of the c derivative is then about 10x off
+practical number of samples reaches it, and the estimate of the c derivative is then 10-30x off
 (docs/teeth-fit.md); the fit differences c instead (``dentin_shape_gradient``).
 With ``adjoint`` = d rho / d C (eq. 5.7) the tracer returns grad = sum adjoint * dC/dtheta; terms that
 precede a vertex are weighted by the adjoint-weighted contributions of all later vertices (suffix

@@ -46,7 +46,8 @@ def _scene():
 
 
 def _trees_and_grid(cs: CompiledScene, reach: float) -> tuple:
-    """The dentin trees the tracer searches (nodes, roots) and the reach grid, as ``path_tracer_compiled._trees``."""
+    """The dentin trees the tracer searches (nodes, roots) and the reach grid, built on ``cs``'s geometry itself
+    (``path_tracer_compiled._trees`` refits trees built at c = 0, which answer the same: test_teeth_bvh_refit)."""
     from material_structures.core.teeth.bvh import TriangleBVH
 
     trees = [TriangleBVH(cs.tris_s, np.flatnonzero(cs.dentin_tooth == i)) for i in range(len(cs.dentin))]
