@@ -139,7 +139,7 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
     out_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH",
                                       description="Fit folder: log, loss plot, checkpoint, scene_fit.json")
     iterations: bpy.props.IntProperty(name="Iterations", default=FIT_DEFAULTS.iterations, min=1, max=100000,
-                                      description="Fit iterations (6-20 s each for a 3-camera capture on 2 cores; "
+                                      description="Fit iterations (5-20 s each for a 3-camera capture on 2 cores; "
                                                   "fewer: a quicker, rougher fit)")
     init: bpy.props.EnumProperty(name="Start", default="LITERATURE", items=[
         ("LITERATURE", "Literature", "Best match among published tooth measurements"),
