@@ -52,8 +52,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--out", required=True, help="fit folder (created if missing)")
     f.add_argument("--scene", default=None, help="scene JSON with geometry/start (default CAPTURE/scene.json)")
     f.add_argument("--init", choices=("literature", "scene", "perturbed"), default="literature",
-                   help="start point: literature-table search (default, as the thesis), the scene's values, or "
-                        "a perturbation of them")
+                   help="start point: the teeth's materials from a literature-table search (default, as the "
+                        "thesis; gums and cavity from the scene), the scene's values, or a perturbation of them")
     f.add_argument("--iterations", type=at_least(1), default=FIT_DEFAULTS.iterations,
                    help=f"iterations (default {FIT_DEFAULTS.iterations}; fewer: a quicker, rougher fit)")
     f.add_argument("--textured-iterations", type=at_least(0), default=FIT_DEFAULTS.textured_iterations,

@@ -67,11 +67,19 @@ def _tile_sums(values: np.ndarray, tile_of: np.ndarray, n_tiles: int) -> np.ndar
     return out.reshape(-1, 3)
 
 
+# the model's own phase-function lobes and surface transmission (the literature tabulates neither): the
+# start takes them, not the scene's, so that a synthetic capture's scene.json (its ground truth) leaks
+# nothing into the start but the geometry and the surroundings
+MODEL_DEFAULTS = VolumeMaterial(1.0, 0.5)
+MODEL_A_T = 1.0
+
+
 def _homogeneous(scene: TeethScene, mat: VolumeMaterial) -> TeethScene:
     out = scene.copy()
     for t in out.teeth:
         t.enamel = mat
         t.dentin = mat
+        t.a_t = np.full((1, 1, 3), MODEL_A_T)
         t.c = np.zeros(3)
     return out
 
@@ -81,6 +89,10 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
                      max_depth: int | None = None, scale_invariant: bool = True,
                      progress: Callable[[int], None] | None = None) -> TeethScene:
     """Start scene whose enamel and dentin take, per channel, the best table point (c = 0).
+
+    Every tooth parameter comes from the table or the model's defaults: sigma_t, albedo and g1 from the
+    table; g2, beta and a homogeneous a_t = 1 from :data:`MODEL_DEFAULTS` and :data:`MODEL_A_T`;
+    dentin coefficients 0. Only the geometry, the gums and the oral cavity are ``scene``'s.
 
     Every (sigma_t, albedo, g) point is rendered as a grey homogeneous tooth (the surroundings keep
     their colours, so channel c of the render is compared with channel c of the capture), twice with
@@ -101,7 +113,7 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
         raise ValueError("the capture's masks select no pixels")
     tiles = traced_tiles(pixels, *capture.masks.shape[1:], tile)
     ref = _tile_sums(traced_values(capture.images[:, light_ids].astype(np.float64), pixels), *tiles)
-    base = scene.teeth[0].enamel
+    base = MODEL_DEFAULTS
     errors = np.zeros((len(gs), len(table), 3))
     for gi, g in enumerate(gs):
         for j, (sig, alb) in enumerate(table):

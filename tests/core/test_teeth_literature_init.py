@@ -9,6 +9,8 @@ import pytest
 
 from material_structures.core.teeth.capture import Capture, default_rig
 from material_structures.core.teeth.literature_init import (
+    MODEL_A_T,
+    MODEL_DEFAULTS,
     literature_start,
     literature_table,
     paired_table_errors,
@@ -78,18 +80,22 @@ def _capture_of_table_points(picks, scale: float = 1.0):
     grid = table.reshape(N_SIGMA, N_ALBEDO, 2)
     pts = np.array([grid[i, j] for i, j in picks])  # (channel, (sigma_t, albedo))
     truth = make_scene(n_teeth=1, resolution=14)
-    base = truth.teeth[0].enamel
+    base = MODEL_DEFAULTS  # a table point is a grey tooth with the model's lobes and a_t (literature_start)
     mat = VolumeMaterial(pts[:, 0], np.minimum(pts[:, 1], 0.999), float(gs[1]), base.g2, base.beta)
     for t in truth.teeth:
         t.enamel, t.dentin, t.c = mat, mat, np.zeros(3)
+        t.a_t = np.full((1, 1, 3), MODEL_A_T)
     cams, lights = default_rig(target=scene_target(truth), width=24, height=20, n_lights=12, n_cameras=2,
                                fov_x_deg=3.0)
     cap = render_capture(truth, cams, lights, spp=32, spp_background=0, seed=5)
     cap.images = cap.images * np.float32(scale)
-    # the search starts from other materials: it must not depend on the scene's own values
+    # the search starts from other materials, lobes and a_t: it must not depend on the scene's own values
     start = truth.copy()
     for t in start.teeth:
-        t.enamel = t.dentin = VolumeMaterial([5.0, 5.0, 5.0], [0.7, 0.7, 0.7], 0.3, base.g2, base.beta)
+        t.enamel = VolumeMaterial([5.0, 5.0, 5.0], [0.7, 0.7, 0.7], 0.3, 0.4, 0.55)
+        t.dentin = VolumeMaterial([2.0, 2.0, 2.0], [0.9, 0.9, 0.9], 0.8, -0.5, 0.95)
+        t.a_t = np.full((1, 1, 3), 0.6)
+        t.c = np.array([0.3, -0.2, 0.1])
     return pts, float(gs[1]), start, cap
 
 
@@ -114,7 +120,9 @@ def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
             np.testing.assert_allclose(m.sigma_t, pts[:, 0], rtol=1e-12)
             np.testing.assert_allclose(m.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
             assert m.g1 == g
+            assert (m.g2, m.beta) == (MODEL_DEFAULTS.g2, MODEL_DEFAULTS.beta)  # not the scene's 0.4 / 0.55
         np.testing.assert_array_equal(t.c, 0.0)
+        np.testing.assert_array_equal(t.a_t, MODEL_A_T)  # not the scene's 0.6
 
 
 def test_scale_invariant_search_ignores_the_exposure():
