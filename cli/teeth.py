@@ -24,8 +24,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     s = tsub.add_parser("synth", help="render a synthetic capture of a known ground truth")
     s.add_argument("out", help="output capture folder (capture.json, images/, masks/, scene.json)")
+    s.add_argument("--scene", default=None,
+                   help="render this scene JSON (your own ground truth) instead of the built-in jaw section")
     s.add_argument("--teeth", type=between(1, 32, int), default=2,
-                   help="number of teeth (incisor, canine, premolar, molar)")
+                   help="number of teeth of the built-in jaw section (incisor, canine, premolar, molar)")
     s.add_argument("--width", type=between(4, 16384, int), default=96)
     s.add_argument("--height", type=between(4, 16384, int), default=64)
     s.add_argument("--lights", type=between(1, 4096, int), default=54)
@@ -104,12 +106,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run_synth(args: argparse.Namespace) -> int:
     from ..core.teeth.capture import default_rig
+    from ..core.teeth.scene import load_scene
     from ..core.teeth.synthetic import make_scene, render_capture, scene_target
 
     if args.teeth < 1 or args.width < 4 or args.height < 4 or args.spp < 1:
         raise ValueError("need --teeth >= 1, --width/--height >= 4 and --spp >= 1")
-    scene = make_scene(n_teeth=args.teeth, resolution=args.resolution)
-    span = max(12.0, 8.6 * args.teeth + 6.0)
+    if args.scene is not None:
+        scene = load_scene(args.scene)
+        if not scene.teeth:
+            raise ValueError(f"{args.scene} has no teeth to render")
+    else:
+        scene = make_scene(n_teeth=args.teeth, resolution=args.resolution)
+    span = max(12.0, 8.6 * len(scene.teeth) + 6.0)
     fov = 2.0 * __import__("math").degrees(__import__("math").atan(0.5 * span / 300.0))
     cams, lights = default_rig(target=scene_target(scene), width=args.width, height=args.height,
                                n_lights=args.lights, n_cameras=args.cameras, fov_x_deg=fov)

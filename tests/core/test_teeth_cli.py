@@ -51,6 +51,35 @@ def test_synth_then_fit_with_resume(tmp_path):
     assert main(["teeth", "fit", str(tmp_path / "nope"), "--out", str(fit_dir)]) == 2
 
 
+def test_synth_renders_a_given_scene(tmp_path, capsys):
+    """``teeth synth --scene`` renders the user's ground truth (other materials and coefficients than the
+    built-in jaw section), writes it as the capture's scene.json, and refuses a missing file in one line."""
+    from material_structures.core.teeth.scene import VolumeMaterial, save_scene
+    from material_structures.core.teeth.synthetic import make_scene
+
+    truth = make_scene(n_teeth=1, resolution=12)
+    truth.teeth[0].enamel = VolumeMaterial([1.3, 1.5, 1.9], [0.95, 0.935, 0.91], 0.55, -0.25, 0.8)
+    truth.teeth[0].c = np.array([0.25, -0.15, 0.1])
+    save_scene(truth, tmp_path / "truth.json")
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", str(cap_dir), "--scene", str(tmp_path / "truth.json"), "--width", "16",
+                 "--height", "12", "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "0"]) == 0
+    written = load_scene(cap_dir / "scene.json")
+    np.testing.assert_array_equal(written.teeth[0].enamel.sigma_t, [1.3, 1.5, 1.9])
+    np.testing.assert_array_equal(written.teeth[0].c, [0.25, -0.15, 0.1])
+    cap = Capture.load(cap_dir)
+    pixels = [np.flatnonzero(m.ravel()) for m in cap.masks]
+    res = render(truth, cap.cameras, cap.lights, RenderSettings(2, None, 12345), pixels=pixels,
+                 light_ids=np.arange(3))
+    masked = cap.masks[:, None, :, :, None] & np.ones((1, 3, 1, 1, 3), dtype=bool)
+    assert masked.sum() > 30
+    np.testing.assert_allclose(cap.images[masked], res.images[masked], rtol=1e-6, atol=1e-9)
+    capsys.readouterr()
+    assert main(["teeth", "synth", str(tmp_path / "cap2"), "--scene", str(tmp_path / "nope.json")]) == 2
+    err = capsys.readouterr().err
+    assert "nope.json" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
 def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
     cap_dir = tmp_path / "cap"
     assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
