@@ -6,8 +6,9 @@ The measurements behind each default are in docs/teeth-fit.md. In short, per ite
 lights of the capture, pass A (the image that forms the adjoint, eq. 5.7-5.8) at 32 samples per pixel
 and pass B (the gradient) at 4, the L2 loss of 8 x 8 box-filtered images; Adam (eq. 2.38-2.39) on the
 dual domains xi = log sigma_t, kappa = log10(1 - albedo) (eq. 5.22-5.24) for 80 iterations, then
-Gauss-Newton steps for the materials (the dentin coefficients keep Adam, on a gradient by central
-differences with common random numbers: ``dentin_shape_gradient``); 300 iterations; the result
+Gauss-Newton steps for the materials (the dentin coefficients join the fit only then, and keep Adam, on
+a gradient by central differences with common random numbers: ``dentin_shape_gradient``); 300
+iterations; the result
 is the mean of the last 30 % of the iterates (Polyak-Ruppert averaging). A few lights never enter the
 fit and check it afterwards (``held_out_lights``).
 
@@ -44,7 +45,7 @@ class FitSettings:
     lr: float = 0.04  # Adam
     lr_decay: float = 0.01  # lr_n = lr / (1 + lr_decay n), gn_lr likewise
     optimiser: str = "gauss-newton"  # or "adam" (the thesis)
-    gn_start: int = 80  # Adam iterations before Gauss-Newton steps the materials
+    gn_start: int = 80  # Adam iterations before Gauss-Newton steps the materials and the dentin coefficients join
     gn_every: int = 40  # iterations between Gauss-Newton matrix estimates
     gn_lr: float = 0.5  # fraction of the Gauss-Newton step
     gn_passes: int = 8  # 1-spp Jacobian passes pooled into the matrix

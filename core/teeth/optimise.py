@@ -229,6 +229,11 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
             # path-space Jacobian columns, which the matrix would need, are noise
             gn = free & ~is_c
         gn_idx = np.flatnonzero(gn)
+        # with Gauss-Newton the dentin coefficients wait for it (gn_start) in the first phase: before, the
+        # materials are far off, the coefficients' gradient follows their error, and the coefficients run into
+        # the valley they share with the dentin's materials, where they stay (docs/teeth-fit.md, "What the
+        # capture cannot tell")
+        c_from = s.gn_start if s.optimiser == "gauss-newton" and pi == 0 and len(gn_idx) else 0
         # the last phase's iterations from this one on enter the averaged result (average_tail)
         avg_from = tail_start(n_it, s.average_tail) if pi == len(phases) - 1 else n_it
         if not free.any():
@@ -243,7 +248,8 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
             kw = {"loss_block": s.loss_block} if s.loss_block > 1 else {}
             if s.image_spp > 0:
                 kw["image_spp"] = s.image_spp
-            if not free[is_c].any() and (gradient is None or "shape" in inspect.signature(gradient).parameters):
+            free_now = free & ~is_c if it < c_from else free
+            if not free_now[is_c].any() and (gradient is None or "shape" in inspect.signature(gradient).parameters):
                 kw["shape"] = False  # no dentin coefficient is fitted: skip their two renders
             gn_on = len(gn_idx) > 0 and it >= s.gn_start
             if gn_on and (hmat is None or it - precond_it >= s.gn_every):
@@ -265,7 +271,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 avg_sum = y.copy() if avg_sum is None else avg_sum + y
                 avg_count += 1
             g = chain_to_optimiser(g_phys, y, layout, DOMAIN)
-            g[~free] = 0.0
+            g[~free_now] = 0.0
             decay = 1.0 + s.lr_decay * it  # lr_n = lr / (1 + lr_decay * n), gn_lr likewise
             by_gn = gn if gn_on else np.zeros_like(gn)
             back = guard.observe(loss, y) if gn_on and guard is not None else None
@@ -276,7 +282,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 gn_opt.reset()
             else:
                 lr = s.lr / decay * np.where(is_c & gn_on, s.gn_c_lr, 1.0)
-                y_new = np.where(free & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), lr), y)
+                y_new = np.where(free_now & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), lr), y)
                 if gn_on:
                     damping = s.gn_damping if guard is None else guard.damping
                     y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], damped_inverse(hmat, damping),

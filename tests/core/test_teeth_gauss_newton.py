@@ -332,6 +332,34 @@ def test_gn_c_lr_scales_the_coefficients_adam_steps_once_gauss_newton_runs():
     np.testing.assert_allclose(scaled[2].teeth[0].enamel.sigma_t, full[2].teeth[0].enamel.sigma_t, rtol=1e-12)
 
 
+def test_dentin_coefficients_wait_for_gauss_newton():
+    """With Gauss-Newton the coefficients stay at the start until ``gn_start`` while the materials move, and
+    move from then on; with Adam alone, and when they are all that is free, they move from the first step."""
+    from material_structures.core.teeth.gradient_check import fd_test_scene
+    from material_structures.core.teeth.synthetic import perturbed_start
+
+    truth, cams, lights = fd_test_scene()
+    img = render(truth, cams, lights, RenderSettings(8, 4, 3)).images
+    cap = Capture(cams, lights, img.astype(np.float32), np.ones((1, cams[0].height, cams[0].width), dtype=bool))
+    start = perturbed_start(truth, seed=2, reset_c=False)
+    base = dict(iterations=4, spp=1, lights_per_iteration=len(lights), free=("*.enamel.sigma_t", "*.c"), seed=1,
+                max_depth=4, gn_passes=1, gn_block=4)
+
+    def iterates(**kw) -> list:
+        seen: list = []
+        fit(start, cap, _settings(**{**base, **kw}), callback=lambda e, sc: seen.append(sc.copy()))
+        return seen
+
+    gn = iterates(optimiser="gauss-newton", gn_start=2)
+    for k in (1, 2):  # iterations 0 and 1 left the coefficients alone, not the enamel
+        np.testing.assert_array_equal(gn[k].teeth[0].c, start.teeth[0].c)
+        assert np.abs(gn[k].teeth[0].enamel.sigma_t - gn[k - 1].teeth[0].enamel.sigma_t).min() > 1e-6
+    assert np.abs(gn[3].teeth[0].c - gn[2].teeth[0].c).min() > 1e-4  # iteration 2 moved them
+    for kw in ({"optimiser": "adam"}, {"optimiser": "gauss-newton", "gn_start": 2, "free": ("*.c",)}):
+        it = iterates(**kw)
+        assert np.abs(it[1].teeth[0].c - start.teeth[0].c).min() > 1e-4, kw
+
+
 def test_resumed_fit_takes_the_guard_settings_of_the_resuming_settings(tmp_path):
     """The guard's windows and escalation survive a resume; its rise, factor and base damping are the
     resuming settings' (the checkpoint's were kept before); a guard turned off stays off."""
