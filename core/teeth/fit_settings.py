@@ -8,9 +8,8 @@ and pass B (the gradient) at 4, the L2 loss of 8 x 8 box-filtered images; Adam (
 dual domains xi = log sigma_t, kappa = log10(1 - albedo) (eq. 5.22-5.24) for 80 iterations, then
 Gauss-Newton steps for the materials (the dentin coefficients join the fit only then, and keep Adam, on
 a gradient by central differences with common random numbers: ``dentin_shape_gradient``); 300
-iterations; the result
-is the mean of the last 30 % of the iterates (Polyak-Ruppert averaging). A few lights never enter the
-fit and check it afterwards (``held_out_lights``).
+iterations; the result is the mean of the last 30 % of the iterates (Polyak-Ruppert averaging). A few
+lights never enter the fit and check it afterwards (``held_out_lights``).
 
 Plain data without numpy, so the command line's ``--help`` can show it without loading the renderer.
 """

@@ -231,8 +231,8 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         gn_idx = np.flatnonzero(gn)
         # with Gauss-Newton the dentin coefficients wait for it (gn_start) in the first phase: before, the
         # materials are far off, the coefficients' gradient follows their error, and the coefficients run into
-        # the valley they share with the dentin's materials, where they stay (docs/teeth-fit.md, "What the
-        # capture cannot tell")
+        # the valley they share with the dentin's materials, where they stay (docs/teeth-fit.md, "The
+        # coefficients wait for Gauss-Newton")
         c_from = s.gn_start if s.optimiser == "gauss-newton" and pi == 0 and len(gn_idx) else 0
         # the last phase's iterations from this one on enter the averaged result (average_tail)
         avg_from = tail_start(n_it, s.average_tail) if pi == len(phases) - 1 else n_it

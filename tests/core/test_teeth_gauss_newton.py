@@ -308,14 +308,20 @@ def test_pooled_estimator_removes_most_of_the_per_pass_bias():
         assert np.all(np.abs(r_pp[3:] - 1) < 0.3) and np.all(np.abs(r_po[3:] - 1) < 0.3), (r_pp, r_po)
 
 
-def test_gn_c_lr_scales_the_coefficients_adam_steps_once_gauss_newton_runs():
+def _coefficient_problem():
+    """A one-tooth capture (``fd_test_scene``) and a start off in sigma_t, albedo and the coefficients."""
     from material_structures.core.teeth.gradient_check import fd_test_scene
     from material_structures.core.teeth.synthetic import perturbed_start
 
     truth, cams, lights = fd_test_scene()
     img = render(truth, cams, lights, RenderSettings(8, 4, 3)).images
     cap = Capture(cams, lights, img.astype(np.float32), np.ones((1, cams[0].height, cams[0].width), dtype=bool))
-    start = perturbed_start(truth, seed=2, reset_c=False)
+    return perturbed_start(truth, seed=2, reset_c=False), cap
+
+
+def test_gn_c_lr_scales_the_coefficients_adam_steps_once_gauss_newton_runs():
+    start, cap = _coefficient_problem()
+    lights = cap.lights
     base = dict(iterations=3, spp=1, lights_per_iteration=len(lights), free=("*.enamel.sigma_t", "*.c"), seed=1,
                 max_depth=4, optimiser="gauss-newton", gn_start=1, gn_passes=1, gn_block=4)
     seen: dict = {1.0: [], 0.25: []}
@@ -335,14 +341,8 @@ def test_gn_c_lr_scales_the_coefficients_adam_steps_once_gauss_newton_runs():
 def test_dentin_coefficients_wait_for_gauss_newton():
     """With Gauss-Newton the coefficients stay at the start until ``gn_start`` while the materials move, and
     move from then on; with Adam alone, and when they are all that is free, they move from the first step."""
-    from material_structures.core.teeth.gradient_check import fd_test_scene
-    from material_structures.core.teeth.synthetic import perturbed_start
-
-    truth, cams, lights = fd_test_scene()
-    img = render(truth, cams, lights, RenderSettings(8, 4, 3)).images
-    cap = Capture(cams, lights, img.astype(np.float32), np.ones((1, cams[0].height, cams[0].width), dtype=bool))
-    start = perturbed_start(truth, seed=2, reset_c=False)
-    base = dict(iterations=4, spp=1, lights_per_iteration=len(lights), free=("*.enamel.sigma_t", "*.c"), seed=1,
+    start, cap = _coefficient_problem()
+    base = dict(iterations=4, spp=1, lights_per_iteration=len(cap.lights), free=("*.enamel.sigma_t", "*.c"), seed=1,
                 max_depth=4, gn_passes=1, gn_block=4)
 
     def iterates(**kw) -> list:
