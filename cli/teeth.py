@@ -34,7 +34,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--cameras", type=between(1, 256, int), default=3)
     s.add_argument("--spp", type=at_least(1), default=16, help="samples per masked (tooth) pixel")
     s.add_argument("--spp-background", type=at_least(0), default=2, help="samples per other pixel")
-    s.add_argument("--resolution", type=between(4, 1024, int), default=32, help="tooth mesh resolution")
+    s.add_argument("--resolution", type=between(4, 1024, int), default=32,
+                   help="tooth mesh resolution of the built-in jaw section")
     s.add_argument("--seed", type=int, default=12345)
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
                    help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "

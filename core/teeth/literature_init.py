@@ -67,10 +67,9 @@ def _tile_sums(values: np.ndarray, tile_of: np.ndarray, n_tiles: int) -> np.ndar
     return out.reshape(-1, 3)
 
 
-# the model's own phase-function lobes and surface transmission (the literature tabulates neither): the
-# start takes them, not the scene's, so that a synthetic capture's scene.json (its ground truth) leaks
-# nothing into the start but the geometry and the surroundings
-MODEL_DEFAULTS = VolumeMaterial(1.0, 0.5)
+# the model's own surface transmission (the literature tabulates it no more than the second phase lobe,
+# which comes from VolumeMaterial's defaults): the start takes it, not the scene's, so that a synthetic
+# capture's scene.json (its ground truth) leaks nothing into the start but the geometry and the surroundings
 MODEL_A_T = 1.0
 
 
@@ -91,7 +90,7 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
     """Start scene whose enamel and dentin take, per channel, the best table point (c = 0).
 
     Every tooth parameter comes from the table or the model's defaults: sigma_t, albedo and g1 from the
-    table; g2, beta and a homogeneous a_t = 1 from :data:`MODEL_DEFAULTS` and :data:`MODEL_A_T`;
+    table; g2, beta from ``VolumeMaterial``'s defaults and a homogeneous a_t = :data:`MODEL_A_T`;
     dentin coefficients 0. Only the geometry, the gums and the oral cavity are ``scene``'s.
 
     Every (sigma_t, albedo, g) point is rendered as a grey homogeneous tooth (the surroundings keep
@@ -113,11 +112,10 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
         raise ValueError("the capture's masks select no pixels")
     tiles = traced_tiles(pixels, *capture.masks.shape[1:], tile)
     ref = _tile_sums(traced_values(capture.images[:, light_ids].astype(np.float64), pixels), *tiles)
-    base = MODEL_DEFAULTS
     errors = np.zeros((len(gs), len(table), 3))
     for gi, g in enumerate(gs):
         for j, (sig, alb) in enumerate(table):
-            mat = VolumeMaterial(np.full(3, sig), np.full(3, min(alb, 0.999)), g, base.g2, base.beta)
+            mat = VolumeMaterial(np.full(3, sig), np.full(3, min(alb, 0.999)), g)
             sc = _homogeneous(scene, mat)
             cs = CompiledScene(sc)
             r = [_tile_sums(traced_values(render(sc, capture.cameras, capture.lights,
@@ -134,4 +132,4 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
     sigma = np.array([table[j, 0] for _, j in best])
     albedo = np.array([table[j, 1] for _, j in best])
     g = float(np.median([gs[gi] for gi, _ in best]))
-    return _homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), g, base.g2, base.beta))
+    return _homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), g))

@@ -321,8 +321,7 @@ def _coefficient_problem():
 
 def test_gn_c_lr_scales_the_coefficients_adam_steps_once_gauss_newton_runs():
     start, cap = _coefficient_problem()
-    lights = cap.lights
-    base = dict(iterations=3, spp=1, lights_per_iteration=len(lights), free=("*.enamel.sigma_t", "*.c"), seed=1,
+    base = dict(iterations=3, spp=1, lights_per_iteration=len(cap.lights), free=("*.enamel.sigma_t", "*.c"), seed=1,
                 max_depth=4, optimiser="gauss-newton", gn_start=1, gn_passes=1, gn_block=4)
     seen: dict = {1.0: [], 0.25: []}
     for factor in seen:

@@ -10,7 +10,6 @@ import pytest
 from material_structures.core.teeth.capture import Capture, default_rig
 from material_structures.core.teeth.literature_init import (
     MODEL_A_T,
-    MODEL_DEFAULTS,
     literature_start,
     literature_table,
     paired_table_errors,
@@ -80,8 +79,8 @@ def _capture_of_table_points(picks, scale: float = 1.0):
     grid = table.reshape(N_SIGMA, N_ALBEDO, 2)
     pts = np.array([grid[i, j] for i, j in picks])  # (channel, (sigma_t, albedo))
     truth = make_scene(n_teeth=1, resolution=14)
-    base = MODEL_DEFAULTS  # a table point is a grey tooth with the model's lobes and a_t (literature_start)
-    mat = VolumeMaterial(pts[:, 0], np.minimum(pts[:, 1], 0.999), float(gs[1]), base.g2, base.beta)
+    # a table point is a grey tooth with the model's second lobe and a_t (literature_start)
+    mat = VolumeMaterial(pts[:, 0], np.minimum(pts[:, 1], 0.999), float(gs[1]))
     for t in truth.teeth:
         t.enamel, t.dentin, t.c = mat, mat, np.zeros(3)
         t.a_t = np.full((1, 1, 3), MODEL_A_T)
@@ -120,7 +119,7 @@ def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
             np.testing.assert_allclose(m.sigma_t, pts[:, 0], rtol=1e-12)
             np.testing.assert_allclose(m.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
             assert m.g1 == g
-            assert (m.g2, m.beta) == (MODEL_DEFAULTS.g2, MODEL_DEFAULTS.beta)  # not the scene's 0.4 / 0.55
+            assert (m.g2, m.beta) == (-0.2, 0.8)  # VolumeMaterial's defaults, not the scene's 0.4 / 0.55
         np.testing.assert_array_equal(t.c, 0.0)
         np.testing.assert_array_equal(t.a_t, MODEL_A_T)  # not the scene's 0.6
 
