@@ -51,7 +51,6 @@ class FitSettings:
     gn_block: int = 8  # pixel tiles the Jacobian passes are pooled over
     gn_damping: float = 0.01
     gn_max_step: float = 0.05  # trust region in the optimiser domain
-    gn_c_lr: float = 1.0  # factor on the dentin coefficients' Adam lr while Gauss-Newton runs
     gn_guard_window: int = 10  # divergence guard windows (0: off), gauss_newton.DivergenceGuard
     gn_guard_rise: float = 1.0  # a window whose mean loss is this much above the best window's rolls back
     # ---- result
@@ -85,8 +84,6 @@ class FitSettings:
                 raise ValueError(f"gn_damping must be > 0, got {self.gn_damping}")
             if not self.gn_max_step > 0:
                 raise ValueError(f"gn_max_step must be > 0, got {self.gn_max_step}")
-            if not self.gn_c_lr > 0:
-                raise ValueError(f"gn_c_lr must be > 0, got {self.gn_c_lr}")
             if self.gn_guard_window < 0 or not self.gn_guard_rise > 0:
                 raise ValueError("gn_guard_window must be >= 0 and gn_guard_rise > 0, got "
                                  f"{self.gn_guard_window}, {self.gn_guard_rise}")

@@ -281,8 +281,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 y_new = back
                 gn_opt.reset()
             else:
-                lr = s.lr / decay * np.where(is_c & gn_on, s.gn_c_lr, 1.0)
-                y_new = np.where(free_now & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), lr), y)
+                y_new = np.where(free_now & ~by_gn, opt.step(y, np.where(by_gn, 0.0, g), s.lr / decay), y)
                 if gn_on:
                     damping = s.gn_damping if guard is None else guard.damping
                     y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], damped_inverse(hmat, damping),
