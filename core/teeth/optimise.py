@@ -34,6 +34,7 @@ from .param_vector import (
     ParamLayout,
     chain_to_optimiser,
     from_optimiser,
+    optimiser_bounds,
     scene_to_vector,
     to_optimiser,
     vector_to_scene,
@@ -221,6 +222,10 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
             gn_opt = PreconditionedMomentum(s.gn_lr, max_step=s.gn_max_step)
             hmat, precond_it, guard = None, -1, _new_guard(s)
         free = free_mask(layout, s.free)
+        # every step is projected onto the valid ranges: a variable left beyond its bound would hold the
+        # parameter there (clamped) until steps against the gradient's new sign had walked it back
+        y_lo, y_hi = optimiser_bounds(layout, DOMAIN)
+        y = np.clip(y, y_lo, y_hi)
         # optimiser "gauss-newton": the variables it steps (the rest of the free ones keep Adam)
         gn = np.zeros_like(free)
         is_c = layout.kinds() == "c"
@@ -286,7 +291,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                     damping = s.gn_damping if guard is None else guard.damping
                     y_new[gn_idx] = gn_opt.step(y[gn_idx], g[gn_idx], damped_inverse(hmat, damping),
                                                 s.gn_lr / decay)
-            y = y_new
+            y = np.clip(y_new, y_lo, y_hi)
             entry = {"phase": phase, "iteration": it, "loss": loss, "best_loss": best_loss,
                      "seconds": time.perf_counter() - t0, "lights": light_ids.tolist(), **stats}
             if gn_seconds:

@@ -2,7 +2,8 @@
 
 Physical parameters (what the path tracer differentiates) are laid out by ``ParamLayout``; the
 optimiser works on transformed values: xi = log sigma_t (eq. 5.24), kappa = log10(1 - albedo)
-(eq. 5.22); the others are used directly and clamped to their valid range.
+(eq. 5.22); the others are used directly. The optimiser's steps are projected onto the valid ranges
+(``optimiser_bounds``), so a parameter at a bound moves off it as soon as its gradient turns.
 """
 
 from __future__ import annotations
@@ -183,6 +184,27 @@ def from_optimiser(y: np.ndarray, layout: ParamLayout, domain: str = "thesis") -
     x[k == "sigma_t"] = np.exp(y[k == "sigma_t"])
     x[k == "albedo"] = albedo_from_kappa(y[k == "albedo"])
     return clamp(x, layout)
+
+
+def optimiser_bounds(layout: ParamLayout, domain: str = "thesis") -> tuple[np.ndarray, np.ndarray]:
+    """Per-component bounds (lo, hi) of the optimiser variables: the valid ranges (``RANGES``) mapped to
+    the optimiser domain. In the thesis domain every map is monotone per component, so clipping y to
+    these bounds is the projection onto the valid set (xi = log sigma_t, kappa = log10(1 - albedo), which
+    decreases with the albedo). The absorption domain's (log sigma_s, log sigma_a) pair has no per-
+    component bounds (any pair is a valid sigma_t; ``from_optimiser`` clamps its albedo)."""
+    if domain not in DOMAINS:
+        raise ValueError(f"unknown optimiser domain {domain!r}; one of {DOMAINS}")
+    lo, hi = np.empty(layout.size), np.empty(layout.size)
+    for e in layout.entries:
+        a, b = RANGES[e.kind]
+        if domain == "absorption" and e.kind in ("sigma_t", "albedo"):
+            a, b = -np.inf, np.inf
+        elif e.kind == "sigma_t":
+            a, b = np.log(a), np.log(b)
+        elif e.kind == "albedo":
+            a, b = float(kappa_from_albedo(b)), float(kappa_from_albedo(a))
+        lo[e.start:e.start + e.size], hi[e.start:e.start + e.size] = a, b
+    return lo, hi
 
 
 def chain_to_optimiser(grad_x: np.ndarray, y: np.ndarray, layout: ParamLayout, domain: str = "thesis") -> np.ndarray:

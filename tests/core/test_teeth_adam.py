@@ -1,6 +1,7 @@
 """Adam (thesis eq. 2.38-2.39) as the teeth fit uses it."""
 
 import numpy as np
+import pytest
 
 from material_structures.core.teeth.optimise import Adam, FitSettings
 
@@ -70,3 +71,38 @@ def test_iterates_past_zero_albedo_keep_a_finite_gradient():
     # the floor is seen and its rho matters: the derivative is a number, not 0 by accident
     assert np.any(g[lay.slice("cavity.albedo")] != 0)
 
+
+
+def test_a_parameter_at_its_bound_leaves_it_as_soon_as_adam_turns():
+    """The steps are projected onto the valid ranges. A gradient that pushes beta (range [0, 1]) up for 6
+    steps of lr 0.04 from 0.9, then down, with |g| constant: Adam's normalised step is exactly
+    lr m_hat, m_hat = -1 while pushed (beta reaches 1 at the 3rd step), and after the turn m_hat = -0.616,
+    -0.333, -0.115, then +0.056 (closed form from B1 = 0.9). Projected, beta sits at 1 and leaves it at
+    the 4th step after the turn: 1 - 0.04 x 0.056. Unprojected, the variable would be at 1.14 + 0.04 x
+    1.064 and beta held at 1 for four more steps."""
+    from material_structures.core.teeth.capture import Capture
+    from material_structures.core.teeth.optimise import fit
+    from material_structures.core.teeth.param_vector import ParamLayout
+
+    from ._teeth_scenes import down_camera, light, slab_scene
+
+    scene = slab_scene([1.0, 1.3, 1.7], [0.95, 0.9, 0.8], beta=0.9)
+    cams, lights = [down_camera(4, 4, fov=6.0)], [light((40.0, 0.0, 200.0))]
+    cap = Capture(cams, lights, np.zeros((1, 1, 4, 4, 3), dtype=np.float32), np.ones((1, 4, 4), dtype=bool))
+    col = ParamLayout(scene).col("slab.enamel.beta")
+
+    def pushed(scene, capture, light_ids, st, seed, layout):  # seed = iteration (fit seed 0, first phase)
+        g = np.zeros(layout.size)
+        g[col] = -1e-6 if seed < 6 else 1e-6
+        return 1.0, g, {}
+
+    s = FitSettings(iterations=11, free=("slab.enamel.beta",), optimiser="adam", lr=0.04, lr_decay=0.0,
+                    image_spp=0, loss_block=1, held_out_lights=0, average_tail=0.0)
+    betas: list = []
+    fit(scene, cap, s, gradient=pushed, callback=lambda e, sc: betas.append(sc.teeth[0].enamel.beta))
+    # betas[k]: after k steps
+    np.testing.assert_allclose(betas[:3], [0.9, 0.94, 0.98], rtol=1e-12)
+    assert betas[3:10] == [1.0] * 7
+    m_hat = (0.9 * (0.9 * (0.9 * (0.9 * -(1 - 0.9**6) + 0.1) + 0.1) + 0.1) + 0.1) / (1 - 0.9**10)
+    assert m_hat == pytest.approx(0.0560, abs=1e-4)
+    assert betas[10] == pytest.approx(1.0 - 0.04 * m_hat, rel=1e-9)

@@ -140,3 +140,36 @@ def test_absorption_domain_round_trip_and_chain_rule_match_finite_differences():
     np.testing.assert_allclose(chain_to_optimiser(gx, y, lay, "absorption"), jac.T @ gx, rtol=1e-6, atol=1e-9)
     with pytest.raises(ValueError, match="domain"):
         to_optimiser(x, lay, "nope")
+
+
+def test_optimiser_bounds_are_the_valid_ranges_in_the_thesis_domain():
+    """Clipping the optimiser variables to ``optimiser_bounds`` is the projection onto the valid ranges: the
+    bounds map to the ranges' ends, a clipped variable maps to the same (clamped) parameters as the
+    unclipped one, and inside the bounds the map is exactly invertible (no clamp acts)."""
+    from material_structures.core.teeth.param_vector import (
+        RANGES,
+        ParamLayout,
+        from_optimiser,
+        optimiser_bounds,
+        to_optimiser,
+    )
+
+    scene = make_scene(n_teeth=1, resolution=8)
+    lay = ParamLayout(scene)
+    lo, hi = optimiser_bounds(lay)
+    kinds = lay.kinds()
+    ends = np.array([RANGES[k] for k in kinds])
+    x_lo, x_hi = from_optimiser(lo, lay), from_optimiser(hi, lay)
+    flip = kinds == "albedo"  # kappa = log10(1 - albedo) decreases with the albedo
+    np.testing.assert_allclose(np.where(flip, x_hi, x_lo), ends[:, 0], rtol=1e-9)
+    np.testing.assert_allclose(np.where(flip, x_lo, x_hi), ends[:, 1], rtol=1e-9)
+    rng = np.random.default_rng(8)
+    y = lo + (hi - lo) * rng.uniform(-0.5, 1.5, size=lay.size)  # a third of them outside
+    yc = np.clip(y, lo, hi)
+    assert np.any(yc != y)
+    np.testing.assert_allclose(from_optimiser(yc, lay), from_optimiser(y, lay), rtol=1e-12)
+    np.testing.assert_allclose(to_optimiser(from_optimiser(yc, lay), lay), yc, rtol=1e-9, atol=1e-9)
+    lo_a, hi_a = optimiser_bounds(lay, "absorption")
+    assert np.all(np.isinf(lo_a[flip])) and np.all(np.isinf(hi_a[kinds == "sigma_t"]))
+    with pytest.raises(ValueError, match="domain"):
+        optimiser_bounds(lay, "nope")
