@@ -6,7 +6,10 @@ forward-mode image Jacobian of ``path_tracer.render``). Its energy relative to t
     chi2(d) = sum over tiles, lights, channels of (sum_tile J d)^2 / (tile pixels * noise variance),
 
 says whether the capture can tell x from x + d: chi2 ~ 1 is one standard deviation of the capture
-noise. J is only available as a Monte Carlo estimate, and |J_hat d|^2 is biased upwards by J_hat's
+noise. The dentin coefficients' share of J d is instead the central difference (C(x + d_c) - C(x - d_c)) / 2
+of two renders with common random numbers (as the fit's ``dentin_shape_gradient``): their path-space
+derivative is noise, and biased, at a sharp enamel/dentin boundary (a photograph's, a Mitsuba capture's).
+J is only available as a Monte Carlo estimate, and |J_hat d|^2 is biased upwards by J_hat's
 variance, so the square is estimated without bias from independent passes: the mean over pairs
 i != j of (J_i d)(J_j d) (which can come out negative when the signal is below the estimator's noise).
 Pixels are pooled into ``block`` x ``block`` tiles first (a lower bound on the per-pixel chi2, with
@@ -20,7 +23,8 @@ import numpy as np
 
 from .capture import Capture
 from .compiled_scene import CompiledScene
-from .param_vector import ParamLayout, scene_to_vector, volume_pairs
+from .dentin_shape_gradient import shape_columns
+from .param_vector import RANGES, ParamLayout, scene_to_vector, vector_to_scene, volume_pairs
 from .path_tracer import RenderSettings, render, traced_tiles, traced_values
 from .scene import TeethScene
 
@@ -71,7 +75,27 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     if directions.shape[1] != layout.size:
         raise ValueError(f"directions must have {layout.size} columns (the scene's parameters), "
                          f"got {directions.shape[1]}")
-    cols = np.flatnonzero(np.any(directions != 0, axis=0))
+    c_cols = shape_columns(layout)
+    material = directions.copy()
+    material[:, c_cols] = 0.0
+    cols = np.flatnonzero(np.any(material != 0, axis=0))
+    # the directions' coefficient parts, each differenced about a centre that keeps both ends in range
+    x = scene_to_vector(scene, layout)
+    lo, hi = RANGES["c"]
+    ends = []
+    for d in directions:
+        dc = d[c_cols]
+        if not np.any(dc != 0):
+            ends.append(None)
+            continue
+        centre = np.clip(x[c_cols], lo + np.abs(dc), hi - np.abs(dc))
+        pair = []
+        for sign in (1.0, -1.0):
+            xs = x.copy()
+            xs[c_cols] = centre + sign * dc
+            sc = vector_to_scene(scene, xs, layout)
+            pair.append((sc, CompiledScene(sc, layout=layout)))
+        ends.append(pair)
     k = len(directions)
     h, w = capture.masks.shape[1:]
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
@@ -86,10 +110,15 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
         st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + i)
         if len(cols):
             r = render(scene, capture.cameras, capture.lights, st, pixels=pixels, compiled=cs, jacobian_cols=cols)
-            a = r.jacobian @ directions[:, cols].T  # (rows, L, 3, K)
+            a = r.jacobian @ material[:, cols].T  # (rows, L, 3, K)
         else:
             r = render(scene, capture.cameras, capture.lights, st, pixels=pixels, compiled=cs)
             a = np.zeros((len(tile_of), len(capture.lights), 3, k))
+        for j, pair in enumerate(ends):
+            if pair is not None:  # same seed as the pass: common random numbers
+                plus, minus = (traced_values(render(sc, capture.cameras, capture.lights, st, pixels=pixels,
+                                                    compiled=csc).images, pixels) for sc, csc in pair)
+                a[..., j] += 0.5 * np.moveaxis(plus - minus, 0, 1)
         t = np.zeros((n_tiles,) + a.shape[1:])
         np.add.at(t, tile_of, a)
         s1 = t if s1 is None else s1 + t

@@ -1,6 +1,6 @@
 """Capture sensitivity (chi2 of parameter directions): the tile/pair estimator against a brute-force
-recomputation from central differences of the same estimator (common random numbers), and its
-unbiasedness across independent seeds."""
+recomputation from central differences (common random numbers; the dentin coefficients' by renders of
+both ends), and its unbiasedness across independent seeds."""
 
 from __future__ import annotations
 
@@ -57,12 +57,15 @@ def test_chi2_matches_brute_force_from_crn_central_differences(problem):
     hgt, wid = m.shape
     ref = []
     for d in D[:-1]:
-        eps = 1e-5 / np.abs(d).max()
+        # materials: the derivative (reweighted differences, the sampling of x0); a dentin coefficient: the
+        # image change of +-d itself, each end sampled as rendered (common random numbers)
+        shape = bool(np.any(d[layout.kinds() == "c"] != 0))
+        eps, sampling = (1.0, None) if shape else (1e-5 / np.abs(d).max(), sc)
         tiles = []
         for i in range(passes):
             st = RenderSettings(spp=1, max_depth=5, seed=3 + i)
             ip, im = (render(vector_to_scene(sc, x0 + sgn * eps * d, layout), cap.cameras, cap.lights, st,
-                             pixels=[np.flatnonzero(m)], sampling_scene=sc).images[0] for sgn in (1, -1))
+                             pixels=[np.flatnonzero(m)], sampling_scene=sampling).images[0] for sgn in (1, -1))
             diff = (ip - im) / (2 * eps)
             t = []
             for r0 in range(0, hgt, block):
@@ -146,3 +149,9 @@ def test_information_off_diagonal_is_the_chi2_of_summed_directions(problem):
     assert F[2, 2] == pytest.approx(F[0, 0] + F[1, 1] + 2 * F[0, 1], rel=1e-9)
     np.testing.assert_allclose(np.diag(F), out["chi2"])
     assert abs(F[0, 1]) > 1e-3 * np.sqrt(F[0, 0] * F[1, 1])  # a real cross term, not zeros
+    # a direction that moves a material and a dentin coefficient is the sum of its two parts' image changes
+    d3 = D[names.index("tooth0.c[0]")]
+    F = capture_sensitivity(sc, cap, np.vstack([d1, d3, d1 + d3]), passes=4, block=4, noise_variance=2e-5,
+                            max_depth=5, seed=3)["information"]
+    assert F[2, 2] == pytest.approx(F[0, 0] + F[1, 1] + 2 * F[0, 1], rel=1e-9)
+    assert F[1, 1] != 0.0 and F[0, 1] != 0.0  # the coefficient's part is in (its sign is the pairs' noise here)
