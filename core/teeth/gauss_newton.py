@@ -51,16 +51,16 @@ from .scene import TeethScene
 ESTIMATORS = ("per-pass", "pooled")
 
 
-def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray, domain: str = "thesis") -> np.ndarray:
+def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray) -> np.ndarray:
     """(k, k) dx[cols] / dy[cols] at ``y``: the physical Jacobian columns ``cols`` times this map are the
     optimiser-variable columns (the map only mixes a volume's sigma_t and albedo, so ``cols`` must hold
     both or neither of a pair)."""
     eye = np.eye(layout.size)
-    return np.array([chain_to_optimiser(eye[i], y, layout, domain)[cols] for i in cols])
+    return np.array([chain_to_optimiser(eye[i], y, layout)[cols] for i in cols])
 
 
 def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, cols: np.ndarray, y: np.ndarray,
-                        domain: str = "thesis", *, passes: int = 4, block: int = 8, max_depth: int | None = None,
+                        *, passes: int = 4, block: int = 8, max_depth: int | None = None,
                         seed: int = 0, workers: int = 1, lights_per_render: int = 9,
                         estimator: str = "per-pass") -> np.ndarray:
     """(k, k) Gauss-Newton matrix of the per-pixel L2 loss over all of ``capture``'s lights in the
@@ -79,7 +79,7 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
         raise ValueError("the capture needs masks")
     cols = np.asarray(cols, dtype=np.int64)
     k = len(cols)
-    chain = optimiser_jacobian_map(y, layout, cols, domain)
+    chain = optimiser_jacobian_map(y, layout, cols)
     h, w = capture.masks.shape[1:]
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
     tile_of, n_tiles = traced_tiles(pixels, h, w, block)

@@ -45,7 +45,6 @@ from .scene import TeethScene
 __all__ = ["Adam", "DEFAULT_FREE", "FitSettings", "FitState", "block_sums", "fit", "free_mask", "held_out_light_ids",
            "iteration_gradient", "l2_loss", "paired_loss", "plot_loss", "tail_start", "texture_phase_scene"]
 
-DOMAIN = "thesis"  # the optimiser domain (param_vector.to_optimiser)
 GN_ESTIMATOR = "pooled"  # (mean J_i)^T (mean J_i): the per-pass mean lost (docs/teeth-fit.md)
 GN_GUARD_FACTOR = 4.0  # the divergence guard's damping factor
 
@@ -111,7 +110,7 @@ def _gn_seed(s: FitSettings, phase_index: int, iteration: int) -> int:
 def fit_gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, gn_idx: np.ndarray,
                             y: np.ndarray, s: FitSettings, seed: int) -> np.ndarray:
     """The Gauss-Newton matrix over the variables ``gn_idx`` that ``optimiser="gauss-newton"`` steps."""
-    return gauss_newton_matrix(scene, capture, layout, gn_idx, y, DOMAIN, passes=s.gn_passes, block=s.gn_block,
+    return gauss_newton_matrix(scene, capture, layout, gn_idx, y, passes=s.gn_passes, block=s.gn_block,
                                max_depth=s.max_depth, seed=seed, workers=s.workers, estimator=GN_ESTIMATOR)
 
 
@@ -217,14 +216,14 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 cur = texture_phase_scene(best_scene, s.texture_size)
                 best_scene = texture_phase_scene(best_scene, s.texture_size)
             layout = ParamLayout(cur)
-            y = to_optimiser(scene_to_vector(cur, layout), layout, DOMAIN)
+            y = to_optimiser(scene_to_vector(cur, layout), layout)
             opt = Adam(s.lr)
             gn_opt = PreconditionedMomentum(s.gn_lr, max_step=s.gn_max_step)
             hmat, precond_it, guard = None, -1, _new_guard(s)
         free = free_mask(layout, s.free)
         # every step is projected onto the valid ranges: a variable left beyond its bound would hold the
         # parameter there (clamped) until steps against the gradient's new sign had walked it back
-        y_lo, y_hi = optimiser_bounds(layout, DOMAIN)
+        y_lo, y_hi = optimiser_bounds(layout)
         y = np.clip(y, y_lo, y_hi)
         # optimiser "gauss-newton": the variables it steps (the rest of the free ones keep Adam)
         gn = np.zeros_like(free)
@@ -247,7 +246,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
             t0 = time.perf_counter()
             rng = np.random.default_rng([s.seed, pi, it])
             light_ids = np.sort(rng.choice(training, n_l, replace=False))
-            x = from_optimiser(y, layout, DOMAIN)
+            x = from_optimiser(y, layout)
             cur = vector_to_scene(cur, x, layout)
             seed = s.seed * 100003 + 10007 * pi + it
             kw = {"loss_block": s.loss_block} if s.loss_block > 1 else {}
@@ -275,7 +274,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
             if it >= avg_from:
                 avg_sum = y.copy() if avg_sum is None else avg_sum + y
                 avg_count += 1
-            g = chain_to_optimiser(g_phys, y, layout, DOMAIN)
+            g = chain_to_optimiser(g_phys, y, layout)
             g[~free_now] = 0.0
             decay = 1.0 + s.lr_decay * it  # lr_n = lr / (1 + lr_decay * n), gn_lr likewise
             by_gn = gn if gn_on else np.zeros_like(gn)
@@ -307,7 +306,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 callback(entry, cur)
             last = it == n_it - 1
             if out_dir is not None and ((it + 1) % s.checkpoint_every == 0 or last):
-                cur_scene = vector_to_scene(cur, from_optimiser(y, layout, DOMAIN), layout)
+                cur_scene = vector_to_scene(cur, from_optimiser(y, layout), layout)
                 save_json(ckpt, asdict(FitState(phase, it + 1, cur_scene.to_dict(), y.tolist(),
                                                  opt.m.tolist(), opt.v.tolist(), opt.n, best_loss,
                                                  best_scene.to_dict(), log,
@@ -321,7 +320,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 save_json(os.path.join(out_dir, "scene_best.json"), best_scene.to_dict())
                 result = best_scene if avg_sum is None else _averaged(cur, avg_sum, avg_count, layout)
                 save_json(os.path.join(out_dir, "scene_fit.json"), result.to_dict())
-        cur = vector_to_scene(cur, from_optimiser(y, layout, DOMAIN), layout)
+        cur = vector_to_scene(cur, from_optimiser(y, layout), layout)
     if avg_sum is not None:
         return _averaged(cur, avg_sum, avg_count, layout), log
     return best_scene, log
@@ -329,4 +328,4 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
 
 def _averaged(scene: TeethScene, y_sum: np.ndarray, count: int, layout: ParamLayout) -> TeethScene:
     """``scene`` with the mean ``y_sum / count`` of the averaged optimiser-domain iterates."""
-    return vector_to_scene(scene, from_optimiser(y_sum / count, layout, DOMAIN), layout)
+    return vector_to_scene(scene, from_optimiser(y_sum / count, layout), layout)

@@ -137,9 +137,6 @@ def clamp(x: np.ndarray, layout: ParamLayout) -> np.ndarray:
     return out
 
 
-DOMAINS = ("thesis", "absorption")
-
-
 def volume_pairs(layout: ParamLayout) -> tuple[np.ndarray, np.ndarray]:
     """Component indices of every volume's sigma_t and the matching albedo, aligned."""
     si, ai = [], []
@@ -151,55 +148,32 @@ def volume_pairs(layout: ParamLayout) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(si, dtype=np.int64), np.asarray(ai, dtype=np.int64)
 
 
-def to_optimiser(x: np.ndarray, layout: ParamLayout, domain: str = "thesis") -> np.ndarray:
-    """Physical -> optimiser domain.
-
-    ``thesis``: xi = log sigma_t (eq. 5.24), kappa = log10(1 - albedo) (eq. 5.22), identity otherwise.
-    ``absorption``: per volume and channel, (log sigma_s, log sigma_a) with sigma_s = albedo sigma_t and
-    sigma_a = (1 - albedo) sigma_t, stored in the sigma_t and albedo slots. A reparameterisation of the
-    same model (not in the thesis): the valleys of the loss that couple sigma_t and albedo are
-    closer to its axes, which suits Adam's per-coordinate steps."""
-    if domain not in DOMAINS:
-        raise ValueError(f"unknown optimiser domain {domain!r}; one of {DOMAINS}")
+def to_optimiser(x: np.ndarray, layout: ParamLayout) -> np.ndarray:
+    """Physical -> optimiser domain: xi = log sigma_t (eq. 5.24), kappa = log10(1 - albedo) (eq. 5.22),
+    identity otherwise."""
     k = layout.kinds()
     y = x.astype(np.float64).copy()
-    if domain == "absorption":
-        si, ai = volume_pairs(layout)
-        st, al = x[si], np.minimum(x[ai], RANGES["albedo"][1])
-        y[si], y[ai] = np.log(st * al), np.log(st * (1.0 - al))
-        return y
     y[k == "sigma_t"] = np.log(x[k == "sigma_t"])
     y[k == "albedo"] = kappa_from_albedo(np.minimum(x[k == "albedo"], RANGES["albedo"][1]))
     return y
 
 
-def from_optimiser(y: np.ndarray, layout: ParamLayout, domain: str = "thesis") -> np.ndarray:
+def from_optimiser(y: np.ndarray, layout: ParamLayout) -> np.ndarray:
     k = layout.kinds()
     x = y.astype(np.float64).copy()
-    if domain == "absorption":
-        si, ai = volume_pairs(layout)
-        ss, sa = np.exp(y[si]), np.exp(y[ai])
-        x[si], x[ai] = ss + sa, ss / (ss + sa)
-        return clamp(x, layout)
     x[k == "sigma_t"] = np.exp(y[k == "sigma_t"])
     x[k == "albedo"] = albedo_from_kappa(y[k == "albedo"])
     return clamp(x, layout)
 
 
-def optimiser_bounds(layout: ParamLayout, domain: str = "thesis") -> tuple[np.ndarray, np.ndarray]:
+def optimiser_bounds(layout: ParamLayout) -> tuple[np.ndarray, np.ndarray]:
     """Per-component bounds (lo, hi) of the optimiser variables: the valid ranges (``RANGES``) mapped to
-    the optimiser domain. In the thesis domain every map is monotone per component, so clipping y to
-    these bounds is the projection onto the valid set (xi = log sigma_t, kappa = log10(1 - albedo), which
-    decreases with the albedo). The absorption domain's (log sigma_s, log sigma_a) pair has no per-
-    component bounds (any pair is a valid sigma_t; ``from_optimiser`` clamps its albedo)."""
-    if domain not in DOMAINS:
-        raise ValueError(f"unknown optimiser domain {domain!r}; one of {DOMAINS}")
+    the optimiser domain. Every map is monotone per component, so clipping y to these bounds is the
+    projection onto the valid set (kappa = log10(1 - albedo) decreases with the albedo)."""
     lo, hi = np.empty(layout.size), np.empty(layout.size)
     for e in layout.entries:
         a, b = RANGES[e.kind]
-        if domain == "absorption" and e.kind in ("sigma_t", "albedo"):
-            a, b = -np.inf, np.inf
-        elif e.kind == "sigma_t":
+        if e.kind == "sigma_t":
             a, b = np.log(a), np.log(b)
         elif e.kind == "albedo":
             a, b = float(kappa_from_albedo(b)), float(kappa_from_albedo(a))
@@ -207,20 +181,13 @@ def optimiser_bounds(layout: ParamLayout, domain: str = "thesis") -> tuple[np.nd
     return lo, hi
 
 
-def chain_to_optimiser(grad_x: np.ndarray, y: np.ndarray, layout: ParamLayout, domain: str = "thesis") -> np.ndarray:
+def chain_to_optimiser(grad_x: np.ndarray, y: np.ndarray, layout: ParamLayout) -> np.ndarray:
     """Gradient w.r.t. the optimiser variables from the physical gradient (eq. 5.22, 5.24)."""
     k = layout.kinds()
     g = grad_x.astype(np.float64).copy()
-    if domain == "absorption":
-        # sigma_t = s + a, albedo = s / (s + a); d/du = s d/ds, d/dv = a d/da
-        si, ai = volume_pairs(layout)
-        ss, sa = np.exp(y[si]), np.exp(y[ai])
-        st = ss + sa
-        gs, ga = grad_x[si], grad_x[ai]
-        dal = ss * sa / (st * st)
-        g[si] = gs * ss + ga * dal
-        g[ai] = gs * sa - ga * dal
-        return g
+    g[k == "sigma_t"] *= dsigma_dxi(y[k == "sigma_t"])
+    g[k == "albedo"] *= dalbedo_dkappa(y[k == "albedo"])
+    return g
     g[k == "sigma_t"] *= dsigma_dxi(y[k == "sigma_t"])
     g[k == "albedo"] *= dalbedo_dkappa(y[k == "albedo"])
     return g
