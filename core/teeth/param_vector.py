@@ -188,6 +188,3 @@ def chain_to_optimiser(grad_x: np.ndarray, y: np.ndarray, layout: ParamLayout) -
     g[k == "sigma_t"] *= dsigma_dxi(y[k == "sigma_t"])
     g[k == "albedo"] *= dalbedo_dkappa(y[k == "albedo"])
     return g
-    g[k == "sigma_t"] *= dsigma_dxi(y[k == "sigma_t"])
-    g[k == "albedo"] *= dalbedo_dkappa(y[k == "albedo"])
-    return g
