@@ -72,7 +72,6 @@ def test_iterates_past_zero_albedo_keep_a_finite_gradient():
     assert np.any(g[lay.slice("cavity.albedo")] != 0)
 
 
-
 def test_a_parameter_at_its_bound_leaves_it_as_soon_as_adam_turns():
     """The steps are projected onto the valid ranges. A gradient that pushes beta (range [0, 1]) up for 6
     steps of lr 0.04 from 0.9, then down, with |g| constant: Adam's normalised step is exactly
