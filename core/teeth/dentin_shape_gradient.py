@@ -63,18 +63,26 @@ def shape_gradient(scene: TeethScene, cameras: list[Camera], lights: list[PointL
         raise ValueError(f"direction must hold {len(cols)} entries of +-1")
     if len(cols) == 0:
         return np.zeros(0)
-    x = scene_to_vector(scene, layout)
-    lo, hi = RANGES["c"]
-    centre = np.clip(x[cols], lo + step, hi - step)
-    images = []
-    for sign in (1.0, -1.0):
-        xs = x.copy()
-        xs[cols] = centre + sign * step * u
-        sc = vector_to_scene(scene, xs, layout)
-        images.append(render(sc, cameras, lights, settings, pixels=pixels, light_ids=light_ids,
-                             compiled=CompiledScene(sc, layout=layout)).images)
+    images = [render(sc, cameras, lights, settings, pixels=pixels, light_ids=light_ids,
+                     compiled=CompiledScene(sc, layout=layout)).images
+              for sc in shape_ends(scene, layout, step * u)]
     d = float(np.sum(adjoint * (images[0] - images[1]))) / (2.0 * step)
     return d * u
+
+
+def shape_ends(scene: TeethScene, layout: ParamLayout, dc: np.ndarray) -> tuple[TeethScene, TeethScene]:
+    """The two scenes of a central difference of the dentin coefficients by ``dc`` (one entry per
+    :func:`shape_columns`): c + dc and c - dc about the nearest centre that keeps both ends in range."""
+    cols = shape_columns(layout)
+    x = scene_to_vector(scene, layout)
+    lo, hi = RANGES["c"]
+    centre = np.clip(x[cols], lo + np.abs(dc), hi - np.abs(dc))
+    ends = []
+    for sign in (1.0, -1.0):
+        xs = x.copy()
+        xs[cols] = centre + sign * dc
+        ends.append(vector_to_scene(scene, xs, layout))
+    return ends[0], ends[1]
 
 
 def random_direction(seed: int, k: int) -> np.ndarray:

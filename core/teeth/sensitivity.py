@@ -23,8 +23,8 @@ import numpy as np
 
 from .capture import Capture
 from .compiled_scene import CompiledScene
-from .dentin_shape_gradient import shape_columns
-from .param_vector import RANGES, ParamLayout, scene_to_vector, vector_to_scene, volume_pairs
+from .dentin_shape_gradient import shape_columns, shape_ends
+from .param_vector import ParamLayout, scene_to_vector, volume_pairs
 from .path_tracer import RenderSettings, render, traced_tiles, traced_values
 from .scene import TeethScene
 
@@ -79,23 +79,10 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     material = directions.copy()
     material[:, c_cols] = 0.0
     cols = np.flatnonzero(np.any(material != 0, axis=0))
-    # the directions' coefficient parts, each differenced about a centre that keeps both ends in range
-    x = scene_to_vector(scene, layout)
-    lo, hi = RANGES["c"]
-    ends = []
-    for d in directions:
-        dc = d[c_cols]
-        if not np.any(dc != 0):
-            ends.append(None)
-            continue
-        centre = np.clip(x[c_cols], lo + np.abs(dc), hi - np.abs(dc))
-        pair = []
-        for sign in (1.0, -1.0):
-            xs = x.copy()
-            xs[c_cols] = centre + sign * dc
-            sc = vector_to_scene(scene, xs, layout)
-            pair.append((sc, CompiledScene(sc, layout=layout)))
-        ends.append(pair)
+    # the directions' coefficient parts: the two scenes of each one's central difference, built once
+    ends = [None if not np.any(d[c_cols] != 0) else
+            [(sc, CompiledScene(sc, layout=layout)) for sc in shape_ends(scene, layout, d[c_cols])]
+            for d in directions]
     k = len(directions)
     h, w = capture.masks.shape[1:]
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
