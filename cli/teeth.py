@@ -198,13 +198,16 @@ def fit_settings(args: argparse.Namespace) -> FitSettings:
 def run_fit(args: argparse.Namespace) -> int:
     import time
 
+    import numpy as np
+
     from ..core.json_io import save_json
     from ..core.teeth.capture import Capture
     from ..core.teeth.fit_checkpoint import load_state
     from ..core.teeth.fit_report import held_out_check, plot_loss
-    from ..core.teeth.literature_init import literature_start, literature_table
+    from ..core.teeth.literature_init import literature_points, literature_start, literature_starts
     from ..core.teeth.optimise import fit, held_out_light_ids
     from ..core.teeth.scene import load_scene
+    from ..core.teeth.start_trials import best_start
     from ..core.teeth.synthetic import perturbed_start
 
     t_start = time.perf_counter()
@@ -226,14 +229,29 @@ def run_fit(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r}")
         resumed = len(load_state(ckpt).log)  # a malformed or foreign checkpoint is a one-line error here
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
+    os.makedirs(args.out, exist_ok=True)  # before the search and the trials: a bad --out fails at once
+    trials_path = os.path.join(args.out, "start_trials.json")
     if not args.resume:
+        if os.path.isfile(trials_path):
+            os.remove(trials_path)  # an earlier fit's, in this folder
         if args.init == "literature":
-            table, gs = literature_table()
-            n_points = len(table) * len(gs)
+            n_points = literature_points()
             if as_json:
                 _event(progress="init", message="searching the literature table for a start")
             with _bar(n_points, "init", "point", disable=args.no_progress or as_json) as init_bar:
-                scene = literature_start(scene, cap, progress=init_bar.update)
+                if fs.start_trials == 0:
+                    scene = literature_start(scene, cap, progress=init_bar.update)
+                else:
+                    starts = literature_starts(scene, cap, progress=init_bar.update)
+            if fs.start_trials > 0:
+                n_trial = len(starts) * fs.start_trials
+                if as_json:
+                    _event(progress="init", message=f"trying {len(starts)} starts, {fs.start_trials} iterations each")
+                with _bar(n_trial, "starts", "it", disable=args.no_progress or as_json) as trial_bar:
+                    scene, scores = best_start(starts, cap, fs, progress=lambda entry: trial_bar.update(1))
+                save_json(trials_path,
+                          {"g1": [s.teeth[0].enamel.g1 for s in starts], "trial_loss": scores,
+                           "chosen": int(np.argmin(scores)), "iterations": fs.start_trials})
         elif args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
     total = fs.iterations + fs.textured_iterations
@@ -278,6 +296,9 @@ def run_fit(args: argparse.Namespace) -> int:
     check = held_out_check(best, cap, held_out, os.path.join(args.out, "check.png"), workers=fs.workers)
     report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,
               "seconds_this_run": time.perf_counter() - t_start, "held_out": check}
+    if os.path.isfile(trials_path):
+        with open(trials_path) as f:
+            report["start_trials"] = json.load(f)
     save_json(os.path.join(args.out, "fit_report.json"), report)
     summary = (f"held-out lights: {check['rms_relative']:.1%} RMS per pixel, {check['rms_relative_tiles']:.1%} "
                f"on 8 x 8 tiles (check.png)" if check["lights"] else "no held-out lights")

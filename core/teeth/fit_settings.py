@@ -24,6 +24,9 @@ DEFAULT_FREE = ("*.sigma_t", "*.albedo", "*.g1", "*.g2", "*.beta", "*.a_t", "*.c
 @dataclass
 class FitSettings:
     # ---- schedule
+    # iterations of the trial fit from each literature start (one per phase-function g); the fit goes on
+    # from the best (start_trials.best_start); 0: the search's single best start
+    start_trials: int = 30
     iterations: int = 300  # "homogeneous" phase (thesis Sec. 5.7)
     textured_iterations: int = 0  # "textured" phase: a_t becomes a texture_size^2 texture
     texture_size: int = 8
@@ -59,8 +62,8 @@ class FitSettings:
     checkpoint_every: int = 5
 
     def __post_init__(self) -> None:
-        if self.iterations < 1 or self.textured_iterations < 0 or self.texture_size < 1:
-            raise ValueError("iterations must be >= 1, textured_iterations >= 0 and texture_size >= 1")
+        if self.iterations < 1 or self.textured_iterations < 0 or self.texture_size < 1 or self.start_trials < 0:
+            raise ValueError("iterations must be >= 1, textured_iterations and start_trials >= 0, texture_size >= 1")
         if self.spp < 1 or self.image_spp < 0 or self.lights_per_iteration < 1 or self.loss_block < 1:
             raise ValueError("spp, lights_per_iteration and loss_block must be >= 1, image_spp >= 0 (0 = spp)")
         if self.max_depth is not None and self.max_depth < 1:

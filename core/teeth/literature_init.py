@@ -6,8 +6,22 @@ et al. 2015] (50000 points), renders a virtual *homogeneous* tooth for each poin
 the masked measurements by a scale-invariant error and, per colour channel, starts from the point
 with the smallest error. Here the table is a coarse log-spaced grid over the same span (sigma_t
 0.3-30 / mm, albedo 0.5-0.999, g 0.3-0.9; a few hundred points), evaluated on a subset of lights with
-two independently seeded renders per point and tile sums of the masked pixels, so that the choice
-follows the model and not the renders' Monte Carlo noise (see ``literature_start``).
+two independently seeded renders per point and tile sums of the masked pixels, so that the errors
+are not biased by the renders' Monte Carlo noise (see ``literature_start``).
+
+Unbiased is not enough: at 1 sample per pixel the paired error of one point has a standard deviation
+of about 0.04 on the Mitsuba acceptance capture, more than the spread of the errors of the good points
+(0.006-0.05), and the smallest of 240 such estimates is the point with the most negative noise (the
+winner's curse): the search chose g 0.9, sigma_t 3.9-6.5 / mm with errors of -0.03 to -0.07, points
+whose errors at 8 samples per pixel are 0.013-0.043, and fits started there ended 42 % above the
+truth's loss, in another valley. So the best points of each g and channel are rendered again, with new
+seeds, more samples and other lights, and the choice is made mostly on those errors (weighted by samples).
+
+Nor does the search tell g: at 8 samples per pixel on every table point, the best errors of g 0.3, 0.6
+and 0.9 were within 0.003 of each other in every channel (a homogeneous tooth is not the capture's
+enamel and dentin), and the fit keeps the valley its start's g puts it in. ``literature_starts`` gives
+one start per g; the fit tries each and goes on from the best (``start_trials``; docs/teeth-fit.md,
+"The start's mean cosine decides the valley").
 """
 
 from __future__ import annotations
@@ -23,6 +37,8 @@ from .path_tracer import RenderSettings, render, traced_tiles, traced_values
 from .scene import TeethScene, VolumeMaterial
 
 SIGMA_RANGE_MM = (0.3, 30.0)
+REFINE_KEEP = 3  # table points per g and channel rendered again (``literature_starts``)
+REFINE_LIGHTS = 12
 ALBEDO_RANGE = (0.5, 0.999)
 G_VALUES = (0.3, 0.6, 0.9)
 
@@ -83,9 +99,14 @@ def _homogeneous(scene: TeethScene, mat: VolumeMaterial) -> TeethScene:
     return out
 
 
+def literature_points(n_sigma: int = 10, n_albedo: int = 8, refine_keep: int = REFINE_KEEP) -> int:
+    """How many times ``literature_start(s)`` calls its ``progress``: the table, then the refinement."""
+    return n_sigma * n_albedo * len(G_VALUES) + len(G_VALUES) * 3 * refine_keep
+
+
 def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_albedo: int = 8,
                      pixel_stride: int = 3, n_lights: int = 6, seed: int = 0, spp: int = 1, tile: int = 8,
-                     max_depth: int | None = None, scale_invariant: bool = True,
+                     max_depth: int | None = None, scale_invariant: bool = True, refine_keep: int = REFINE_KEEP,
                      progress: Callable[[int], None] | None = None) -> TeethScene:
     """Start scene whose enamel and dentin take, per channel, the best table point (c = 0).
 
@@ -99,37 +120,96 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
     table on the acceptance capture, 2 cores) is summed over ``tile`` x ``tile`` tiles per
     camera and light (per-pixel 1-spp values are mostly noise) and compared by
     :func:`paired_table_errors` (``scale_invariant``: the thesis' error; else the absolute one, for
-    calibrated captures). ``progress(n)`` is called after each table point with n = 1."""
-    if capture.images is None or capture.masks is None:
-        raise ValueError("the literature search needs capture images and masks")
-    if spp < 1 or tile < 1 or pixel_stride < 1:
-        raise ValueError(f"spp, tile and pixel_stride must be >= 1, got {spp}, {tile}, {pixel_stride}")
-    table, gs = literature_table(n_sigma, n_albedo)
-    rng = np.random.default_rng(seed)
-    light_ids = np.sort(rng.choice(len(capture.lights), min(n_lights, len(capture.lights)), replace=False))
-    pixels = [np.flatnonzero(m.ravel())[::pixel_stride] for m in capture.masks]
-    if sum(len(p) for p in pixels) == 0:
-        raise ValueError("the capture's masks select no pixels")
-    tiles = traced_tiles(pixels, *capture.masks.shape[1:], tile)
-    ref = _tile_sums(traced_values(capture.images[:, light_ids].astype(np.float64), pixels), *tiles)
-    errors = np.zeros((len(gs), len(table), 3))
-    for gi, g in enumerate(gs):
-        for j, (sig, alb) in enumerate(table):
-            mat = VolumeMaterial(np.full(3, sig), np.full(3, min(alb, 0.999)), g)
-            sc = _homogeneous(scene, mat)
-            cs = CompiledScene(sc)
-            r = [_tile_sums(traced_values(render(sc, capture.cameras, capture.lights,
-                                                 RenderSettings(spp=spp, max_depth=max_depth,
-                                                                seed=2 * (seed + gi * len(table) + j) + h),
-                                                 pixels=pixels, light_ids=light_ids, compiled=cs).images, pixels),
-                            *tiles) for h in (0, 1)]
-            for c in range(3):
-                errors[gi, j, c] = paired_table_errors(r[0][:, c:c + 1], r[1][:, c:c + 1], ref[:, c],
-                                                       scale_invariant)[0]
-            if progress is not None:
-                progress(1)
-    best = [np.unravel_index(np.argmin(errors[:, :, c]), errors.shape[:2]) for c in range(3)]
+    calibrated captures).
+
+    Then, unless ``refine_keep`` is 0, the ``refine_keep`` points of smallest error of each g and channel
+    are rendered again, twice with seeds no table point used, at max(8, 2 ``spp``) samples per pixel on
+    every min(2, ``pixel_stride``)-th masked pixel of 12 other random lights, and the choice is made on the
+    mean of both errors weighted by their samples, mostly the new one's (module docstring: the table's own
+    minimum is mostly its noise).
+    ``progress(n)`` is called after each point; :func:`literature_points` calls in all."""
+    points, errors, table, gs = _search(scene, capture, n_sigma, n_albedo, pixel_stride, n_lights, seed, spp, tile,
+                                        max_depth, scale_invariant, refine_keep, progress)
+    best = [points[int(np.argmin(errors[:, c]))] for c in range(3)]
     sigma = np.array([table[j, 0] for _, j in best])
     albedo = np.array([table[j, 1] for _, j in best])
     g = float(np.median([gs[gi] for gi, _ in best]))
     return _homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), g))
+
+
+def literature_starts(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_albedo: int = 8,
+                      pixel_stride: int = 3, n_lights: int = 6, seed: int = 0, spp: int = 1, tile: int = 8,
+                      max_depth: int | None = None, scale_invariant: bool = True, refine_keep: int = REFINE_KEEP,
+                      progress: Callable[[int], None] | None = None) -> list[TeethScene]:
+    """One start per g of the table (in ``G_VALUES``' order): each channel takes the point of that g whose
+    error is smallest (the search of :func:`literature_start`, the same arguments). The search cannot tell
+    g (module docstring); the fit tries them (``start_trials.best_start``)."""
+    points, errors, table, gs = _search(scene, capture, n_sigma, n_albedo, pixel_stride, n_lights, seed, spp, tile,
+                                        max_depth, scale_invariant, refine_keep, progress)
+    starts = []
+    for gi, g in enumerate(gs):
+        mine = [k for k, (pg, _) in enumerate(points) if pg == gi]
+        best = [points[mine[int(np.argmin(errors[mine, c]))]] for c in range(3)]
+        sigma = np.array([table[j, 0] for _, j in best])
+        albedo = np.array([table[j, 1] for _, j in best])
+        starts.append(_homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), float(g))))
+    return starts
+
+
+def _search(scene, capture, n_sigma, n_albedo, pixel_stride, n_lights, seed, spp, tile, max_depth, scale_invariant,
+            refine_keep, progress) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
+    """The table search and its refinement: (points as (g index, table index), their errors (n, 3), table, gs)."""
+    if capture.images is None or capture.masks is None:
+        raise ValueError("the literature search needs capture images and masks")
+    if spp < 1 or tile < 1 or pixel_stride < 1:
+        raise ValueError(f"spp, tile and pixel_stride must be >= 1, got {spp}, {tile}, {pixel_stride}")
+    if refine_keep < 0:
+        raise ValueError(f"refine_keep must be >= 0, got {refine_keep}")
+    table, gs = literature_table(n_sigma, n_albedo)
+    rng = np.random.default_rng(seed)
+    light_ids = np.sort(rng.choice(len(capture.lights), min(n_lights, len(capture.lights)), replace=False))
+    masked = [np.flatnonzero(m.ravel()) for m in capture.masks]
+    if sum(len(p) for p in masked) == 0:
+        raise ValueError("the capture's masks select no pixels")
+
+    def point_errors(points, ids, stride, n_spp, seed_of) -> np.ndarray:
+        """(len(points), 3) paired errors of (g index, table index) points on lights ``ids``."""
+        pixels = [p[::stride] for p in masked]
+        tiles = traced_tiles(pixels, *capture.masks.shape[1:], tile)
+        ref = _tile_sums(traced_values(capture.images[:, ids].astype(np.float64), pixels), *tiles)
+        out = np.zeros((len(points), 3))
+        for n, (gi, j) in enumerate(points):
+            sig, alb = table[j]
+            sc = _homogeneous(scene, VolumeMaterial(np.full(3, sig), np.full(3, min(alb, 0.999)), gs[gi]))
+            cs = CompiledScene(sc)
+            r = [_tile_sums(traced_values(render(sc, capture.cameras, capture.lights,
+                                                 RenderSettings(spp=n_spp, max_depth=max_depth,
+                                                                seed=seed_of(n, gi, j, h)),
+                                                 pixels=pixels, light_ids=ids, compiled=cs).images, pixels),
+                            *tiles) for h in (0, 1)]
+            for c in range(3):
+                out[n, c] = paired_table_errors(r[0][:, c:c + 1], r[1][:, c:c + 1], ref[:, c], scale_invariant)[0]
+            if progress is not None:
+                progress(1)
+        return out
+
+    grid = [(gi, j) for gi in range(len(gs)) for j in range(len(table))]
+    errors = point_errors(grid, light_ids, pixel_stride, spp, lambda n, gi, j, h: 2 * (seed + gi * len(table) + j) + h)
+    if refine_keep == 0:
+        return grid, errors, table, gs
+    cand = sorted({grid[gi * len(table) + int(j)] for gi in range(len(gs)) for c in range(3)
+                   for j in np.argsort(errors[gi * len(table):(gi + 1) * len(table), c], kind="stable")[:refine_keep]})
+    others = np.setdiff1d(np.arange(len(capture.lights)), light_ids)
+    pool = others if len(others) >= REFINE_LIGHTS else np.arange(len(capture.lights))
+    ids = np.sort(np.random.default_rng([seed, 1]).choice(pool, min(REFINE_LIGHTS, len(pool)), replace=False))
+    used = seed + len(grid)  # seeds 2 (used + n) + h: after every table point's
+    stride2, spp2 = min(2, pixel_stride), max(8, 2 * spp)
+    refined = point_errors(cand, ids, stride2, spp2, lambda n, gi, j, h: 2 * (used + n) + h)
+    if progress is not None and len(gs) * 3 * refine_keep > len(cand):
+        progress(len(gs) * 3 * refine_keep - len(cand))
+    # both estimates, weighted by their samples (their inverse variances, roughly): the table's carries its
+    # selection bias, with a small weight where its renders were cheap (1:24 for the defaults)
+    w1 = spp * sum(len(p[::pixel_stride]) for p in masked) * len(light_ids)
+    w2 = spp2 * sum(len(p[::stride2]) for p in masked) * len(ids)
+    first = errors[[gi * len(table) + j for gi, j in cand]]
+    return cand, (w1 * first + w2 * refined) / (w1 + w2), table, gs

@@ -101,9 +101,10 @@ def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
 
 
 def test_fit_starts_from_the_literature_search(tmp_path):
-    """``--init literature`` (the default) runs the table search before the fit: the first iteration's
-    scene is the search's start (table values, c = 0)."""
-    from material_structures.core.teeth.literature_init import literature_start, literature_table
+    """``--init literature`` (the default) runs the table search, one start per phase-function g, a short
+    trial fit from each, and goes on from the trial of lowest loss: with only the dentin coefficients free,
+    the materials stay that start's (table values), and start_trials.json / fit_report.json name it."""
+    from material_structures.core.teeth.literature_init import G_VALUES, literature_starts, literature_table
 
     cap_dir = tmp_path / "cap"
     assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
@@ -114,13 +115,17 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     fit_dir = tmp_path / "fit"
     assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--iterations", "1", "--no-progress",
                  "--free", "*.c"]) == 0
-    fitted = load_scene(fit_dir / "scene_fit.json")  # best of 1 iteration = the start (only c is free)
-    expected = literature_start(load_scene(cap_dir / "scene.json"), cap)  # scale-invariant, the default
+    trials = json.loads((fit_dir / "start_trials.json").read_text())
+    assert trials["g1"] == list(G_VALUES) and len(trials["trial_loss"]) == len(G_VALUES)
+    assert trials["chosen"] == int(np.argmin(trials["trial_loss"]))
+    assert json.loads((fit_dir / "fit_report.json").read_text())["start_trials"] == trials
+    fitted = load_scene(fit_dir / "scene_fit.json")  # only c is free: the materials are the chosen start's
+    expected = literature_starts(load_scene(cap_dir / "scene.json"), cap)[trials["chosen"]]
     for t, e in zip(fitted.teeth, expected.teeth, strict=True):
         np.testing.assert_allclose(t.enamel.sigma_t, e.enamel.sigma_t, rtol=1e-12)
         np.testing.assert_allclose(t.dentin.albedo, e.dentin.albedo, rtol=1e-12)
+        assert t.enamel.g1 == e.enamel.g1
         assert all(np.isclose(table[:, 0], s).any() for s in t.enamel.sigma_t)
-        np.testing.assert_array_equal(t.c, 0.0)
 
 
 def test_fit_workers_in_one_process_and_clear_errors(tmp_path, capsys):

@@ -9,8 +9,11 @@ import pytest
 
 from material_structures.core.teeth.capture import Capture, default_rig
 from material_structures.core.teeth.literature_init import (
+    G_VALUES,
     MODEL_A_T,
+    literature_points,
     literature_start,
+    literature_starts,
     literature_table,
     paired_table_errors,
     scale_invariant_error,
@@ -113,7 +116,7 @@ def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
     found = literature_start(start, cap, N_SIGMA, N_ALBEDO, pixel_stride=1, n_lights=12, spp=8, tile=4,
                              scale_invariant=False,
                              progress=calls.append)
-    assert len(calls) == 3 * N_SIGMA * N_ALBEDO
+    assert sum(calls) == literature_points(N_SIGMA, N_ALBEDO)  # the table, then the refinement's points
     for t in found.teeth:
         for m in (t.enamel, t.dentin):
             np.testing.assert_allclose(m.sigma_t, pts[:, 0], rtol=1e-12)
@@ -122,6 +125,13 @@ def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
             assert (m.g2, m.beta) == (-0.2, 0.8)  # VolumeMaterial's defaults, not the scene's 0.4 / 0.55
         np.testing.assert_array_equal(t.c, 0.0)
         np.testing.assert_array_equal(t.a_t, MODEL_A_T)  # not the scene's 0.6
+    # one start per g, for the fit's trials: the capture's g among them, with the capture's points
+    starts = literature_starts(start, cap, N_SIGMA, N_ALBEDO, pixel_stride=1, n_lights=12, spp=8, tile=4,
+                               scale_invariant=False)
+    assert [s.teeth[0].enamel.g1 for s in starts] == list(G_VALUES)
+    mine = starts[list(G_VALUES).index(g)].teeth[0]
+    np.testing.assert_allclose(mine.enamel.sigma_t, pts[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(mine.dentin.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
 
 
 def test_scale_invariant_search_ignores_the_exposure():
@@ -150,3 +160,5 @@ def test_search_rejects_missing_data_and_bad_settings():
         literature_start(truth, Capture(cams, lights, images, np.zeros((1, 6, 8), bool)))
     with pytest.raises(ValueError, match="spp"):
         literature_start(truth, Capture(cams, lights, images, np.ones((1, 6, 8), bool)), spp=0)
+    with pytest.raises(ValueError, match="refine_keep"):
+        literature_start(truth, Capture(cams, lights, images, np.ones((1, 6, 8), bool)), refine_keep=-1)
