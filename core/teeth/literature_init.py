@@ -131,10 +131,7 @@ def literature_start(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_a
     points, errors, table, gs = _search(scene, capture, n_sigma, n_albedo, pixel_stride, n_lights, seed, spp, tile,
                                         max_depth, scale_invariant, refine_keep, progress)
     best = [points[int(np.argmin(errors[:, c]))] for c in range(3)]
-    sigma = np.array([table[j, 0] for _, j in best])
-    albedo = np.array([table[j, 1] for _, j in best])
-    g = float(np.median([gs[gi] for gi, _ in best]))
-    return _homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), g))
+    return _start(scene, table, best, float(np.median([gs[gi] for gi, _ in best])))
 
 
 def literature_starts(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_albedo: int = 8,
@@ -149,11 +146,16 @@ def literature_starts(scene: TeethScene, capture: Capture, n_sigma: int = 10, n_
     starts = []
     for gi, g in enumerate(gs):
         mine = [k for k, (pg, _) in enumerate(points) if pg == gi]
-        best = [points[mine[int(np.argmin(errors[mine, c]))]] for c in range(3)]
-        sigma = np.array([table[j, 0] for _, j in best])
-        albedo = np.array([table[j, 1] for _, j in best])
-        starts.append(_homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), float(g))))
+        starts.append(_start(scene, table, [points[mine[int(np.argmin(errors[mine, c]))]] for c in range(3)],
+                             float(g)))
     return starts
+
+
+def _start(scene: TeethScene, table: np.ndarray, best: list, g: float) -> TeethScene:
+    """The homogeneous start whose channel c takes table point ``best[c]`` = (g index, table index)."""
+    sigma = np.array([table[j, 0] for _, j in best])
+    albedo = np.array([table[j, 1] for _, j in best])
+    return _homogeneous(scene, VolumeMaterial(sigma, np.minimum(albedo, 0.999), g))
 
 
 def _search(scene, capture, n_sigma, n_albedo, pixel_stride, n_lights, seed, spp, tile, max_depth, scale_invariant,

@@ -34,8 +34,7 @@ def trial_score(log: list[dict]) -> float:
 
 
 def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings,
-               progress: Callable[[dict], None] | None = None,
-               status: Callable[[str], None] | None = None) -> tuple[TeethScene, list[float]]:
+               progress: Callable[[dict], None] | None = None) -> tuple[TeethScene, list[float]]:
     """(the winning trial's result, every trial's score) of ``settings.start_trials``-iteration fits from
     ``starts`` (module docstring). One start, or ``start_trials`` 0: that start, unfitted, and no scores."""
     if not starts:
@@ -44,12 +43,8 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
         return starts[0], []
     trial = replace(settings, iterations=settings.start_trials, textured_iterations=0)
     results, scores = [], []
-    for k, start in enumerate(starts):
-        if status is not None:
-            status(f"trying start {k + 1} of {len(starts)}")
+    for start in starts:
         result, log = fit(start, capture, trial, progress=progress)
         results.append(result)
         scores.append(trial_score(log))
-    if status is not None:
-        status("")
     return results[int(np.argmin(scores))], scores
