@@ -195,19 +195,58 @@ def fit_settings(args: argparse.Namespace) -> FitSettings:
                    held_out_lights=args.held_out_lights, seed=args.seed, free=free, workers=args.workers)
 
 
+def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str):
+    """(start, iterations done): the literature search's start; with ``start_trials``, one start per g, the
+    fit's first iterations from each (``start_trials.best_start``), and the winner's checkpoint, log and
+    scene files moved into ``--out``, where the fit resumes them."""
+    import shutil
+
+    from ..core.json_io import save_json
+    from ..core.teeth.literature_init import literature_points, literature_start, literature_starts
+    from ..core.teeth.start_trials import best_start, trial_dir
+
+    if as_json:
+        _event(progress="init", message="searching the literature table for a start")
+    with _bar(literature_points(), "init", "point", disable=args.no_progress or as_json) as init_bar:
+        if fs.start_trials == 0:
+            return literature_start(scene, cap, progress=init_bar.update), 0
+        starts = literature_starts(scene, cap, progress=init_bar.update)
+    n_trial = min(fs.start_trials, fs.iterations)
+    if as_json:
+        _event(progress="init", message=f"trying {len(starts)} starts, {n_trial} iterations each")
+    work = os.path.join(args.out, "start_trials")
+    shutil.rmtree(work, ignore_errors=True)  # an interrupted fit's trials
+    n_all, done = len(starts) * n_trial, [0]
+    with _bar(n_all, "starts", "it", disable=args.no_progress or as_json) as trial_bar:
+        def trial_progress(entry: dict) -> None:
+            done[0] += 1
+            trial_bar.update(1)
+            if as_json:
+                _event(progress="init", message=f"trying {len(starts)} starts: {done[0]} of {n_all} iterations")
+
+        chosen, scores = best_start(starts, cap, fs, work, progress=trial_progress)
+    if chosen is None:
+        return starts[0], 0
+    won = trial_dir(work, chosen)
+    for name in os.listdir(won):
+        if name != ".fit.lock":
+            os.replace(os.path.join(won, name), os.path.join(args.out, name))
+    shutil.rmtree(work)
+    save_json(trials_path, {"g1": [s.teeth[0].enamel.g1 for s in starts], "trial_loss": scores,
+                            "chosen": chosen, "iterations": n_trial})
+    return starts[chosen], n_trial
+
+
 def run_fit(args: argparse.Namespace) -> int:
     import time
 
-    import numpy as np
-
+    from ..core.folder_lock import FolderLock
     from ..core.json_io import save_json
     from ..core.teeth.capture import Capture
     from ..core.teeth.fit_checkpoint import load_state
     from ..core.teeth.fit_report import held_out_check, plot_loss
-    from ..core.teeth.literature_init import literature_points, literature_start, literature_starts
     from ..core.teeth.optimise import fit, held_out_light_ids
     from ..core.teeth.scene import load_scene
-    from ..core.teeth.start_trials import best_start
     from ..core.teeth.synthetic import perturbed_start
 
     t_start = time.perf_counter()
@@ -231,27 +270,14 @@ def run_fit(args: argparse.Namespace) -> int:
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     os.makedirs(args.out, exist_ok=True)  # before the search and the trials: a bad --out fails at once
     trials_path = os.path.join(args.out, "start_trials.json")
+    resume = args.resume
     if not args.resume:
         if os.path.isfile(trials_path):
             os.remove(trials_path)  # an earlier fit's, in this folder
         if args.init == "literature":
-            n_points = literature_points()
-            if as_json:
-                _event(progress="init", message="searching the literature table for a start")
-            with _bar(n_points, "init", "point", disable=args.no_progress or as_json) as init_bar:
-                if fs.start_trials == 0:
-                    scene = literature_start(scene, cap, progress=init_bar.update)
-                else:
-                    starts = literature_starts(scene, cap, progress=init_bar.update)
-            if fs.start_trials > 0:
-                n_trial = len(starts) * fs.start_trials
-                if as_json:
-                    _event(progress="init", message=f"trying {len(starts)} starts, {fs.start_trials} iterations each")
-                with _bar(n_trial, "starts", "it", disable=args.no_progress or as_json) as trial_bar:
-                    scene, scores = best_start(starts, cap, fs, progress=lambda entry: trial_bar.update(1))
-                save_json(trials_path,
-                          {"g1": [s.teeth[0].enamel.g1 for s in starts], "trial_loss": scores,
-                           "chosen": int(np.argmin(scores)), "iterations": fs.start_trials})
+            with FolderLock(args.out):  # the search and the trials write to --out/start_trials
+                scene, resumed = _literature_start(scene, cap, fs, args, as_json, trials_path)
+            resume = resumed > 0
         elif args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
     total = fs.iterations + fs.textured_iterations
@@ -281,10 +307,10 @@ def run_fit(args: argparse.Namespace) -> int:
         from ..scaleout.teeth import DaskGradient
 
         with dask_client(args.scheduler, args.dask_workers) as client:
-            best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress,
+            best, log = fit(scene, cap, fs, out_dir=args.out, resume=resume, progress=progress,
                             gradient=DaskGradient(client, cap), status=status)
     else:
-        best, log = fit(scene, cap, fs, out_dir=args.out, resume=args.resume, progress=progress, status=status)
+        best, log = fit(scene, cap, fs, out_dir=args.out, resume=resume, progress=progress, status=status)
     if bar is not None:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))

@@ -24,8 +24,8 @@ DEFAULT_FREE = ("*.sigma_t", "*.albedo", "*.g1", "*.g2", "*.beta", "*.a_t", "*.c
 @dataclass
 class FitSettings:
     # ---- schedule
-    # iterations of the trial fit from each literature start (one per phase-function g); the fit goes on
-    # from the best (start_trials.best_start); 0: the search's single best start
+    # the fit's first iterations, run from each literature start (one per phase-function g); the fit goes on
+    # from the best trial, whose iterations count (start_trials.best_start); 0: the search's single best start
     start_trials: int = 30
     iterations: int = 300  # "homogeneous" phase (thesis Sec. 5.7)
     textured_iterations: int = 0  # "textured" phase: a_t becomes a texture_size^2 texture

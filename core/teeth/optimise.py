@@ -137,9 +137,12 @@ def _resumed_guard(saved: dict | None, s: FitSettings) -> DivergenceGuard | None
 def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str | None = None,
         resume: bool = False, progress: Callable | None = None,
         callback: Callable | None = None, gradient: Callable | None = None,
-        status: Callable[[str], None] | None = None) -> tuple[TeethScene, list]:
+        status: Callable[[str], None] | None = None, until: int | None = None) -> tuple[TeethScene, list]:
     """Fit ``scene``'s free parameters to ``capture``; returns (result, log): the best-loss scene, or with
     ``settings.average_tail`` the mean of the last iterates (Polyak-Ruppert averaging).
+
+    ``until``: stop after that many iterations of the first phase, with a checkpoint in ``out_dir``, from
+    which ``resume`` continues exactly as the uninterrupted fit would (a start trial, ``start_trials``).
 
     With ``out_dir``: writes ``checkpoint.json`` every ``checkpoint_every`` iterations, ``loss.json`` (the
     log, the settings and the held-out lights), ``scene_fit.json`` (the result so far: the best-loss scene
@@ -157,12 +160,14 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     if out_dir is not None:
         os.makedirs(out_dir, exist_ok=True)
         with FolderLock(out_dir):
-            return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status)
-    return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status)
+            return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until)
+    return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until)
 
 
-def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status):
+def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until):
     s = settings
+    if until is not None and until < 1:
+        raise ValueError("until must be at least 1 iteration")
     phases = [("homogeneous", s.iterations)]
     if s.textured_iterations > 0:
         phases.append(("textured", s.textured_iterations))
@@ -242,7 +247,8 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         avg_from = tail_start(n_it, s.average_tail) if pi == len(phases) - 1 else n_it
         if not free.any():
             raise ValueError(f"no parameter matches the free patterns {s.free!r}")
-        for it in range(start_it, n_it):
+        stop = n_it if until is None or pi > 0 else min(n_it, until)
+        for it in range(start_it, stop):
             t0 = time.perf_counter()
             rng = np.random.default_rng([s.seed, pi, it])
             light_ids = np.sort(rng.choice(training, n_l, replace=False))
@@ -304,7 +310,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 progress(entry)
             if callback is not None:
                 callback(entry, cur)
-            last = it == n_it - 1
+            last = it == stop - 1
             if out_dir is not None and ((it + 1) % s.checkpoint_every == 0 or last):
                 cur_scene = vector_to_scene(cur, from_optimiser(y, layout), layout)
                 save_json(ckpt, asdict(FitState(phase, it + 1, cur_scene.to_dict(), y.tolist(),
@@ -321,6 +327,8 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 result = best_scene if avg_sum is None else _averaged(cur, avg_sum, avg_count, layout)
                 save_json(os.path.join(out_dir, "scene_fit.json"), result.to_dict())
         cur = vector_to_scene(cur, from_optimiser(y, layout), layout)
+        if stop < n_it:
+            break  # ``until``: the rest continues from the checkpoint
     if avg_sum is not None:
         return _averaged(cur, avg_sum, avg_count, layout), log
     return best_scene, log

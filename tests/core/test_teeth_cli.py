@@ -9,6 +9,7 @@ import pytest
 
 from material_structures.cli import main
 from material_structures.core.teeth.capture import Capture
+from material_structures.core.teeth.fit_settings import FitSettings
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import load_scene
 
@@ -101,9 +102,10 @@ def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
 
 
 def test_fit_starts_from_the_literature_search(tmp_path):
-    """``--init literature`` (the default) runs the table search, one start per phase-function g, a short
-    trial fit from each, and goes on from the trial of lowest loss: with only the dentin coefficients free,
-    the materials stay that start's (table values), and start_trials.json / fit_report.json name it."""
+    """``--init literature`` (the default) runs the table search, one start per phase-function g, the fit's
+    first iterations from each, and goes on from the trial of lowest loss (its iterations count): with only
+    the dentin coefficients free, the materials stay that start's (table values), and start_trials.json /
+    fit_report.json name it; the trials' folder is gone."""
     from material_structures.core.teeth.literature_init import G_VALUES, literature_starts, literature_table
 
     cap_dir = tmp_path / "cap"
@@ -118,7 +120,9 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     trials = json.loads((fit_dir / "start_trials.json").read_text())
     assert trials["g1"] == list(G_VALUES) and len(trials["trial_loss"]) == len(G_VALUES)
     assert trials["chosen"] == int(np.argmin(trials["trial_loss"]))
-    assert json.loads((fit_dir / "fit_report.json").read_text())["start_trials"] == trials
+    report = json.loads((fit_dir / "fit_report.json").read_text())
+    assert report["start_trials"] == trials and trials["iterations"] == 1 and report["iterations"] == 1
+    assert not (fit_dir / "start_trials").exists() and (fit_dir / "checkpoint.json").is_file()
     fitted = load_scene(fit_dir / "scene_fit.json")  # only c is free: the materials are the chosen start's
     expected = literature_starts(load_scene(cap_dir / "scene.json"), cap)[trials["chosen"]]
     for t, e in zip(fitted.teeth, expected.teeth, strict=True):
@@ -203,12 +207,18 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
                  "--resolution", "10"]) == 0
     capsys.readouterr()
     monkeypatch.setenv("MATERIAL_STRUCTURES_PROGRESS", "json")
-    assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "fit"), "--iterations", "2"]) == 0
+    n = FitSettings().start_trials + 2
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "fit"), "--iterations", str(n)]) == 0
     out, err = capsys.readouterr()
     events = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
     fits = [e for e in events if e["progress"] == "fit"]
-    assert [e["iteration"] for e in fits] == [1, 2] and all(e["iterations"] == 2 for e in fits)
+    # the trials are the fit's first start_trials iterations: the fit goes on from there
+    assert [e["iteration"] for e in fits] == [n - 1, n] and all(e["iterations"] == n for e in fits)
     assert all(np.isfinite(e["loss"]) for e in fits)
     assert events[0] == {"progress": "init", "message": "searching the literature table for a start"}
+    trials = [e["message"] for e in events if e["progress"] == "init"][1:]
+    n_all = 3 * FitSettings().start_trials
+    assert trials[0] == f"trying 3 starts, {FitSettings().start_trials} iterations each"
+    assert trials[1:] == [f"trying 3 starts: {i} of {n_all} iterations" for i in range(1, n_all + 1)]
     assert any(e["progress"] == "status" and "held-out" in e["message"] for e in events)
     assert "it/s" not in err and "|" not in err  # no tqdm bars
