@@ -216,24 +216,31 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
         _event(progress="init", message=f"trying {len(starts)} starts, {n_trial} iterations each")
     work = os.path.join(args.out, "start_trials")
     shutil.rmtree(work, ignore_errors=True)  # an interrupted fit's trials
-    n_all, done = len(starts) * n_trial, [0]
-    with _bar(n_all, "starts", "it", disable=args.no_progress or as_json) as trial_bar:
+    n_all, done = [len(starts) * n_trial], [0]
+    with _bar(n_all[0], "starts", "it", disable=args.no_progress or as_json) as trial_bar:
         def trial_progress(entry: dict) -> None:
             done[0] += 1
             trial_bar.update(1)
             if as_json:
-                _event(progress="init", message=f"trying {len(starts)} starts: {done[0]} of {n_all} iterations")
+                _event(progress="init", message=f"trying {len(starts)} starts: {done[0]} of {n_all[0]} iterations")
 
-        chosen, scores = best_start(starts, cap, fs, work, progress=trial_progress)
-    if chosen is None:
+        def trial_dropped(n: int) -> None:  # a start stopped at half its trial: fewer iterations to run
+            n_all[0] -= n
+            if hasattr(trial_bar, "total"):
+                trial_bar.total = n_all[0]
+                trial_bar.refresh()
+
+        trials = best_start(starts, cap, fs, work, progress=trial_progress, dropped=trial_dropped)
+    if trials is None:
         return starts[0], 0
+    chosen = trials.chosen
     won = trial_dir(work, chosen)
     for name in os.listdir(won):
         if name != ".fit.lock":
             os.replace(os.path.join(won, name), os.path.join(args.out, name))
     shutil.rmtree(work)
-    save_json(trials_path, {"g1": [s.teeth[0].enamel.g1 for s in starts], "trial_loss": scores,
-                            "chosen": chosen, "iterations": n_trial})
+    save_json(trials_path, {"g1": [s.teeth[0].enamel.g1 for s in starts], "trial_loss": trials.scores,
+                            "iterations": trials.iterations, "chosen": chosen})
     return starts[chosen], n_trial
 
 
