@@ -12,8 +12,9 @@ iteration i of every trial draws the same lights and the same path seeds; the tr
 last half are therefore paired, and their mean compares the starts (common random numbers; at 30
 iterations the trial losses of g 0.3 and 0.6 on the acceptance capture were 2-4x lower than g 0.9's).
 A start whose trial loss over the first half (iterations 7-14 of 30) is at least ``DROP_RATIO`` times the
-best start's stops there: the rest of its trial could not change the choice on the acceptance capture, and
-g 0.9's paths are the longest (about 6 s an iteration on 2 cores, against 3.5 s for g 0.3 and 0.6).
+best start's stops there. On the acceptance capture (seed 0) g 0.3's and g 0.9's first halves scored 4.7x
+and 5.2x g 0.6's, and their whole trials 2.1x and 3.3x: the choice was the same, and g 0.9's iterations
+are the slowest (a median 6.6 s on 2 cores against 3.5-3.8 s: its paths are longer).
 Each trial stops with a checkpoint; the fit resumes the winner's, so it is the fit from the winning start,
 and its trial iterations count towards ``FitSettings.iterations``.
 """
