@@ -308,6 +308,9 @@ def run_fit(args: argparse.Namespace) -> int:
     done[0] = resumed
     if bar is not None and resumed:
         bar.update(resumed)
+    if as_json and resumed:  # the iterations done before (the winning start's trial, or an interrupted fit)
+        last = load_state(os.path.join(args.out, "checkpoint.json")).log[-1]
+        _event(progress="fit", iteration=resumed, iterations=total, loss=last["loss"], phase=last["phase"])
     os.makedirs(args.out, exist_ok=True)
     if on_dask:
         from ..scaleout.cluster import dask_client

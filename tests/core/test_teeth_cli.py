@@ -212,8 +212,8 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
     out, err = capsys.readouterr()
     events = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
     fits = [e for e in events if e["progress"] == "fit"]
-    # the trials are the fit's first start_trials iterations: the fit goes on from there
-    assert [e["iteration"] for e in fits] == [n - 1, n] and all(e["iterations"] == n for e in fits)
+    # the trials are the fit's first start_trials iterations: the fit says so, and goes on from there
+    assert [e["iteration"] for e in fits] == [n - 2, n - 1, n] and all(e["iterations"] == n for e in fits)
     assert all(np.isfinite(e["loss"]) for e in fits)
     assert events[0] == {"progress": "init", "message": "searching the literature table for a start"}
     trials = [e["message"] for e in events if e["progress"] == "init"][1:]
