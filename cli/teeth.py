@@ -196,9 +196,9 @@ def fit_settings(args: argparse.Namespace) -> FitSettings:
 
 
 def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str):
-    """(start, iterations done): the literature search's start; with ``start_trials``, one start per g, the
-    fit's first iterations from each (``start_trials.best_start``), and the winner's checkpoint, log and
-    scene files moved into ``--out``, where the fit resumes them."""
+    """(start, whether the fit resumes): the literature search's start; with ``start_trials``, one start per
+    g, the fit's first iterations from each (``start_trials.best_start``), and the winner's checkpoint, log
+    and scene files moved into ``--out``, where the fit resumes them."""
     import shutil
 
     from ..core.json_io import save_json
@@ -209,7 +209,7 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
         _event(progress="init", message="searching the literature table for a start")
     with _bar(literature_points(), "init", "point", disable=args.no_progress or as_json) as init_bar:
         if fs.start_trials == 0:
-            return literature_start(scene, cap, progress=init_bar.update), 0
+            return literature_start(scene, cap, progress=init_bar.update), False
         starts = literature_starts(scene, cap, progress=init_bar.update)
     n_trial = min(fs.start_trials, fs.iterations)
     if as_json:
@@ -232,7 +232,7 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
 
         trials = best_start(starts, cap, fs, work, progress=trial_progress, dropped=trial_dropped)
     if trials is None:
-        return starts[0], 0
+        return starts[0], False
     chosen = trials.chosen
     won = trial_dir(work, chosen)
     for name in os.listdir(won):
@@ -241,7 +241,7 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
     shutil.rmtree(work)
     save_json(trials_path, {"g1": [s.teeth[0].enamel.g1 for s in starts], "trial_loss": trials.scores,
                             "iterations": trials.iterations, "chosen": chosen})
-    return starts[chosen], n_trial
+    return starts[chosen], True
 
 
 def run_fit(args: argparse.Namespace) -> int:
@@ -268,12 +268,12 @@ def run_fit(args: argparse.Namespace) -> int:
         raise ValueError("--workers is for fits in this process; on Dask, the cluster's workers render")
     if args.scheduler is not None and args.dask_workers is not None:
         raise ValueError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
-    resumed = 0  # iterations done before, when resuming
+    ckpt = os.path.join(args.out, "checkpoint.json")
+    before: list = []  # the log of the iterations done before this run (resumed)
     if args.resume:
-        ckpt = os.path.join(args.out, "checkpoint.json")
         if not os.path.isfile(ckpt):
             raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r}")
-        resumed = len(load_state(ckpt).log)  # a malformed or foreign checkpoint is a one-line error here
+        before = load_state(ckpt).log  # a malformed or foreign checkpoint is a one-line error here
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     os.makedirs(args.out, exist_ok=True)  # before the search and the trials: a bad --out fails at once
     trials_path = os.path.join(args.out, "start_trials.json")
@@ -283,8 +283,9 @@ def run_fit(args: argparse.Namespace) -> int:
             os.remove(trials_path)  # an earlier fit's, in this folder
         if args.init == "literature":
             with FolderLock(args.out):  # the search and the trials write to --out/start_trials
-                scene, resumed = _literature_start(scene, cap, fs, args, as_json, trials_path)
-            resume = resumed > 0
+                scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path)
+            if resume:  # the winning start's trial, moved into --out
+                before = load_state(ckpt).log
         elif args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
     total = fs.iterations + fs.textured_iterations
@@ -305,12 +306,12 @@ def run_fit(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.set_description_str(f"fit: {text}" if text else "fit")
 
-    done[0] = resumed
-    if bar is not None and resumed:
-        bar.update(resumed)
-    if as_json and resumed:  # the iterations done before (the winning start's trial, or an interrupted fit)
-        last = load_state(os.path.join(args.out, "checkpoint.json")).log[-1]
-        _event(progress="fit", iteration=resumed, iterations=total, loss=last["loss"], phase=last["phase"])
+    done[0] = len(before)
+    if bar is not None and before:
+        bar.update(len(before))
+    if as_json and before:  # the iterations done before (the winning start's trial, or an interrupted fit)
+        _event(progress="fit", iteration=len(before), iterations=total, loss=before[-1]["loss"],
+               phase=before[-1]["phase"])
     os.makedirs(args.out, exist_ok=True)
     if on_dask:
         from ..scaleout.cluster import dask_client
