@@ -195,29 +195,53 @@ def fit_settings(args: argparse.Namespace) -> FitSettings:
                    held_out_lights=args.held_out_lights, seed=args.seed, free=free, workers=args.workers)
 
 
-def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str):
+TRIALS_DIR = "start_trials"  # in --out: the start trials' folders and the starts they run from, until one wins
+
+
+def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str,
+                      resume_trials: bool = False):
     """(start, whether the fit resumes): the literature search's start; with ``start_trials``, one start per
     g, the fit's first iterations from each (``start_trials.best_start``), and the winner's checkpoint, log
-    and scene files moved into ``--out``, where the fit resumes them."""
+    and scene files moved into ``--out``, where the fit resumes them. ``resume_trials``: an interrupted fit's
+    trials go on from their checkpoints, from the starts its search saved (no search)."""
     import shutil
 
     from ..core.json_io import save_json
+    from ..core.teeth.fit_checkpoint import load_state
     from ..core.teeth.literature_init import literature_points, literature_start, literature_starts
+    from ..core.teeth.scene import TeethScene
     from ..core.teeth.start_trials import best_start, trial_dir
 
-    if as_json:
-        _event(progress="init", message="searching the literature table for a start")
-    with _bar(literature_points(), "init", "point", disable=args.no_progress or as_json) as init_bar:
-        if fs.start_trials == 0:
-            return literature_start(scene, cap, progress=init_bar.update), False
-        starts = literature_starts(scene, cap, progress=init_bar.update)
+    work = os.path.join(args.out, TRIALS_DIR)
+    starts_path = os.path.join(work, "starts.json")
+    if resume_trials:
+        with open(starts_path) as f:
+            starts = [TeethScene.from_dict(d) for d in json.load(f)["starts"]]
+    else:
+        if as_json:
+            _event(progress="init", message="searching the literature table for a start")
+        with _bar(literature_points(), "init", "point", disable=args.no_progress or as_json) as init_bar:
+            if fs.start_trials == 0:
+                return literature_start(scene, cap, progress=init_bar.update), False
+            starts = literature_starts(scene, cap, progress=init_bar.update)
+        shutil.rmtree(work, ignore_errors=True)  # an interrupted fit's trials
+        os.makedirs(work)
+        # the trials run from the starts as saved (a resumed trial starts from them read back, to the bit)
+        save_json(starts_path, {"starts": [s.to_dict() for s in starts]})
+        with open(starts_path) as f:
+            starts = [TeethScene.from_dict(d) for d in json.load(f)["starts"]]
     n_trial = min(fs.start_trials, fs.iterations)
     if as_json:
         _event(progress="init", message=f"trying {len(starts)} starts, {n_trial} iterations each")
-    work = os.path.join(args.out, "start_trials")
-    shutil.rmtree(work, ignore_errors=True)  # an interrupted fit's trials
-    n_all, done = [len(starts) * n_trial], [0]
+    ran_before = 0  # the iterations an interrupted fit's trials had run
+    for k in range(len(starts)):
+        ckpt = os.path.join(trial_dir(work, k), "checkpoint.json")
+        if os.path.isfile(ckpt):
+            ran_before += len(load_state(ckpt).log)
+    n_all, done = [len(starts) * n_trial], [ran_before]
     with _bar(n_all[0], "starts", "it", disable=args.no_progress or as_json) as trial_bar:
+        trial_bar.update(ran_before)
+
         def trial_progress(entry: dict) -> None:
             done[0] += 1
             trial_bar.update(1)
@@ -232,16 +256,28 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
 
         trials = best_start(starts, cap, fs, work, progress=trial_progress, dropped=trial_dropped)
     if trials is None:
+        shutil.rmtree(work)
         return starts[0], False
-    chosen = trials.chosen
-    won = trial_dir(work, chosen)
-    for name in os.listdir(won):
-        if name != ".fit.lock":
-            os.replace(os.path.join(won, name), os.path.join(args.out, name))
-    shutil.rmtree(work)
     save_json(trials_path, {"g1": [s.teeth[0].enamel.g1 for s in starts], "trial_loss": trials.scores,
-                            "iterations": trials.iterations, "chosen": chosen})
-    return starts[chosen], True
+                            "iterations": trials.iterations, "chosen": trials.chosen})
+    _adopt_trial(work, trials.chosen, args.out)
+    return starts[trials.chosen], True
+
+
+def _adopt_trial(work: str, chosen: int, out: str) -> None:
+    """Move the winning trial's files into ``out`` (its checkpoint last: once it is there, so is the rest)
+    and remove the trials' folder. Run again after an interruption, it finishes the move."""
+    import shutil
+
+    from ..core.teeth.start_trials import trial_dir
+
+    won = trial_dir(work, chosen)
+    names = [n for n in os.listdir(won) if n != ".fit.lock" and n != "checkpoint.json" and ".tmp" not in n] \
+        if os.path.isdir(won) else []
+    for name in [*names, "checkpoint.json"]:
+        if os.path.exists(os.path.join(won, name)):
+            os.replace(os.path.join(won, name), os.path.join(out, name))
+    shutil.rmtree(work)
 
 
 def run_fit(args: argparse.Namespace) -> int:
@@ -269,25 +305,41 @@ def run_fit(args: argparse.Namespace) -> int:
     if args.scheduler is not None and args.dask_workers is not None:
         raise ValueError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
     ckpt = os.path.join(args.out, "checkpoint.json")
+    trials_path = os.path.join(args.out, "start_trials.json")
+    trials_work = os.path.join(args.out, TRIALS_DIR)
     before: list = []  # the log of the iterations done before this run (resumed)
-    if args.resume:
+    # --resume of a fit stopped during its start trials (the search's starts were saved), or while the
+    # winner's files moved into --out (the trials had ended: start_trials.json is written before the move)
+    stopped_in_trials = args.resume and args.init == "literature" and os.path.isdir(trials_work) and (
+        os.path.isfile(trials_path) or os.path.isfile(os.path.join(trials_work, "starts.json")))
+    if args.resume and not stopped_in_trials:
         if not os.path.isfile(ckpt):
-            raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r}")
+            raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r} (the fit stopped before its "
+                                    "first one: run it again without --resume)")
         before = load_state(ckpt).log  # a malformed or foreign checkpoint is a one-line error here
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     os.makedirs(args.out, exist_ok=True)  # before the search and the trials: a bad --out fails at once
-    trials_path = os.path.join(args.out, "start_trials.json")
     resume = args.resume
-    if not args.resume:
-        if os.path.isfile(trials_path):
-            os.remove(trials_path)  # an earlier fit's, in this folder
-        if args.init == "literature":
-            with FolderLock(args.out):  # the search and the trials write to --out/start_trials
+    if stopped_in_trials:
+        with FolderLock(args.out):
+            if os.path.isfile(trials_path):
+                with open(trials_path) as f:
+                    _adopt_trial(trials_work, int(json.load(f)["chosen"]), args.out)
+            else:
+                scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path, resume_trials=True)
+        if resume:
+            before = load_state(ckpt).log
+    elif not args.resume:
+        with FolderLock(args.out):  # the search and the trials write to --out/start_trials
+            for earlier in (trials_path, ckpt):  # an earlier fit's, in this folder: this fit replaces it
+                if os.path.isfile(earlier):
+                    os.remove(earlier)
+            if args.init == "literature":
                 scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path)
-            if resume:  # the winning start's trial, moved into --out
-                before = load_state(ckpt).log
-        elif args.init == "perturbed":
+        if args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
+        elif resume:  # the winning start's trial, moved into --out
+            before = load_state(ckpt).log
     total = fs.iterations + fs.textured_iterations
     bar = None if args.no_progress or as_json else _bar(total, "fit", "it")
     done = [0]

@@ -58,7 +58,9 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
     """The trials (module docstring) of the fit's first ``settings.start_trials`` iterations (at most
     ``settings.iterations``) from each of ``starts``: each start's first half, then the rest for those
     under ``DROP_RATIO`` times the best (positive) first-half score. Trial k leaves its checkpoint, loss.json and
-    scene files in ``trial_dir(work_dir, k)``, from which ``fit(..., resume=True)`` goes on.
+    scene files in ``trial_dir(work_dir, k)``, from which ``fit(..., resume=True)`` goes on; a trial that
+finds a checkpoint there (an interrupted fit's trials) goes on from it, so that trials run again after an
+interruption end as the uninterrupted ones would.
     ``progress(entry)`` after every trial iteration; ``dropped(n)`` with the iterations a dropped start
     will not run. One start, or ``start_trials`` 0: None, nothing run."""
     if not starts:
@@ -67,11 +69,18 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
         return None
     n = min(settings.start_trials, settings.iterations)
     half = n // 2 if n >= 2 else n
-    logs = [fit(start, capture, settings, out_dir=trial_dir(work_dir, k), progress=progress, until=half)[1]
-            for k, start in enumerate(starts)]
-    first = [trial_score(log) for log in logs]
+
+    def run(k: int, until: int) -> list[dict]:
+        # a trial with a checkpoint (an interrupted fit's) goes on from it: the same iterations, to the bit
+        folder = trial_dir(work_dir, k)
+        resume = os.path.isfile(os.path.join(folder, "checkpoint.json"))
+        return fit(starts[k], capture, settings, out_dir=folder, resume=resume, progress=progress, until=until)[1]
+
+    logs = [run(k, half) for k in range(len(starts))]
+    # over the first half only: a resumed trial may have run past it before the interruption
+    first = [trial_score(log[:half]) for log in logs]
     lead = int(np.argmin(first))
-    for k, start in enumerate(starts):
+    for k in range(len(starts)):
         if half == n:
             break
         # a ratio of scores means something only where they are positive (the paired loss estimate of a
@@ -80,8 +89,7 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
             if dropped is not None:
                 dropped(n - half)
             continue
-        logs[k] = fit(start, capture, settings, out_dir=trial_dir(work_dir, k), resume=True, progress=progress,
-                      until=n)[1]
+        logs[k] = run(k, n)
     runs = [len(log) for log in logs]
     scores = [trial_score(log) for log in logs]
     chosen = min((k for k in range(len(starts)) if runs[k] == n), key=lambda k: scores[k])

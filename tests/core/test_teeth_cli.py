@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -224,3 +225,54 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
     assert trials[-1] == f"trying 3 starts: {ran} of {ran} iterations"
     assert any(e["progress"] == "status" and "held-out" in e["message"] for e in events)
     assert "it/s" not in err and "|" not in err  # no tqdm bars
+
+
+# trial iterations before Ctrl-C: in the second start's first half; in the first start's second half (half 15); 0:
+# after the trials, while the winner's files move into --out
+@pytest.mark.parametrize("stop_after", [22, 47, 0])
+def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(tmp_path, monkeypatch, stop_after):
+    """Ctrl-C during the start trials, then ``--resume``: the trials go on from their checkpoints (no second
+    search) and the fit ends with the uninterrupted fit's losses and result, to the bit."""
+    from material_structures.core.teeth import literature_init, start_trials
+
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "1", "--spp", "1", "--spp-background", "0",
+                 "--resolution", "10"]) == 0
+    n = FitSettings().start_trials + 2
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(whole), "--iterations", str(n), "--no-progress"]) == 0
+
+    real_fit, ran = start_trials.fit, [0]
+
+    def fit_stopped_after(*a, **kw):
+        def progress(entry):
+            kw_progress(entry)
+            ran[0] += 1
+            if ran[0] == stop_after:
+                raise KeyboardInterrupt
+        kw_progress = kw.pop("progress")
+        return real_fit(*a, progress=progress, **kw)
+
+    monkeypatch.setattr(start_trials, "fit", fit_stopped_after)
+    if stop_after == 0:
+        real_replace = os.replace
+
+        def replace_then_stop(src, dst):
+            real_replace(src, dst)
+            if "start_trials" in str(src) and str(src).endswith("loss.json"):
+                raise KeyboardInterrupt
+
+        monkeypatch.setattr(os, "replace", replace_then_stop)
+    fit_cmd = ["teeth", "fit", str(cap_dir), "--out", str(cut), "--iterations", str(n), "--no-progress"]
+    assert main(fit_cmd) == 130
+    monkeypatch.undo()  # the real fit and os.replace again
+    assert (cut / "start_trials" / "starts.json").is_file() and not (cut / "checkpoint.json").exists()
+    assert (cut / "start_trials.json").exists() == (stop_after == 0)
+    monkeypatch.setattr(literature_init, "literature_starts", lambda *a, **k: pytest.fail("searched again"))
+    assert main(fit_cmd + ["--resume"]) == 0
+    assert not (cut / "start_trials").exists()
+    for name in ("start_trials.json", "scene_fit.json"):
+        assert json.loads((cut / name).read_text()) == json.loads((whole / name).read_text()), name
+    losses = [[e["loss"] for e in json.loads((d / "loss.json").read_text())["log"]] for d in (whole, cut)]
+    assert len(losses[0]) == n and losses[1] == losses[0]
