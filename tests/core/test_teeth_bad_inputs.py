@@ -222,14 +222,17 @@ def test_sigterm_stops_a_dask_teeth_fit_with_its_workers_and_it_resumes(capture_
     from ._interrupt import interrupt_when
 
     out = tmp_path / "fit"
+    # the first checkpoint comes at iteration 5; a tiny capture's iterations are fast, so that before the
+    # signal lands the fit may run a few more (with 8 in all it had sometimes ended: 3 failures in 10 runs)
+    n = 40
     argv = [sys.executable, "-m", "material_structures", "teeth", "fit", str(capture_dir), "--out", str(out),
-            "--init", "scene", "--iterations", "8", "--held-out-lights", "0", "--dask-workers", "1",
+            "--init", "scene", "--iterations", str(n), "--held-out-lights", "0", "--dask-workers", "1",
             "--no-progress"]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ckpt = out / "checkpoint.json"
     interrupt_when(proc, ckpt.exists, 240)
     done = len(json.loads(ckpt.read_text())["log"])
-    assert 5 <= done < 8
+    assert 5 <= done < n
     r = subprocess.run(argv + ["--resume"], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert len(json.loads((out / "loss.json").read_text())["log"]) == 8
+    assert len(json.loads((out / "loss.json").read_text())["log"]) == n
