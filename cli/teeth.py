@@ -12,6 +12,7 @@ import argparse
 import json
 import os
 
+from ..core.teeth.fit_checkpoint import TRIALS_DIR
 from ..core.teeth.fit_settings import FitSettings
 from .checks import at_least, between, positive_float, refuse_output_over_inputs
 
@@ -193,9 +194,6 @@ def fit_settings(args: argparse.Namespace) -> FitSettings:
     free = tuple(p.strip() for p in args.free.split(",") if p.strip()) if args.free else FIT_DEFAULTS.free
     return replace(FIT_DEFAULTS, iterations=args.iterations, textured_iterations=args.textured_iterations,
                    held_out_lights=args.held_out_lights, seed=args.seed, free=free, workers=args.workers)
-
-
-TRIALS_DIR = "start_trials"  # in --out: the start trials' folders and the starts they run from, until one wins
 
 
 def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str,

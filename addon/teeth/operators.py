@@ -8,12 +8,13 @@ import bpy
 
 from ...core.teeth.anatomy import SPECS as ANATOMY_SPECS
 from ...core.teeth.anatomy import make_anatomical_tooth
+from ...core.teeth.fit_checkpoint import stopped_fit
 from ..common import AddGroupNode, CancelBackgroundJob, FilePicker, end_modal_progress
 from . import fit_job
 from .fit_job import FitJob, current_job, job_running, set_current_job, usable_cores
 from .geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
 from .materials import GROUP_NAMES, MARKER, ensure_group, new_teeth_material
-from .properties import CHECK_IMAGE_NAME, owner
+from .properties import CHECK_IMAGE_NAME, fit_out_dir, owner
 from .scene_build import (
     apply_fit,
     build_teeth_scene,
@@ -248,8 +249,18 @@ class MS_OT_teeth_fit(bpy.types.Operator):
     bl_label = "Fit Teeth to Capture"
     bl_options = {"REGISTER", "UNDO"}
 
+    resume: bpy.props.BoolProperty(name="Resume", default=False, options={"SKIP_SAVE"},
+                                   description="Continue the fit that stopped in the output folder")
+
     _timer = None
     _job = None  # the job this (modal) operator watches
+
+    @classmethod
+    def description(cls, context, properties):
+        if properties.resume:
+            return ("Continue the fit that stopped in the output folder (cancelled, or Blender closed) from where "
+                    "it stopped, to the result it would have reached; then apply it")
+        return cls.__doc__
 
     @classmethod
     def poll(cls, context):
@@ -261,12 +272,15 @@ class MS_OT_teeth_fit(bpy.types.Operator):
     def _start(self, context):
         fs = context.scene.ms_teeth_fit
         capture = bpy.path.abspath(fs.capture_dir)
-        out = bpy.path.abspath(fs.out_dir) if fs.out_dir else os.path.join(capture, "fit")
+        out = fit_out_dir(fs)
         if job_running():
             self.report({"ERROR"}, "A teeth fit is already running")
             return None
         if not os.path.isfile(os.path.join(capture, "capture.json")):
             self.report({"ERROR"}, f"no capture.json in {capture!r}")
+            return None
+        if self.resume and not stopped_fit(out):
+            self.report({"ERROR"}, f"no stopped fit to resume in {out!r}")
             return None
         # the fit applies to the teeth mapped to the capture's: refuse now rather than after an hour's fit
         try:
@@ -280,7 +294,8 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             return None
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)
-            job = FitJob(capture, out, fs.iterations, fs.init.lower(), workers=usable_cores()).start()
+            job = FitJob(capture, out, fs.iterations, fs.init.lower(), extra=["--resume"] if self.resume else None,
+                         workers=usable_cores()).start()
         except (FileNotFoundError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return None

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import bpy
 
+from ...core.teeth.fit_checkpoint import stopped_fit
 from ..common import SidebarPanel
-from .properties import CHECK_IMAGE_NAME, owner
+from .properties import CHECK_IMAGE_NAME, fit_out_dir, owner
 
 
 class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
@@ -56,7 +57,10 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
             box.prop(fs, "progress", slider=True)
             box.operator("material_structures.teeth_fit_cancel", icon="CANCEL")
         else:
-            box.operator("material_structures.teeth_fit", icon="PLAY")
+            row = box.row(align=True)
+            row.operator("material_structures.teeth_fit", icon="PLAY")
+            if fs.capture_dir and stopped_fit(fit_out_dir(fs)):
+                row.operator("material_structures.teeth_fit", text="Resume", icon="FF").resume = True
             box.operator("material_structures.teeth_apply_fit_file", icon="FILE_TICK")
         if fs.status:
             box.label(text=fs.status)

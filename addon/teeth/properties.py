@@ -9,6 +9,8 @@ moves the extreme dentin points by 1 mm, see core.teeth.dentin_blend_shapes.cano
 
 from __future__ import annotations
 
+import os
+
 import bpy
 
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
@@ -126,6 +128,11 @@ def _capture_dir_changed(self, _context) -> None:
     except (OSError, ValueError, KeyError, TypeError):
         return
     fill_tooth_map(self.id_data, names)
+
+
+def fit_out_dir(fs) -> str:
+    """The fit's output folder: the panel's Output, else the capture folder's ``fit``."""
+    return bpy.path.abspath(fs.out_dir) if fs.out_dir else os.path.join(bpy.path.abspath(fs.capture_dir), "fit")
 
 
 class MS_TeethFitSettings(bpy.types.PropertyGroup):

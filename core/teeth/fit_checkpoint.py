@@ -7,7 +7,11 @@ iterates are part of the state)."""
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field, fields
+
+# in a fit's output folder: the start trials (one folder per start, and the starts they run from) until one wins
+TRIALS_DIR = "start_trials"
 
 
 @dataclass
@@ -58,3 +62,19 @@ def check_identity(path: str, saved: dict, now: dict) -> None:
                 "free": "the free parameters", "seed": "the seed", "held_out_lights": "the held-out lights"}
         raise ValueError(f"{path!r} was made for another fit ({', '.join(what.get(k, k) for k in differ)} "
                          "differ); resume with the fit's own capture and settings, or start a new fit")
+
+
+def stopped_fit(out_dir: str) -> bool:
+    """Whether ``out_dir`` holds a fit that stopped before its end (cancelled, killed, the machine went down),
+    which ``teeth fit --resume`` continues: start trials under way, or a checkpoint newer than the report a
+    finished fit writes last (``fit_report.json``). Reads no file, so a panel can ask on every redraw."""
+    if os.path.isfile(os.path.join(out_dir, TRIALS_DIR, "starts.json")):
+        return True
+    try:
+        saved = os.path.getmtime(os.path.join(out_dir, "checkpoint.json"))
+    except OSError:
+        return False
+    try:
+        return os.path.getmtime(os.path.join(out_dir, "fit_report.json")) < saved
+    except OSError:
+        return True

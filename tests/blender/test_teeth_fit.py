@@ -191,3 +191,48 @@ def test_modal_fit_reports_progress_in_status_bar(addon_module, capture_dir, tmp
     assert rec.status[-1] is None and rec.ended and rec.timer_removed  # status bar restored
     assert max(rec.progress) == 1000
     assert enamel.ms_tooth.has_fit and "done" in bpy.context.scene.ms_teeth_fit.status
+
+
+def test_a_cancelled_fit_resumes_from_the_panel_to_the_uninterrupted_fit(addon_module, capture_dir, tmp_path):
+    """Cancel after the first checkpoint; the panel then offers Resume (the output folder holds a stopped fit),
+    which ends with the uninterrupted fit's losses and result, applied; with no stopped fit, Resume refuses in
+    one line."""
+    import json
+
+    from material_structures.addon.teeth.fit_job import FitJob
+    from material_structures.core.teeth.fit_checkpoint import stopped_fit
+    from material_structures.showcase import ui_panels as ui
+
+    import_capture_scene(capture_dir)
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir, fs.init, fs.iterations = capture_dir, "SCENE", 40  # 40: the cancel lands long before the end
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    fs.out_dir = str(whole)
+    assert bpy.ops.material_structures.teeth_fit() == {"FINISHED"}
+    assert not stopped_fit(str(whole))
+    with pytest.raises(RuntimeError, match="no stopped fit to resume"):
+        bpy.ops.material_structures.teeth_fit(resume=True)
+
+    job = FitJob(capture_dir, str(cut), iterations=40, init="scene").start()
+    deadline = time.time() + 120
+    while not (cut / "checkpoint.json").exists() and job.poll() == "RUNNING" and time.time() < deadline:
+        time.sleep(0.05)
+    job.cancel()
+    assert job.poll() == "CANCELLED"
+    done = len(json.loads((cut / "checkpoint.json").read_text())["log"])
+    assert 5 <= done < 40 and stopped_fit(str(cut))
+
+    def resume_buttons() -> list:
+        panel = next(c for c in ui.panel_classes(addon_module) if c.bl_idname == "VIEW3D_PT_material_structures_teeth")
+        return [it for it in ui.record_panel(panel, bpy.context).items()
+                if it.identifier == "material_structures.teeth_fit" and it.op_props.get("resume")]
+
+    assert resume_buttons() == []  # the output folder is still the finished fit's
+    fs.out_dir = str(cut)
+    assert [it.text for it in resume_buttons()] == ["Resume"]
+    assert bpy.ops.material_structures.teeth_fit(resume=True) == {"FINISHED"}
+    assert not stopped_fit(str(cut)) and resume_buttons() == []
+    logs = [json.loads((d / "loss.json").read_text())["log"] for d in (whole, cut)]
+    assert [e["loss"] for e in logs[1]] == [e["loss"] for e in logs[0]] and len(logs[0]) == 40
+    assert json.loads((cut / "scene_fit.json").read_text()) == json.loads((whole / "scene_fit.json").read_text())
+    assert fs.last_result.startswith("done: applied")
