@@ -234,6 +234,7 @@ def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(tmp_path, m
     """Ctrl-C during the start trials, then ``--resume``: the trials go on from their checkpoints (no second
     search) and the fit ends with the uninterrupted fit's losses and result, to the bit."""
     from material_structures.core.teeth import literature_init, start_trials
+    from material_structures.core.teeth.fit_checkpoint import stopped_fit
 
     cap_dir = tmp_path / "cap"
     assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
@@ -269,9 +270,10 @@ def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(tmp_path, m
     monkeypatch.undo()  # the real fit and os.replace again
     assert (cut / "start_trials" / "starts.json").is_file() and not (cut / "checkpoint.json").exists()
     assert (cut / "start_trials.json").exists() == (stop_after == 0)
+    assert stopped_fit(str(cut)) and not stopped_fit(str(whole))  # what the Blender panel's Resume asks
     monkeypatch.setattr(literature_init, "literature_starts", lambda *a, **k: pytest.fail("searched again"))
     assert main(fit_cmd + ["--resume"]) == 0
-    assert not (cut / "start_trials").exists()
+    assert not (cut / "start_trials").exists() and not stopped_fit(str(cut))
     for name in ("start_trials.json", "scene_fit.json"):
         assert json.loads((cut / name).read_text()) == json.loads((whole / name).read_text()), name
     losses = [[e["loss"] for e in json.loads((d / "loss.json").read_text())["log"]] for d in (whole, cut)]
