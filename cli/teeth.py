@@ -212,9 +212,16 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
 
     work = os.path.join(args.out, TRIALS_DIR)
     starts_path = os.path.join(work, "starts.json")
+    def saved_starts() -> list[TeethScene]:
+        try:
+            with open(starts_path) as f:
+                return [TeethScene.from_dict(d) for d in json.load(f)["starts"]]
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{starts_path}: not the starts of a fit's trials ({exc}); run the fit again "
+                             "without --resume") from None
+
     if resume_trials:
-        with open(starts_path) as f:
-            starts = [TeethScene.from_dict(d) for d in json.load(f)["starts"]]
+        starts = saved_starts()
     else:
         if as_json:
             _event(progress="init", message="searching the literature table for a start")
@@ -226,8 +233,7 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
         os.makedirs(work)
         # the trials run from the starts as saved (a resumed trial starts from them read back, to the bit)
         save_json(starts_path, {"starts": [s.to_dict() for s in starts]})
-        with open(starts_path) as f:
-            starts = [TeethScene.from_dict(d) for d in json.load(f)["starts"]]
+        starts = saved_starts()
     n_trial = min(fs.start_trials, fs.iterations)
     if as_json:
         _event(progress="init", message=f"trying {len(starts)} starts, {n_trial} iterations each")

@@ -197,6 +197,12 @@ def test_resume_from_a_missing_or_broken_checkpoint_is_one_line(capture_dir, tmp
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "checkpoint.json" in err and "not a fit checkpoint" in err and err.count("\n") == 1, err
+    (out / "checkpoint.json").unlink()
+    (out / "start_trials").mkdir()  # a fit stopped during its start trials, its saved starts damaged
+    (out / "start_trials" / "starts.json").write_text('{"starts": [{"teeth": 1}]}')
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "starts.json: not the starts of a fit's trials" in err and err.count("\n") == 1, err
 
 
 @pytest.mark.parametrize("text, name, said", [
