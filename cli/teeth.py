@@ -212,6 +212,7 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
 
     work = os.path.join(args.out, TRIALS_DIR)
     starts_path = os.path.join(work, "starts.json")
+
     def saved_starts() -> list[TeethScene]:
         try:
             with open(starts_path) as f:

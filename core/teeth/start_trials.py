@@ -59,8 +59,8 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
     ``settings.iterations``) from each of ``starts``: each start's first half, then the rest for those
     under ``DROP_RATIO`` times the best (positive) first-half score. Trial k leaves its checkpoint, loss.json and
     scene files in ``trial_dir(work_dir, k)``, from which ``fit(..., resume=True)`` goes on; a trial that
-finds a checkpoint there (an interrupted fit's trials) goes on from it, so that trials run again after an
-interruption end as the uninterrupted ones would.
+    finds a checkpoint there (an interrupted fit's trials) goes on from it, so that trials run again after an
+    interruption end as the uninterrupted ones would.
     ``progress(entry)`` after every trial iteration; ``dropped(n)`` with the iterations a dropped start
     will not run. One start, or ``start_trials`` 0: None, nothing run."""
     if not starts:
