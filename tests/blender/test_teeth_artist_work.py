@@ -173,7 +173,7 @@ def test_fit_saved_while_running_reopens_idle(addon_module, capture_dir, tmp_pat
     wm = _WindowManager()
     context = SimpleNamespace(scene=bpy.context.scene, window_manager=wm, window=None, workspace=None,
                               screen=None, view_layer=bpy.context.view_layer)
-    op = SimpleNamespace(report=lambda *a: None, _timer=None, _job=None)
+    op = SimpleNamespace(report=lambda *a: None, _timer=None, _job=None, resume=False)  # the button: a new fit
     op._start = lambda ctx: ops.MS_OT_teeth_fit._start(op, ctx)
     op._cleanup = lambda ctx: ops.MS_OT_teeth_fit._cleanup(op, ctx)
     op._finish = lambda ctx, job, state: ops.MS_OT_teeth_fit._finish(op, ctx, job, state)
