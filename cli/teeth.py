@@ -332,8 +332,6 @@ def run_fit(args: argparse.Namespace) -> int:
                     _adopt_trial(trials_work, int(json.load(f)["chosen"]), args.out)
             else:
                 scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path, resume_trials=True)
-        if resume:
-            before = load_state(ckpt).log
     elif not args.resume:
         with FolderLock(args.out):  # the search and the trials write to --out/start_trials
             for earlier in (trials_path, ckpt):  # an earlier fit's, in this folder: this fit replaces it
@@ -343,8 +341,8 @@ def run_fit(args: argparse.Namespace) -> int:
                 scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path)
         if args.init == "perturbed":
             scene = perturbed_start(scene, seed=args.seed)
-        elif resume:  # the winning start's trial, moved into --out
-            before = load_state(ckpt).log
+    if resume and not before:  # the winning start's trial, moved into --out by this run
+        before = load_state(ckpt).log
     total = fs.iterations + fs.textured_iterations
     bar = None if args.no_progress or as_json else _bar(total, "fit", "it")
     done = [0]
