@@ -68,6 +68,14 @@ def test_fit_button_runs_the_fit_settings_defaults_and_shows_the_check(addon_mod
     assert tuple(img.size)[1] == 15 and tuple(img.size)[0] > 3 * 20  # capture | fit | difference
 
 
+def _fit_tracer_compiled() -> bool:
+    """Whether the fit's interpreter (``python_executable``: this one or the checkout's .venv) has numba, which
+    decides the tracer: compiled, or the numpy reference with worker processes."""
+    from material_structures.addon.teeth.fit_job import python_executable
+
+    return subprocess.run([python_executable(), "-c", "import numba"], capture_output=True).returncode == 0
+
+
 def _live_in_group(pgid: int) -> list[int]:
     """Processes of process group ``pgid`` that are not zombies (Linux /proc)."""
     live = []
@@ -117,9 +125,7 @@ def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path)
     assert job.done_iterations >= 2 and job.loss is not None and job.loss > 0
     assert 0.0 < job.progress < 0.01
     assert "iteration" in job.status_text()
-    # the fit's interpreter (python_executable: this one or the checkout's .venv) decides the tracer
-    compiled = subprocess.run([job.cmd[0], "-c", "import numba"], capture_output=True).returncode == 0
-    if os.path.isdir("/proc") and not compiled:
+    if os.path.isdir("/proc") and not _fit_tracer_compiled():
         deadline = time.time() + 60  # catch a moment when the fit has forked its workers
         while len(_live_in_group(job.proc.pid)) < 2 and time.time() < deadline:
             time.sleep(0.01)
@@ -199,7 +205,7 @@ def test_a_cancelled_fit_resumes_from_the_panel_to_the_uninterrupted_fit(addon_m
     one line."""
     import json
 
-    from material_structures.addon.teeth.fit_job import FitJob, python_executable
+    from material_structures.addon.teeth.fit_job import FitJob
     from material_structures.core.teeth.fit_checkpoint import stopped_fit
     from material_structures.showcase import ui_panels as ui
 
@@ -207,8 +213,7 @@ def test_a_cancelled_fit_resumes_from_the_panel_to_the_uninterrupted_fit(addon_m
     # the cancel must land after the first checkpoint (iteration 5) and before the end: the compiled tracer's
     # iterations on this tiny capture are a fraction of a second, the numpy tracer's (where numba is missing,
     # the 4.5 job) several seconds
-    compiled = subprocess.run([python_executable(), "-c", "import numba"], capture_output=True).returncode == 0
-    n = 40 if compiled else 7
+    n = 40 if _fit_tracer_compiled() else 7
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir, fs.init, fs.iterations = capture_dir, "SCENE", n
     whole, cut = tmp_path / "whole", tmp_path / "cut"
