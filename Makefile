@@ -11,7 +11,7 @@ BCSTAMP := .venv-bare-compat/.material-structures-stamp
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender_manifest.toml)
 PYTEST_JOBS ?=
 
-.PHONY: setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
+.PHONY: lock setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
 	bench refs clean help
 
 help:
@@ -25,22 +25,28 @@ help:
 	@echo "make library     (re)build the artist asset library in samples/library"
 	@echo "make build       installable extension zips in dist/, per platform and Python (with the asset library)"
 	@echo "make bench       every benchmark into bench/results/NAME.json"
+	@echo "make lock        re-resolve uv.lock after editing pyproject.toml's dependencies (then make rebuilds the venvs)"
 	@echo "make refs        regenerate the render-regression reference EXRs (deliberately)"
 
-$(STAMP): requirements.txt pyproject.toml scripts/bootstrap.sh
+$(STAMP): uv.lock pyproject.toml scripts/bootstrap.sh
 	@bash scripts/bootstrap.sh main
 
-$(CSTAMP): requirements-compat.txt pyproject.toml scripts/bootstrap.sh
+$(CSTAMP): uv.lock pyproject.toml scripts/bootstrap.sh
 	@bash scripts/bootstrap.sh compat
 
-$(BSTAMP): requirements-bare.txt pyproject.toml scripts/bootstrap.sh
+$(BSTAMP): uv.lock pyproject.toml scripts/bootstrap.sh
 	@bash scripts/bootstrap.sh bare
 
-$(BCSTAMP): requirements-bare-compat.txt pyproject.toml scripts/bootstrap.sh
+$(BCSTAMP): uv.lock pyproject.toml scripts/bootstrap.sh
 	@bash scripts/bootstrap.sh bare-compat
 
 setup: $(STAMP)
 setup-compat: $(CSTAMP)
+
+# pyproject.toml is the one place for dependencies; uv.lock is written here, never by hand. Bump one
+# package: `make lock ARGS="--upgrade-package NAME"`
+lock:
+	@bash scripts/bootstrap.sh lock $(ARGS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

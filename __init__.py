@@ -5,7 +5,17 @@ and the Python package ``material_structures``. Importing the package does not i
 only :func:`register` touches Blender.
 """
 
-__version__ = "0.1.0"
+
+def _manifest_version() -> str:
+    """The version in blender_manifest.toml, its one place (Blender requires it there; pyproject reads it here)."""
+    import os
+    import tomllib
+
+    with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "blender_manifest.toml"), "rb") as f:
+        return tomllib.load(f)["version"]
+
+
+__version__ = _manifest_version()
 
 
 def register() -> None:

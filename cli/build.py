@@ -1,11 +1,13 @@
 """``build``: validate the extension and write the installable zips with the builder shipped in bpy.
 
 ``make build`` writes one zip per platform and Python version, each with the wheels the add-on's features
-import that a desktop Blender lacks (``WHEELS``): ``material_structures-VERSION-cp313-linux_x64.zip`` for
-Blender 5.1+ (CPython 3.13), ``...-cp311-...`` for Blender 4.5 LTS / 5.0 (CPython 3.11), for linux-x64,
-windows-x64 and macos-arm64. The wheels are downloaded once (``pip download``) into ``build/wheels``; the
-zips are built from a staged copy of the source whose manifest lists them (the checkout's manifest lists
-none, so that the checkout itself stays a loadable extension for development).
+import that a desktop Blender lacks (pyproject.toml's extra ``wheels``, at the versions uv.lock resolves for
+that CPython: :func:`locked_wheels`): ``material_structures-VERSION-cp313-linux_x64.zip`` for Blender 5.1+
+(CPython 3.13), ``...-cp311-...`` for Blender 4.5 LTS / 5.0 (CPython 3.11), for linux-x64, windows-x64 and
+macos-arm64. The wheels are downloaded once (``pip download``, checked against uv.lock's hashes) into
+``build/wheels``; the zips are built from a staged copy of the source whose manifest (written with tomlkit)
+lists them (the checkout's manifest lists none, so that the checkout itself stays a loadable extension for
+development).
 """
 
 from __future__ import annotations
@@ -17,19 +19,16 @@ import os
 import shutil
 import subprocess
 import sys
+import tomllib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-# What a desktop Blender's Python lacks and a feature needs (README "Installing"): scipy for the fabric
-# fit (neighbour search, sparse graphs), the scratch model's special functions and the teeth tracer's
-# reference path; numba + llvmlite for the compiled teeth tracer that the teeth fit renders with. Pinned as
-# in requirements.txt (3.13) and requirements-compat.txt (3.11, beside Blender 4.5's numpy 1.26).
-WHEELS: dict[str, tuple[str, ...]] = {
-    "3.13": ("scipy==1.18.1", "numba==0.68.1", "llvmlite==0.50.0"),
-    "3.11": ("scipy==1.13.1", "numba==0.68.1", "llvmlite==0.50.0"),
-}
 # Blender versions per CPython: 4.5 LTS and 5.0 ship 3.11, 5.1 and later 3.13 (the manifest's max is exclusive)
 BLENDER_RANGE: dict[str, tuple[str, str | None]] = {"3.11": ("4.5.0", "5.1.0"), "3.13": ("5.1.0", None)}
+# pyproject.toml's extra that lists what a desktop Blender's Python lacks and a feature needs: scipy for the fabric
+# fit, the scratch model's special functions and the teeth tracer's reference path; numba + llvmlite for the
+# compiled teeth tracer that the teeth fit renders with. Their versions are uv.lock's, nowhere else.
+WHEELS_EXTRA = "wheels"
 # Blender platform -> pip's --platform tags (any of them; the Blender versions above run on all of them)
 PLATFORMS: dict[str, tuple[str, ...]] = {
     "linux-x64": ("manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"),
@@ -44,7 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--validate-only", action="store_true", help="only validate the manifest")
     p.add_argument("--platform", action="append", choices=sorted(PLATFORMS), default=None,
                    help="build for this platform (repeatable; default: all)")
-    p.add_argument("--python", action="append", choices=sorted(WHEELS), default=None,
+    p.add_argument("--python", action="append", choices=sorted(BLENDER_RANGE), default=None,
                    help="build for Blender with this CPython (repeatable; default: all)")
     p.add_argument("--no-wheels", action="store_true",
                    help="one zip without wheels for every platform (needs scipy and numba installed by hand)")
@@ -76,8 +75,6 @@ def validate(source_dir: str = ROOT) -> None:
 
 
 def _manifest(source_dir: str) -> dict:
-    import tomllib
-
     with open(os.path.join(source_dir, "blender_manifest.toml"), "rb") as f:
         return tomllib.load(f)
 
@@ -101,18 +98,48 @@ def build(out_dir: str = "dist", source_dir: str = ROOT) -> str:
     return zip_path
 
 
+def locked_wheels(python: str, root: str = ROOT) -> list[tuple[str, str, list[str]]]:
+    """``(name, version, sha256 hashes)`` of each package of pyproject's extra ``wheels``, as uv.lock resolves
+    it for CPython ``python`` ("3.11", "3.13")."""
+    from packaging.markers import Marker
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    with open(os.path.join(root, "pyproject.toml"), "rb") as f:
+        extra = tomllib.load(f)["project"]["optional-dependencies"][WHEELS_EXTRA]
+    with open(os.path.join(root, "uv.lock"), "rb") as f:
+        lock = tomllib.load(f)
+    env = {"python_version": python, "python_full_version": f"{python}.0"}
+    out = []
+    for req in extra:
+        name = canonicalize_name(Requirement(req).name)
+        hits = [p for p in lock["package"] if p["name"] == name
+                and (not p.get("resolution-markers")
+                     or any(Marker(m).evaluate(env) for m in p["resolution-markers"]))]
+        if len(hits) != 1:
+            raise RuntimeError(f"uv.lock holds {len(hits)} versions of {name} for CPython {python}: run `uv lock`")
+        hashes = [w["hash"].removeprefix("sha256:") for w in hits[0].get("wheels", [])]
+        out.append((name, hits[0]["version"], hashes))
+    return out
+
+
+def wheel_pins(python: str, root: str = ROOT) -> list[str]:
+    """``NAME==VERSION`` of the wheels bundled for CPython ``python`` (:func:`locked_wheels`)."""
+    return [f"{name}=={version}" for name, version, _ in locked_wheels(python, root)]
+
+
 def download_wheels(python: str, platform: str, cache: str) -> list[str]:
-    """The wheels of ``WHEELS[python]`` for the Blender ``platform`` (downloaded into ``cache`` once)."""
-    want = WHEELS[python]
+    """The wheels of :func:`locked_wheels` for the Blender ``platform`` (downloaded into ``cache`` once)."""
+    want = locked_wheels(python)
     dest = os.path.join(cache, f"cp{python.replace('.', '')}-{platform}")
     os.makedirs(dest, exist_ok=True)
 
     def present() -> list[str]:
         names = os.listdir(dest)
         found = []
-        for req in want:
-            name, ver = req.split("==")
-            hits = [n for n in names if n.endswith(".whl") and n.lower().startswith(f"{name.lower()}-{ver}-")]
+        for name, ver, _ in want:
+            prefix = f"{name.replace('-', '_')}-{ver}-"
+            hits = [n for n in names if n.endswith(".whl") and n.lower().startswith(prefix)]
             if not hits:
                 return []
             found.append(os.path.join(dest, sorted(hits)[0]))
@@ -120,14 +147,20 @@ def download_wheels(python: str, platform: str, cache: str) -> list[str]:
 
     if present():
         return present()
+    reqs = os.path.join(dest, "requirements.txt")  # pip checks each download against uv.lock's hashes
+    with open(reqs, "w", encoding="utf-8") as f:
+        for name, ver, hashes in want:
+            f.write(f"{name}=={ver} " + " ".join(f"--hash=sha256:{h}" for h in hashes) + "\n")
     tags = [a for tag in PLATFORMS[platform] for a in ("--platform", tag)]
     proc = subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
-                           "--only-binary=:all:", *tags, "--python-version", python, "--dest", dest, *want],
+                           "--only-binary=:all:", *tags, "--python-version", python, "--dest", dest,
+                           "--require-hashes", "-r", reqs],
                           capture_output=True, text=True)
     if proc.returncode == 0 and present():
         return present()
     errors = " ".join(ln for ln in proc.stderr.splitlines() if ln.startswith("ERROR"))[:400]
-    raise RuntimeError(f"no wheels of {', '.join(want)} for {platform} / CPython {python}: {errors}")
+    pins = ", ".join(f"{n}=={v}" for n, v, _ in want)
+    raise RuntimeError(f"no wheels of {pins} for {platform} / CPython {python}: {errors}")
 
 
 def _stage(source_dir: str, stage: str, manifest: dict) -> None:
@@ -146,22 +179,22 @@ def _stage(source_dir: str, stage: str, manifest: dict) -> None:
 
 
 def _staged_manifest(text: str, python: str, wheels: list[str], platforms: list[str]) -> str:
+    """The checkout's manifest ``text`` with the Blender range of ``python``, ``platforms`` and ``wheels``."""
+    import tomlkit
+
+    doc = tomlkit.parse(text)
+    for key in ("blender_version_max", "platforms", "wheels"):
+        if key in doc:
+            raise RuntimeError(f"blender_manifest.toml: {key} is written by the build")
     lo, hi = BLENDER_RANGE[python]
-    lines = []
-    for line in text.splitlines():
-        if line.startswith("blender_version_min"):
-            lines.append(f'blender_version_min = "{lo}"')
-            if hi:
-                lines.append(f'blender_version_max = "{hi}"')
-            lines.append("platforms = [" + ", ".join(f'"{p}"' for p in platforms) + "]")
-            lines.append("wheels = [")
-            lines += [f'  "./wheels/{os.path.basename(w)}",' for w in wheels]
-            lines.append("]")
-        elif line.startswith(("blender_version_max", "platforms", "wheels")):
-            raise RuntimeError(f"blender_manifest.toml: {line.split('=')[0].strip()} is written by the build")
-        else:
-            lines.append(line)
-    return "\n".join(lines) + "\n"
+    doc["blender_version_min"] = lo
+    if hi:
+        doc["blender_version_max"] = hi
+    doc["platforms"] = list(platforms)
+    listed = tomlkit.array()
+    listed.extend(f"./wheels/{os.path.basename(w)}" for w in wheels)
+    doc["wheels"] = listed.multiline(True)
+    return tomlkit.dumps(doc)
 
 
 def build_platforms(out_dir: str = "dist", source_dir: str = ROOT, platforms: list[str] | None = None,
@@ -170,7 +203,7 @@ def build_platforms(out_dir: str = "dist", source_dir: str = ROOT, platforms: li
     validate(source_dir)
     manifest = _manifest(source_dir)
     platforms = list(platforms or PLATFORMS)
-    pythons = list(pythons or WHEELS)
+    pythons = list(pythons or BLENDER_RANGE)
     work_dir = os.path.abspath(work_dir or os.path.join(source_dir, "build"))
     out_dir = os.path.abspath(out_dir)
     os.makedirs(out_dir, exist_ok=True)

@@ -40,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--seed", type=int, default=12345)
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
                    help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "
-                        "llvm_ad_rgb where Dr.Jit's LLVM backend loads, else scalar_rgb; needs mitsuba==3.9.1): "
+                        "llvm_ad_rgb where Dr.Jit's LLVM backend loads, else scalar_rgb; needs mitsuba, as .venv has): "
                         "for mitsuba the enamel/dentin boundary is made sharp (blend spread 1e-5 mm, as Mitsuba "
                         "renders it) and scene.json is that scene")
     s.set_defaults(func=run_synth)

@@ -1,19 +1,23 @@
 #!/usr/bin/env bash
-# Bootstrap a project virtual environment. Usage: scripts/bootstrap.sh main|compat|bare|bare-compat
-#   main        -> .venv              CPython 3.13, bpy 5.2.3 (requirements.txt)
-#   compat      -> .venv-compat       CPython 3.11, bpy 4.5.15 (requirements-compat.txt)
-#   bare        -> .venv-bare         CPython 3.13, only bpy 5.2.3: a desktop Blender's Python (make test-bare)
-#   bare-compat -> .venv-bare-compat  CPython 3.11, only bpy 4.5.15
-# Re-running is fast: nothing is reinstalled while the requirements and pyproject are unchanged.
+# Bootstrap a project virtual environment. Usage: scripts/bootstrap.sh main|compat|bare|bare-compat|lock
+#   main        -> .venv              CPython 3.13, bpy 5.2.3, this checkout with the extra `dev`
+#   compat      -> .venv-compat       CPython 3.11, bpy 4.5.15, this checkout with the extra `compat`
+#   bare        -> .venv-bare         CPython 3.13, only bpy 5.2.3 + numpy: a desktop Blender's Python (make test-bare)
+#   bare-compat -> .venv-bare-compat  CPython 3.11, only bpy 4.5.15 + numpy 1.26.4
+#   lock [ARGS] -> uv.lock            `uv lock ARGS`, after an edit of pyproject.toml's dependencies (make lock)
+# Each venv is pyproject.toml's dependencies (+ an extra) at uv.lock's versions, installed by `uv sync --locked`;
+# uv is the one on PATH, else one installed from PyPI into .venv-uv. Re-running is instant while uv.lock and
+# pyproject.toml are unchanged.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 kind=${1:-main}
 case "$kind" in
-  main)   want=3.13; venv=.venv;        reqs=requirements.txt ;;
-  compat) want=3.11; venv=.venv-compat; reqs=requirements-compat.txt ;;
-  bare)   want=3.13; venv=.venv-bare;   reqs=requirements-bare.txt ;;
-  bare-compat) want=3.11; venv=.venv-bare-compat; reqs=requirements-bare-compat.txt ;;
-  *) echo "usage: $0 main|compat|bare|bare-compat" >&2; exit 2 ;;
+  main)   want=3.13; venv=.venv;        sync=(--extra dev) ;;
+  compat) want=3.11; venv=.venv-compat; sync=(--extra compat) ;;
+  bare)   want=3.13; venv=.venv-bare;   sync=(--no-install-project) ;;
+  bare-compat) want=3.11; venv=.venv-bare-compat; sync=(--no-install-project) ;;
+  lock)   want=3.13 ;;
+  *) echo "usage: $0 main|compat|bare|bare-compat|lock" >&2; exit 2 ;;
 esac
 
 log() { printf '[setup] %s\n' "$*" >&2; }
@@ -23,64 +27,17 @@ is_version() {  # is_version BIN X.Y -> true when BIN runs and is Python X.Y
 }
 
 find_python() {
-  local cand
+  local cand root
   for cand in "python$want" "python3"; do
     cand=$(command -v "$cand" 2>/dev/null || true)
     if is_version "$cand" "$want"; then echo "$cand"; return 0; fi
   done
-  local root
   root=$(pyenv root 2>/dev/null || echo "$HOME/.pyenv")
   for cand in "$root"/versions/"$want".*/bin/python"$want"; do
     if is_version "$cand" "$want"; then echo "$cand"; return 0; fi
   done
-  if command -v uv >/dev/null 2>&1; then
-    cand=$(uv python find "$want" 2>/dev/null || true)
-    if is_version "$cand" "$want"; then echo "$cand"; return 0; fi
-  fi
-  return 1
-}
-
-ensure_gl_libs() {  # bpy needs X/GL libraries even headless
-  local libs="libX11.so.6 libXrender.so.1 libXfixes.so.3 libXi.so.6 libxkbcommon.so.0 libSM.so.6 libICE.so.6 libGL.so.1 libXext.so.6 libxcb.so.1"
-  local missing="" lib
-  for lib in $libs; do
-    ldconfig -p 2>/dev/null | grep -q "$lib" || missing="$missing $lib"
-  done
-  [ -z "$missing" ] && return 0
-  local pkgs="libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libsm6 libice6 libgl1 libxext6 libxcb1"
-  log "missing X/GL libraries needed by bpy:$missing"
-  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
-    log "installing: $pkgs"
-    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $pkgs >/dev/null
-  elif command -v apt-get >/dev/null 2>&1 && command -v sudo >/dev/null 2>&1; then
-    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $pkgs >/dev/null
-  else
-    log "install these packages with your system's package manager: $pkgs"; exit 1
-  fi
-}
-
-ensure_llvm_lib() {  # Mitsuba's llvm_* variants (Dr.Jit's LLVM backend) load libLLVM; Debian ships it as libllvm19
-  ldconfig -p 2>/dev/null | grep -q "libLLVM.so.19" && return 0
-  local installed=""
-  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
-    log "installing libllvm19 (for Mitsuba's llvm_ad_rgb variant)"
-    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null && installed=1
-  elif command -v apt-get >/dev/null 2>&1 && command -v sudo >/dev/null 2>&1; then
-    log "installing libllvm19 (for Mitsuba's llvm_ad_rgb variant)"
-    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null \
-      && installed=1
-  fi
-  # not fatal: without it Mitsuba's scalar variants still work (bench teeth-vs-mitsuba needs llvm_ad_rgb)
-  [ -n "$installed" ] || log "libLLVM 19 not found (needed by Mitsuba's llvm_ad_rgb variant): install libllvm19"
-}
-
-stamp="$venv/.material-structures-stamp"
-digest=$(cat "$reqs" pyproject.toml | sha256sum | cut -d' ' -f1)
-if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$digest" ] && [ -x "$venv/bin/python" ]; then
-  exit 0  # up to date
-fi
-
-py=$(find_python) || {
+  cand=$(uv python find "$want" 2>/dev/null || true)
+  if is_version "$cand" "$want"; then echo "$cand"; return 0; fi
   cat >&2 <<MSG
 [setup] CPython $want was not found (looked at python$want on PATH, pyenv's versions folder, uv).
 [setup] Install it, for example one of:
@@ -88,29 +45,72 @@ py=$(find_python) || {
 [setup]   pyenv:                      pyenv install $want
 [setup]   uv:                         pip install uv && uv python install $want
 MSG
-  exit 1
+  return 1
 }
-log "using $py ($("$py" --version 2>&1)) for $venv"
-ensure_gl_libs
-if [ "$kind" = main ]; then ensure_llvm_lib; fi
 
-if [ ! -x "$venv/bin/python" ] || ! is_version "$venv/bin/python" "$want"; then
-  rm -rf "$venv"
-  "$py" -m venv "$venv"
-fi
-pip_install() {  # quiet unless it fails
-  local out
-  if ! out=$("$venv/bin/python" -m pip install -q --disable-pip-version-check "$@" 2>&1); then
-    printf '%s\n' "$out" | grep -v '^WARNING: Location' >&2
-    log "pip install $* failed"; exit 1
+apt_install() {  # apt_install PKG... -> true when apt-get (as root or through sudo) installed them
+  local sudo=""
+  command -v apt-get >/dev/null 2>&1 || return 1
+  if [ "$(id -u)" != 0 ]; then command -v sudo >/dev/null 2>&1 && sudo=sudo || return 1; fi
+  log "installing: $*"
+  $sudo apt-get update -qq && $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$@" >/dev/null
+}
+
+ensure_system_libs() {  # bpy needs X/GL libraries even headless; Mitsuba's llvm_* variants load libLLVM 19
+  local lib missing=""
+  for lib in libX11.so.6 libXrender.so.1 libXfixes.so.3 libXi.so.6 libxkbcommon.so.0 libSM.so.6 libICE.so.6 \
+      libGL.so.1 libXext.so.6 libxcb.so.1; do
+    ldconfig -p 2>/dev/null | grep -q "$lib" || missing="$missing $lib"
+  done
+  local pkgs="libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libsm6 libice6 libgl1 libxext6 libxcb1"
+  if [ -n "$missing" ]; then
+    log "missing X/GL libraries needed by bpy:$missing"
+    apt_install $pkgs || { log "install these packages with your system's package manager: $pkgs"; exit 1; }
+  fi
+  # not fatal: without it Mitsuba's scalar variants still work (bench teeth-vs-mitsuba needs llvm_ad_rgb)
+  if [ "$kind" = main ] && ! ldconfig -p 2>/dev/null | grep -q "libLLVM.so.19" && ! apt_install libllvm19; then
+    log "libLLVM 19 not found (needed by Mitsuba's llvm_ad_rgb variant): install libllvm19"
   fi
 }
-log "installing $reqs into $venv (first time: a few minutes, bpy is large)"
-pip_install -r "$reqs"
+
+ensure_uv() {  # sets $uv; pyproject's [tool.uv] required-version is the version asked of PyPI (uv checks it too)
+  uv=$(command -v uv 2>/dev/null || echo .venv-uv/bin/uv)
+  [ -x "$uv" ] && return 0
+  local spec out
+  spec=$("$py" -c 'import tomllib; print(tomllib.load(open("pyproject.toml", "rb"))["tool"]["uv"]["required-version"])')
+  log "installing uv$spec from PyPI into .venv-uv"
+  rm -rf .venv-uv
+  "$py" -m venv .venv-uv
+  if ! out=$(.venv-uv/bin/python -m pip install -q --disable-pip-version-check "uv$spec" 2>&1); then
+    printf '%s\n' "$out" >&2; log "pip install uv failed"; exit 1
+  fi
+}
+
+if [ "$kind" = lock ]; then
+  py=$(find_python) || exit 1
+  ensure_uv
+  exec "$uv" lock "${@:2}"
+fi
+
+stamp="$venv/.material-structures-stamp"
+digest=$(cat uv.lock pyproject.toml | sha256sum | cut -d' ' -f1)
+if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$digest" ] && [ -x "$venv/bin/python" ]; then
+  exit 0  # up to date
+fi
+
+py=$(find_python) || exit 1
+log "using $py ($("$py" --version 2>&1)) for $venv"
+ensure_system_libs
+ensure_uv
+log "installing uv.lock into $venv (${sync[*]}; first time: a minute or two, bpy is large)"
+# --locked: stop, instead of re-resolving, when pyproject.toml's dependencies changed and uv.lock did not
+if ! UV_PROJECT_ENVIRONMENT="$PWD/$venv" "$uv" sync --locked --quiet --python "$py" --no-python-downloads \
+    "${sync[@]}"; then
+  log "uv sync failed (after an edit of pyproject.toml's dependencies: make lock, and commit uv.lock)"; exit 1
+fi
 case "$kind" in
   bare*) "$venv/bin/python" -c "import bpy" || { log "installation failed"; exit 1; } ;;  # nothing of ours
-  *) pip_install --no-deps -e .
-     "$venv/bin/python" -c "import numpy, material_structures.core" || { log "installation failed"; exit 1; } ;;
+  *) "$venv/bin/python" -c "import numpy, material_structures.core" || { log "installation failed"; exit 1; } ;;
 esac
 echo "$digest" > "$stamp"
 log "$venv ready"

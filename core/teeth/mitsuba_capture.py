@@ -24,7 +24,6 @@ from .scene import TeethScene
 LIBLLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 LLVM_VARIANT = "llvm_ad_rgb"
 SCALAR_VARIANT = "scalar_rgb"
-MITSUBA_PIN = "mitsuba==3.9.1"
 MEDIUM_PARAMS = ("sigma_t.value.value", "albedo.value.value", "phase_function.weight.value.value",
                  "phase_function.phase_0.g", "phase_function.phase_1.g")
 CAVITY_PARAM = "cavity.bsdf.brdf_0.reflectance.value"
@@ -40,7 +39,8 @@ def import_mitsuba(variant: str | None = None) -> tuple[object, str]:
         import drjit as dr
         import mitsuba as mi
     except ImportError as e:
-        raise RuntimeError(f"rendering with Mitsuba needs Mitsuba 3: pip install {MITSUBA_PIN} ({e})") from e
+        raise RuntimeError(f"rendering with Mitsuba needs Mitsuba 3 (the project .venv has the version uv.lock pins; "
+                           f"elsewhere: pip install mitsuba) ({e})") from e
     if variant is None:
         variant = LLVM_VARIANT if dr.has_backend(dr.JitBackend.LLVM) else SCALAR_VARIANT
     mi.set_variant(variant)
