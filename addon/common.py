@@ -87,6 +87,41 @@ def group_material(name: str, group, marker: str, marker_value=1, label: str | N
     return mat, gnode, out
 
 
+class NodeMath:
+    """Math-node arithmetic inside a node tree: operands are sockets or numbers; each operation adds a node
+    below the previous one, starting at ``(x, y)``."""
+
+    def __init__(self, tree, x: float, y: float):
+        self.tree, self.x, self.y = tree, x, y
+
+    def _node(self, kind: str, op: str, *args):
+        node = self.tree.nodes.new(kind)
+        node.operation = op
+        node.location = (self.x, self.y)
+        self.y -= 40
+        for i, a in enumerate(args):
+            if isinstance(a, (int, float)):
+                node.inputs[i].default_value = a if kind == "ShaderNodeMath" else (a, a, a)
+            else:
+                self.tree.links.new(a, node.inputs[i])
+        return node
+
+    def f(self, op: str, *args):
+        return self._node("ShaderNodeMath", op, *args).outputs[0]
+
+    def v(self, op: str, *args):
+        node = self._node("ShaderNodeVectorMath", op, *args)
+        return node.outputs["Value" if op in {"DOT_PRODUCT", "LENGTH"} else "Vector"]
+
+    def scale(self, vec, factor):
+        node = self._node("ShaderNodeVectorMath", "SCALE", vec)
+        if isinstance(factor, (int, float)):
+            node.inputs["Scale"].default_value = factor
+        else:
+            self.tree.links.new(factor, node.inputs["Scale"])
+        return node.outputs["Vector"]
+
+
 def add_eevee_fallback(mat, cycles_output, shader, location=(400, -350), name: str | None = None):
     """Make ``cycles_output`` Cycles-only (and keep it active) and give EEVEE / Material Preview an output
     of its own fed by ``shader`` (the OSL shaders are Cycles-only). Returns the EEVEE output node."""
@@ -128,6 +163,46 @@ def wire_lamp_shader_group(group, gin, script, gout, input_names, lamp_term: str
     links.new(script.outputs[lamp_term], add.inputs[1])
     links.new(add.outputs[0], gout.inputs["Shader"])
     return tangent, add
+
+
+OSL_SWITCH = "Shader Path"  # the Mix Shader that picks the OSL script's shader or the closures without it
+OSL_ACTIVE = "OSLActive"  # the scripts' float output: 1 wherever the script runs
+
+
+def add_osl_switch(group, script, native_shader) -> None:
+    """End ``group`` in a Mix Shader (``OSL_SWITCH``) between ``native_shader`` (Cycles' own closures) and
+    what fed the group output's "Shader" so far (the OSL ``script``'s terms).
+
+    Its factor is linked from the script's ``OSLActive`` output and defaults to 0. Cycles without Open
+    Shading Language drops script nodes and every input linked from one takes its default value, so the
+    factor is 1 where the script runs (Cycles with OSL) and 0 everywhere else (Cycles' SVM, its GPUs but
+    OptiX): never the black of a script that did not run."""
+    gout = next(n for n in group.nodes if n.type == "GROUP_OUTPUT")
+    target = gout.inputs["Shader"]
+    osl_side = target.links[0].from_socket if target.is_linked else None
+    mix = group.nodes.new("ShaderNodeMixShader")
+    mix.name = mix.label = OSL_SWITCH
+    mix.location = (gout.location.x - 150, gout.location.y - 150)
+    mix.inputs[0].default_value = 0.0
+    if OSL_ACTIVE in script.outputs:
+        group.links.new(script.outputs[OSL_ACTIVE], mix.inputs[0])
+    group.links.new(native_shader, mix.inputs[1])
+    if osl_side is not None:
+        group.links.new(osl_side, mix.inputs[2])
+    group.links.new(mix.outputs[0], target)
+
+
+def osl_switch(group):
+    """The group's ``OSL_SWITCH`` node (None in a group made before it)."""
+    return group.nodes.get(OSL_SWITCH)
+
+
+def relink_osl_switch(group, script) -> None:
+    """Link a recompiled ``script``'s ``OSLActive`` output to the group's switch (a script node from an older
+    file gets the output when its shader is refreshed)."""
+    mix = osl_switch(group)
+    if mix is not None and OSL_ACTIVE in script.outputs and not mix.inputs[0].is_linked:
+        group.links.new(script.outputs[OSL_ACTIVE], mix.inputs[0])
 
 
 def group_node(mat, marker: str):

@@ -29,16 +29,14 @@ def load_osl_script(
 
     The shader is embedded in the .blend (:func:`shader_text`): the node runs an internal text
     datablock, and Cycles keeps the compiled bytecode in the node, so the file renders wherever it
-    is moved and whichever folder the extension is installed in. Sets the engine to Cycles and
-    enables OSL on ``scene`` (default: the context scene) before compiling, and asserts that
-    ``inputs`` and ``outputs`` exist.
+    is moved and whichever folder the extension is installed in. Compiles it with Cycles + OSL lent to
+    the context scene meanwhile (:func:`compile_script_node`: the scene's render engine and shading system
+    are the artist's and stay as they were), and asserts that ``inputs`` and ``outputs`` exist.
     """
     import bpy
 
     ensure_bundled_paths()
     scene = scene or bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.shading_system = True
     node = node_tree.nodes.new("ShaderNodeScript")
     if name:
         node.name = node.label = name
@@ -80,7 +78,7 @@ def compile_script_node(node, scene=None) -> list[str]:
         else:
             cycles_osl.update_script_node(node, lambda kind, msg: errors.append(msg) if "ERROR" in kind else None)
     finally:
-        if ctx is not None and ctx != scene:
+        if ctx is not None:
             ctx.render.engine, ctx.cycles.shading_system = saved
     return errors
 

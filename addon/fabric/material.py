@@ -24,15 +24,20 @@ import numpy as np
 from ...core.fabric.closure_fit import CLOSURE_FILES, FIT_KEY_BUDGET, SHAPE_FILES, fit_closure_maps, load_closure_maps
 from ...render import load_osl_script
 from ..common import (
+    NodeMath,
     add_eevee_fallback,
     add_group_input,
+    add_osl_switch,
     array_to_image,
     group_material,
     group_node,
+    osl_switch,
+    relink_osl_switch,
     wire_lamp_shader_group,
 )
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .maps import CLOSURE_KEYS, closure_maps_to_images, load_fit_folder, maps_to_images
+from .native_closures import build_native_closures
 from .world_light import world_light_inputs, write_world_inputs
 
 GROUP_NAME = "SGGX Fabric"
@@ -107,6 +112,7 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     if group is not None and group.get(MARKER):
         ensure_viewport_look(group)
         ensure_fit_inputs(group, scene)
+        ensure_closures_without_osl(group)
         return group
     group = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
     group[MARKER] = 1
@@ -121,7 +127,22 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     gin.location, script.location, tangent.location = (-500, 0), (-150, 0), (-500, -350)
     add.location, gout.location = (150, 0), (350, 0)
     _build_viewport_look(group)
+    add_osl_switch(group, script, build_native_closures(group, gin))
     return group
+
+
+def ensure_closures_without_osl(group) -> None:
+    """Give a group from an older file the closure path that renders without OSL (``native_closures``), and
+    link its switch to the script once the script has the ``OSLActive`` output."""
+    script = next((n for n in group.nodes if n.type == "SCRIPT" and "Lamp1Type" in n.inputs), None)
+    if script is None:
+        return
+    if osl_switch(group) is None:
+        ensure_fit_inputs(group)
+        gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
+        add_osl_switch(group, script, build_native_closures(group, gin))
+    else:
+        relink_osl_switch(group, script)
 
 
 def ensure_fit_inputs(group, scene=None) -> None:
@@ -152,46 +173,12 @@ def ensure_viewport_look(group) -> None:
         _build_viewport_look(group)
 
 
-class _Nodes:
-    """Math-node arithmetic inside a node tree: operands are sockets or numbers."""
-
-    def __init__(self, tree, x: float, y: float):
-        self.tree, self.x, self.y = tree, x, y
-
-    def _node(self, kind: str, op: str, *args):
-        node = self.tree.nodes.new(kind)
-        node.operation = op
-        node.location = (self.x, self.y)
-        self.y -= 40
-        for i, a in enumerate(args):
-            if isinstance(a, (int, float)):
-                node.inputs[i].default_value = a if kind == "ShaderNodeMath" else (a, a, a)
-            else:
-                self.tree.links.new(a, node.inputs[i])
-        return node
-
-    def f(self, op: str, *args):
-        return self._node("ShaderNodeMath", op, *args).outputs[0]
-
-    def v(self, op: str, *args):
-        node = self._node("ShaderNodeVectorMath", op, *args)
-        return node.outputs["Value" if op in {"DOT_PRODUCT", "LENGTH"} else "Vector"]
-
-    def scale(self, vec, factor):
-        node = self._node("ShaderNodeVectorMath", "SCALE", vec)
-        if isinstance(factor, (int, float)):
-            node.inputs["Scale"].default_value = factor
-        else:
-            self.tree.links.new(factor, node.inputs["Scale"])
-        return node.outputs["Vector"]
-
-
 def _build_viewport_look(group) -> None:
     """The "Viewport" output: a Principled BSDF driven by the group's inputs (module docstring)."""
     nodes, links = group.nodes, group.links
     gin = next(n for n in nodes if n.type == "GROUP_INPUT")
     gout = next(n for n in nodes if n.type == "GROUP_OUTPUT")
-    m = _Nodes(group, -300, -700)
+    m = NodeMath(group, -300, -700)
     # Quaternion (w, x, y, z) of the fibre basis in the UV frame (x = UV tangent, z = normal).
     q = nodes.new("ShaderNodeSeparateXYZ")
     q.location = (-500, -700)
