@@ -300,6 +300,45 @@ class CancelBackgroundJob:
         return {"FINISHED"}
 
 
+# -- undo ------------------------------------------------------------------------------------------------
+REVISION_PROP = "material_structures_revision"  # on images the add-on writes: counts its packed writes
+_WRITTEN: dict[int, int] = {}  # image session_uid -> the revision its pixels hold in this Blender session
+
+
+def mark_written(image) -> None:
+    """Record that ``image``'s pixels were written and packed: its revision (an ID property, so the .blend
+    and Blender's undo keep it) goes up and this session remembers that its pixels hold that revision."""
+    revision = int(image.get(REVISION_PROP, 0)) + 1
+    image[REVISION_PROP] = revision
+    _WRITTEN[image.session_uid] = revision
+
+
+def reload_stale_images() -> list[str]:
+    """After a global undo or redo: reload every image the add-on wrote in this session whose packed data
+    (restored by the undo) holds another revision than its pixels (Blender keeps image buffers across undo),
+    so what the viewport shows and renders is what is stored. Returns the names of the reloaded images."""
+    reloaded = []
+    for image in bpy.data.images:
+        uid = image.session_uid
+        if uid not in _WRITTEN or image.packed_file is None:
+            continue
+        revision = int(image.get(REVISION_PROP, 0))
+        if _WRITTEN[uid] != revision:
+            image.reload()
+            _WRITTEN[uid] = revision
+            reloaded.append(image.name)
+    return reloaded
+
+
+def push_undo(message: str) -> bool:
+    """Make what was just done one step of Blender's undo (Ctrl+Z, Edit > Undo History), for work that is
+    not an operator's own step (a stroke inside the modal brush). Whether a step was pushed: False where
+    Blender has no undo stack (undo steps 0, or no window)."""
+    if not bpy.ops.ed.undo_push.poll():
+        return False
+    return bpy.ops.ed.undo_push(message=message) == {"FINISHED"}
+
+
 # -- float images ---------------------------------------------------------------------------------------
 def array_to_image(array: np.ndarray, name: str, pack: bool = True, replace: bool = True):
     """A float, Non-Color, channel-packed image holding ``array`` (H, W, C<=4), row 0 = top.
@@ -324,6 +363,7 @@ def array_to_image(array: np.ndarray, name: str, pack: bool = True, replace: boo
     image.update()
     if pack:
         image.pack()
+        mark_written(image)
     return image
 
 

@@ -431,17 +431,45 @@ def fabric_script_nodes():
                 yield node
 
 
+def _cycles_output(mat):
+    """The material output Cycles renders (the active one of those targeting Cycles or all engines)."""
+    outs = [n for n in mat.node_tree.nodes if n.type == "OUTPUT_MATERIAL" and n.target in {"ALL", "CYCLES"}]
+    return next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+
+
+def rendered_fabric_node(mat):
+    """The SGGX Fabric group node whose shader reaches the surface Cycles renders for ``mat`` (None when the
+    material has none, or the artist disconnected or replaced it, e.g. by a Principled BSDF)."""
+    if mat is None or mat.node_tree is None:
+        return None
+    out = _cycles_output(mat)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return None
+    seen, todo = set(), [out.inputs["Surface"].links[0].from_node]
+    while todo:
+        node = todo.pop()
+        if node.name in seen or node.mute:
+            continue
+        seen.add(node.name)
+        if node.type == "GROUP" and node.node_tree is not None and node.node_tree.get(MARKER):
+            return node
+        todo += [link.from_node for sock in node.inputs for link in sock.links if not link.is_muted]
+    return None
+
+
 def _exact_path_on(mat) -> bool:
-    """Whether a fabric material evaluates lamps itself (FastPreview off on its group node)."""
-    node = fabric_group_node(mat)
+    """Whether a fabric material evaluates lamps itself: its fabric group renders (reaches the Cycles output)
+    with FastPreview off."""
+    node = rendered_fabric_node(mat)
     if node is None:
-        return True
+        return False
     sock = node.inputs["FastPreview"]
     return sock.is_linked or not sock.default_value
 
 
 def fabric_objects(scene, exact_only: bool = False):
-    """Meshes with a fabric material (``exact_only``: one whose exact lamp path is on)."""
+    """Meshes with a fabric material (``exact_only``: one whose exact lamp path renders: the fabric group
+    reaches the material's Cycles output and FastPreview is off)."""
     out = []
     for obj in scene.objects:
         if obj.type != "MESH":

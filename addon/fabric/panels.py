@@ -87,9 +87,8 @@ class VIEW3D_PT_material_structures_fabric(SidebarPanel, bpy.types.Panel):
             box.prop(brush, "anisotropy_factor")
         else:
             box.prop(brush, "states_dir")
-        row = box.row()
-        row.operator("material_structures.fabric_brush", icon="BRUSH_DATA")
-        row.operator("material_structures.fabric_brush_undo", icon="LOOP_BACK")
+        box.operator("material_structures.fabric_brush", icon="BRUSH_DATA")
+        box.label(text="Each stroke is one step of Edit > Undo (Ctrl+Z)", icon="INFO")
 
 
 CLASSES: list[type] = [MATERIAL_PT_material_structures_fabric, VIEW3D_PT_material_structures_fabric]

@@ -24,7 +24,15 @@ import os
 import bpy
 
 from ...render import load_osl_script, osl_flip_t
-from ..common import add_eevee_fallback, add_group_input, group_material, wire_lamp_shader_group
+from ..common import (
+    add_eevee_fallback,
+    add_group_input,
+    add_osl_switch,
+    group_material,
+    osl_switch,
+    relink_osl_switch,
+    wire_lamp_shader_group,
+)
 from ..common import group_node as _group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .tables import (
@@ -43,6 +51,7 @@ SHADER = "ms_scratch_metal"
 SCRIPT_NODE = "Scratch Shader"
 MARKER = "material_structures_scratch"
 GROUP_PREFIX = "Scratched Metal"
+BASE_METAL_NODE = "Base Metal Without OSL"
 
 # (socket name, socket type, default, min, max); the OSL input of the same name takes it.
 GROUP_INPUTS = [
@@ -109,7 +118,40 @@ def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
     links.new(texco.outputs["UV"], script.inputs["UV"])
     gin.location, script.location, texco.location = (-500, 0), (-150, 0), (-500, -300)
     tangent.location, add.location, gout.location = (-500, -500), (150, 0), (350, 0)
+    add_osl_switch(group, script, _base_metal(group, gin, tangent))
     return group
+
+
+def _base_metal(group, gin, tangent):
+    """The base metal from Cycles' own Metallic BSDF (GGX, F82 tint from BaseColor and EdgeTint, alpha =
+    Roughness^2, like the script's ``microfacet_f82_tint``): what renders where OSL does not run (Cycles'
+    SVM, GPUs but OptiX), the scratches left out. Returns its shader output."""
+    metal = group.nodes.new("ShaderNodeBsdfMetallic")
+    metal.name = metal.label = BASE_METAL_NODE
+    metal.distribution = "GGX"
+    metal.fresnel_type = "F82"
+    metal.location = (-150, -450)
+    for name, socket in (("BaseColor", "Base Color"), ("EdgeTint", "Edge Tint"), ("Roughness", "Roughness")):
+        group.links.new(gin.outputs[name], metal.inputs[socket])
+    group.links.new(tangent.outputs["Tangent"], metal.inputs["Tangent"])
+    return metal.outputs[0]
+
+
+def ensure_base_metal(group) -> None:
+    """Give a scratch group from an older file the base metal that renders without OSL, and link its switch
+    once the script has the ``OSLActive`` output."""
+    script = script_node(group)
+    if script is None:
+        return
+    if osl_switch(group) is None:
+        gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
+        tangent = next((n for n in group.nodes if n.type == "TANGENT"), None)
+        if tangent is None:
+            tangent = group.nodes.new("ShaderNodeTangent")
+            tangent.direction_type = "UV_MAP"
+        add_osl_switch(group, script, _base_metal(group, gin, tangent))
+    else:
+        relink_osl_switch(group, script)
 
 
 def _store(group, scratch_set, name: str, images: dict | None) -> None:
