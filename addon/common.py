@@ -51,6 +51,33 @@ class MaterialPanel(Panel):
         return mat is not None and bool(mat.get(cls.marker))
 
 
+def shader_path(scene) -> tuple[str, str]:
+    """Which of a material's paths the scene renders, in words: (what renders, how to get the exact shader or
+    "" when it renders). Cycles runs the OSL scripts on the CPU (and on OptiX GPUs); its SVM (OSL off, CUDA,
+    HIP, Metal, oneAPI) renders the closure path built from Cycles' own nodes; EEVEE the viewport look."""
+    if scene.render.engine != "CYCLES":
+        return ("EEVEE / Workbench: the viewport look (an approximation)",
+                "The exact shader renders in Cycles with Open Shading Language")
+    cyc = scene.cycles
+    if not cyc.shading_system:
+        return ("Closure path (Open Shading Language is off): no exact lamps, world light or scratches",
+                "Turn on Open Shading Language (Render Properties) for the exact shader")
+    if cyc.device == "GPU":
+        return ("Exact shader with OSL on the GPU: OptiX runs it; other GPU backends render the closure path",
+                "For the reference look render on the CPU")
+    return "Exact shader (Cycles + Open Shading Language, CPU)", ""
+
+
+def draw_shader_path(layout, scene) -> None:
+    """The line every material panel shows: which path renders here, and a button to the exact one."""
+    what, how = shader_path(scene)
+    box = layout.box()
+    box.label(text=what, icon="CHECKMARK" if not how else "INFO")
+    if how:
+        box.label(text=how)
+        box.operator("material_structures.setup_cycles_osl", icon="SHADING_RENDERED")
+
+
 def draw_group_inputs(layout, node, controls, linked: str = "linked") -> None:
     """One row per ``(socket name, label)`` of a group node: its value, or ``linked`` when a link drives it."""
     col = layout.column()
