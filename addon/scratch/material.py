@@ -126,6 +126,10 @@ def _base_metal(group, gin, tangent):
     """The base metal from Cycles' own Metallic BSDF (GGX, F82 tint from BaseColor and EdgeTint, alpha =
     Roughness^2, like the script's ``microfacet_f82_tint``): what renders where OSL does not run (Cycles'
     SVM, GPUs but OptiX), the scratches left out. Returns its shader output."""
+    note = group.nodes.new("NodeFrame")  # read where the extension is missing (node editor): why no scratches
+    note.name = "Needs Material Structures"
+    note.label = "Scratches render with the Material Structures extension (it extracts their tables)"
+    note.location = (-150, 250)
     metal = group.nodes.new("ShaderNodeBsdfMetallic")
     metal.name = metal.label = BASE_METAL_NODE
     metal.distribution = "GGX"

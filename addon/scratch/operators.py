@@ -151,7 +151,13 @@ class MS_OT_scratch_generate(bpy.types.Operator):
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         mat = apply_set(context, obj, s, self.set_name)
-        self.report({"INFO"}, f"{s.n_scratches} scratches ({s.n_segments} segments) on '{mat.name}'")
+        lost = self.count - new.n_scratches
+        why = ""
+        if lost > 0:  # arcs or lines that lie wholly outside the square patch are clipped away
+            why = (f"; {lost} of the {self.count} generated lie wholly outside the "
+                   f"{self.patch_mm:g} mm patch and were left out")
+        self.report({"WARNING" if lost > 0 else "INFO"},
+                    f"{s.n_scratches} scratches ({s.n_segments} segments) on '{mat.name}'{why}")
         return {"FINISHED"}
 
     def execute(self, context):
