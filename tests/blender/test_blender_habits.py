@@ -241,6 +241,28 @@ def test_closure_path_without_osl_is_the_fast_preview(addon_module, preset):
         np.testing.assert_allclose(without, with_osl, atol=1e-5)
 
 
+def test_generated_scratches_are_undo_steps(addon_module):
+    """Generate twice (the second replaces the set in the same images), Ctrl+Z: the stored set and the table
+    images the shader reads are the first set again; Ctrl+Shift+Z brings the second back."""
+    from material_structures.addon.scratch.editing import material_set, object_scratch_material
+
+    _scene_with_planes("A")
+
+    def stored():
+        s = material_set(object_scratch_material(bpy.data.objects["A"]))[1]
+        return s.segments.copy(), s.n_scratches
+
+    assert _op("scratch_generate", count=60, seed=1) == {"FINISHED"}
+    first = stored()
+    assert _op("scratch_generate", count=60, seed=2) == {"FINISHED"}
+    second = stored()
+    assert first[0].shape != second[0].shape or np.any(first[0] != second[0])
+    bpy.ops.ed.undo()
+    np.testing.assert_array_equal(stored()[0], first[0])
+    bpy.ops.ed.redo()
+    np.testing.assert_array_equal(stored()[0], second[0])
+
+
 def test_polishing_circles_say_why_they_are_fewer_than_asked(addon_module, capfd):
     """Item 9: Polishing Circles with Count 300 gives fewer scratches (arcs wholly outside the patch are
     clipped away): the report says how many and why."""
