@@ -63,9 +63,18 @@ def shader_path(scene) -> tuple[str, str]:
         return ("Closure path (Open Shading Language is off): no exact lamps, world light or scratches",
                 "Turn on Open Shading Language (Render Properties) for the exact shader")
     if cyc.device == "GPU":
-        return ("Exact shader with OSL on the GPU: OptiX runs it; other GPU backends render the closure path",
-                "For the reference look render on the CPU")
+        if gpu_backend() == "OPTIX":
+            return ("OptiX runs the shader without trace() or table textures: fabric lamps unshadowed, no exact "
+                    "world light, no scratches", "Render on the CPU for the exact shader")
+        return ("Closure path (OSL runs on the CPU and OptiX only, not on this GPU backend)",
+                "Render on the CPU (or OptiX) for the exact shader")
     return "Exact shader (Cycles + Open Shading Language, CPU)", ""
+
+
+def gpu_backend() -> str:
+    """Cycles' compute device type in the preferences (OPTIX, CUDA, HIP, METAL, ONEAPI; NONE without one)."""
+    addon = bpy.context.preferences.addons.get("cycles")
+    return getattr(addon.preferences, "compute_device_type", "NONE") if addon is not None else "NONE"
 
 
 def draw_shader_path(layout, scene) -> None:
