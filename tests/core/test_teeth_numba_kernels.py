@@ -97,9 +97,17 @@ def test_the_shared_physics_compiles_to_the_numpy_values():
     np.testing.assert_allclose(got[6], want[6], rtol=0.0, atol=2.5e-16)
     np.testing.assert_allclose(got[5], want[5], rtol=0.0, atol=1e-15)  # l (1 - l) / s, s = 0.7
     np.testing.assert_allclose(got[7], want[7], rtol=0.0, atol=1e-15)  # the sampling's scalar form
-    # the Fresnel term itself (eq. 5.1): 0.0434 at normal incidence for eta 1.631, 1 at grazing incidence
+    # the Fresnel term itself (eq. 5.1), in the angle form F = (sin^2(i - t) / sin^2(i + t) + tan^2(i - t) /
+    # tan^2(i + t)) / 2 with sin t = sin i / eta: 0.0434 at normal incidence for eta 1.631, 1 at grazing incidence
     assert fresnel_dielectric(1.0, 1.631) == pytest.approx(((1.631 - 1) / (1.631 + 1)) ** 2, rel=1e-12)
     assert fresnel_dielectric(0.0, 1.631) == pytest.approx(1.0, abs=1e-12)
+    for deg, e in ((30.0, 1.631), (60.0, 1.5), (75.0, 1.33)):
+        i = np.radians(deg)
+        t = np.arcsin(np.sin(i) / e)
+        want = 0.5 * (np.sin(i - t) ** 2 / np.sin(i + t) ** 2 + np.tan(i - t) ** 2 / np.tan(i + t) ** 2)
+        cos_i = np.array([np.cos(i)])
+        assert _physics_compiled(cos_i, np.array([e]), *(np.zeros(1),) * 5, 1.0, np.zeros(1))[0, 0] == \
+            pytest.approx(want, rel=1e-12), deg
 
 
 def test_scattered_directions_of_the_scalar_and_vector_forms_agree():
