@@ -117,6 +117,19 @@ def test_relative_links_and_anchors_resolve(name):
             assert anchor in anchors(_page_text(dest)), f"docs/{name}:{i}: no heading #{anchor} in docs/{dest}"
 
 
+@pytest.mark.parametrize("name", PAGES)
+def test_table_rows_keep_their_columns(name):
+    """A stray | inside a cell (write abs(x), or \\| ) splits the row and shifts every cell after it."""
+    width = None
+    for i, line in _prose_lines(_read(name)):
+        if not line.startswith("|"):
+            width = None
+            continue
+        cells = len(CODE_SPAN.sub("", line).replace("\\|", "").split("|"))
+        width = width or cells
+        assert cells == width, f"docs/{name}:{i}: {cells - 2} cells where the table has {width - 2}"
+
+
 def test_the_checker_sees_broken_links_and_diary_text():
     title = "Teeth fit: what it recovers (and what it cannot)"
     assert slugify(title) == "teeth-fit-what-it-recovers-and-what-it-cannot"
