@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import cli_command, common, handlers, nodes, operators, panels, preferences, properties
+from . import common, handlers, nodes, operators, panels, preferences, properties
 from .fabric import operators as fabric_operators
 from .fabric import panels as fabric_panels
 from .fabric import properties as fabric_properties
@@ -51,11 +51,9 @@ def register() -> None:
     teeth_properties.register_pointers()
     nodes.register_menus()
     handlers.register_handlers()
-    cli_command.register_command()
 
 
 def unregister() -> None:
-    cli_command.unregister_command()
     handlers.unregister_handlers()
     nodes.unregister_menus()
     teeth_properties.unregister_pointers()

@@ -18,7 +18,7 @@ _handle = None
 
 def run(argv: list[str]) -> int:
     """Run the CLI with ``argv`` (the words after ``-c material_structures``); returns its exit code."""
-    from ..cli import main
+    from . import main
 
     return main(list(argv))
 
