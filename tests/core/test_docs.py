@@ -114,7 +114,10 @@ def test_relative_links_and_anchors_resolve(name):
         assert os.path.abspath(full).startswith(DOCS + os.sep), f"docs/{name}:{i}: {target!r} leaves docs/"
         if anchor:
             assert dest.endswith(".md"), f"docs/{name}:{i}: anchor on a non-page {target!r}"
-            assert anchor in anchors(_page_text(dest)), f"docs/{name}:{i}: no heading #{anchor} in docs/{dest}"
+            dest_text = _page_text(dest)
+            if "<!-- cli-reference -->" in dest_text:  # the parsers did not import: its headings are unknown
+                continue
+            assert anchor in anchors(dest_text), f"docs/{name}:{i}: no heading #{anchor} in docs/{dest}"
 
 
 @pytest.mark.parametrize("name", PAGES)
