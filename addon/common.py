@@ -173,13 +173,16 @@ def add_eevee_fallback(mat, cycles_output, shader, location=(400, -350), name: s
     return out
 
 
-def add_group_input(group, name: str, socket_type: str, default, lo=None, hi=None):
-    """A new input socket ``name`` of node group ``group`` with its default and, unless ``lo`` is None, its
-    range [lo, hi] (the ``(name, socket_type, default, lo, hi)`` specs of the features' groups)."""
+def add_group_input(group, name: str, socket_type: str, default, lo=None, hi=None, description: str = ""):
+    """A new input socket ``name`` of node group ``group`` with its default, unless ``lo`` is None its range
+    [lo, hi], and its tooltip ``description`` (the ``(name, socket_type, default, lo, hi, description)`` specs
+    of the features' groups; on/off inputs are ``NodeSocketBool`` with no range)."""
     sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
     sock.default_value = default
     if lo is not None:
         sock.min_value, sock.max_value = lo, hi
+    if description:
+        sock.description = description
     return sock
 
 
@@ -488,18 +491,22 @@ class MS_StrokePoint(bpy.types.PropertyGroup):
 
     location: bpy.props.FloatVectorProperty(name="Location", size=3, description="World-space point (3D strokes)")
     uv: bpy.props.FloatVectorProperty(name="UV", size=2, description="UV point (UV strokes)")
-    pressure: bpy.props.FloatProperty(name="Pressure", default=1.0, min=0.0, max=1.0)
+    pressure: bpy.props.FloatProperty(name="Pressure", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
+                                      description="Tablet pressure at the point (0-1; 1 without a tablet)")
 
 
 def stroke_property():
     """The ``stroke`` property of a stroke tool: the points its EXEC path replays."""
-    return bpy.props.CollectionProperty(type=MS_StrokePoint, options={"SKIP_SAVE"})
+    return bpy.props.CollectionProperty(type=MS_StrokePoint, options={"SKIP_SAVE"}, name="Stroke",
+                                        description="The points of a recorded stroke (for scripts; empty when "
+                                        "drawing with the mouse)")
 
 
 def stroke_space_property():
     """The ``stroke_space`` property of a stroke tool: whether the points are UVs or 3D points."""
     return bpy.props.EnumProperty(
         name="Stroke Space",
+        description="Whether the stroke's points are UV coordinates or 3D points on the surface",
         items=[("UV", "UV", "Stroke points are UV coordinates"), ("WORLD", "World", "3D points on the surface")],
         default="UV",
         options={"SKIP_SAVE"},

@@ -55,7 +55,8 @@ class MS_OT_fabric_new_material(bpy.types.Operator):
     bl_label = "New Fabric Material"
     bl_options = {"REGISTER", "UNDO"}
 
-    preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default="VELVET")
+    preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default="VELVET",
+                                   description="Which pile fabric the new material starts as")
 
     def execute(self, context):
         obj = context.active_object
@@ -77,6 +78,9 @@ class MS_OT_fabric_import_maps(FolderPicker, bpy.types.Operator):
     bl_idname = "material_structures.fabric_import_maps"
     bl_label = "Import Fitted Fabric Maps"
     bl_options = {"REGISTER", "UNDO"}
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+                                        description="A fit's output folder (kd, ks, sigma, basis maps, params.json)")
 
     def execute(self, context):
         obj = context.active_object
@@ -111,6 +115,9 @@ class MS_OT_fabric_save_maps(FolderPicker, bpy.types.Operator):
     bl_idname = "material_structures.fabric_save_maps"
     bl_label = "Save Fabric Maps"
     bl_options = {"REGISTER"}
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+                                        description="Folder the maps are written to (EXR maps and params.json)")
 
     @classmethod
     def poll(cls, context):
@@ -183,6 +190,8 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
     bl_label = "Fit BTF"
     bl_options = {"REGISTER"}
 
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+                                        description="The measured BTF folder (btf.json and its images)")
     out_dir: bpy.props.StringProperty(name="Output Folder", subtype="DIR_PATH",
                                       description="Where the fitted maps are written (default: beside the BTF "
                                                   "folder, its name + _fit)")

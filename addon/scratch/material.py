@@ -53,17 +53,28 @@ MARKER = "material_structures_scratch"
 GROUP_PREFIX = "Scratched Metal"
 BASE_METAL_NODE = "Base Metal Without OSL"
 
-# (socket name, socket type, default, min, max); the OSL input of the same name takes it.
+# (socket name, socket type, default, min, max, tooltip); the OSL input of the same name takes it. On/off inputs
+# are booleans (no range): Cycles hands them to the shader's int input as 0/1.
 GROUP_INPUTS = [
-    ("BaseColor", "NodeSocketColor", (0.91, 0.92, 0.92, 1.0), None, None),
-    ("EdgeTint", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None),
-    ("Roughness", "NodeSocketFloat", 0.08, 0.0, 1.0),
-    ("Coherence", "NodeSocketFloat", 60.0, 1.0, 500.0),
-    ("Intensity", "NodeSocketFloat", 1.0, 0.0, 1000.0),
-    ("Spectral", "NodeSocketInt", 0, 0, 1),
-    ("Tiling", "NodeSocketFloat", 1.0, 1e-3, 1e4),
-    ("FootprintScale", "NodeSocketFloat", 0.5, 1e-3, 10.0),
-    ("Debug", "NodeSocketInt", 0, 0, 2),
+    ("BaseColor", "NodeSocketColor", (0.91, 0.92, 0.92, 1.0), None, None,
+     "Colour of the metal seen head-on (linear RGB reflectance, 0-1)"),
+    ("EdgeTint", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None,
+     "Colour of the metal at grazing angles (linear RGB, 0-1; the F82 tint)"),
+    ("Roughness", "NodeSocketFloat", 0.08, 0.0, 1.0,
+     "Roughness of the metal between the scratches (0 = mirror, 1 = matte; GGX alpha = Roughness squared)"),
+    ("Coherence", "NodeSocketFloat", 60.0, 1.0, 500.0,
+     "Coherence length of the light, in micrometres (um): how far apart scratches still interfere"),
+    ("Intensity", "NodeSocketFloat", 1.0, 0.0, 1000.0,
+     "Scratch Intensity: multiplies the light the scratches scatter (1 = physical; no unit)"),
+    ("Spectral", "NodeSocketBool", False, None, None,
+     "Scratch colours from 16 wavelength bands instead of 3 (slower, smoother iridescence)"),
+    ("Tiling", "NodeSocketFloat", 1.0, 1e-3, 1e4,
+     "Scratch patches per UV unit: the patch repeats this many times across the UV map (no unit)"),
+    ("FootprintScale", "NodeSocketFloat", 0.5, 1e-3, 10.0,
+     "Size of the surface area one pixel averages over, as a fraction of the pixel's footprint (no unit)"),
+    ("Debug", "NodeSocketInt", 0, 0, 4,
+     "What to show, for checks: 0 the material, 1 the scratch colour alone, 2 the part of the light the "
+     "scratches take from the metal, 3 and 4 the pixel footprint"),
 ]
 
 
@@ -109,7 +120,9 @@ def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
     group[MARKER] = 1
     for spec in GROUP_INPUTS:
         add_group_input(group, *spec)
-    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader",
+                               description="The scratched metal for Cycles (its scratches need Open Shading "
+                               "Language; the plain metal without)")
     nodes, links = group.nodes, group.links
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
     script = _load_script(group, scene)
