@@ -9,7 +9,11 @@ CSTAMP := $(CVENV)/.material-structures-stamp
 BSTAMP := .venv-bare/.material-structures-stamp
 BCSTAMP := .venv-bare-compat/.material-structures-stamp
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender_manifest.toml)
-PYTEST_JOBS ?=
+# test processes (pytest-xdist; 0: everything in one process). Test files stay whole on one worker (--dist
+# loadfile: a file's Blender state and module fixtures are its own). --durations: the slowest tests, every run.
+PYTEST_JOBS ?= 2
+PYTEST_XDIST = -n $(PYTEST_JOBS) --dist loadfile
+PYTEST_DURATIONS ?= 25
 
 .PHONY: setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
 	bench refs clean help
@@ -18,7 +22,7 @@ help:
 	@echo "make demo        set up and render the sample library into out/"
 	@echo "make test        set up and run lint + the default test suite (Blender 5.2 LTS)"
 	@echo "make test-fast   the core tests without the heavy ones (under a minute)"
-	@echo "make test-all    also the slow suites (-m slow)"
+	@echo "make test-all    also the slow suites (-m slow) and the render regression on Cycles' SSE4.2 kernel (nightly)"
 	@echo "make test-compat Blender-side smoke tests on Blender 4.5 LTS (CPython 3.11)"
 	@echo "make test-bare   the built zip in a Python with only bpy 5.2 (a desktop Blender): every operator"
 	@echo "make test-bare-compat  the same on Blender 4.5 LTS"
@@ -46,16 +50,18 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 test: $(STAMP) lint
-	$(PY) -m pytest -m "not slow" -q $(PYTEST_JOBS)
+	$(PY) -m pytest -m "not slow" -q $(PYTEST_XDIST) --durations=$(PYTEST_DURATIONS)
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -m "not slow and not blender and not heavy" -q tests/core
+	$(PY) -m pytest -m "not slow and not blender and not heavy" -q $(PYTEST_XDIST) tests/core
 
+# nightly: everything, then the render regression again with Cycles' CPU kernel forced down to SSE4.2
 test-all: $(STAMP) lint
-	$(PY) -m pytest -q $(PYTEST_JOBS)
+	$(PY) -m pytest -q $(PYTEST_XDIST) --durations=$(PYTEST_DURATIONS)
+	$(PY) -m pytest -m regression -q $(PYTEST_XDIST) --cycles-kernel=sse42 tests/blender
 
 test-compat: $(CSTAMP)
-	$(CPY) -m pytest -m "blender and not slow" -q tests/blender
+	$(CPY) -m pytest -m "blender and not slow" -q $(PYTEST_XDIST) --durations=$(PYTEST_DURATIONS) tests/blender
 
 samples/library/material_structures_library.blend: | $(STAMP)
 	$(PY) -m material_structures library build
@@ -87,7 +93,7 @@ bench: $(STAMP)
 	$(PY) -m material_structures bench --all --out bench/results
 
 refs: $(STAMP)
-	$(PY) -m pytest -m regression -q --update-refs tests
+	$(PY) -m pytest -m regression -q $(PYTEST_XDIST) --update-refs tests
 
 clean:
 	rm -rf out dist tests/output .pytest_cache
