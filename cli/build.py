@@ -18,6 +18,8 @@ import shutil
 import subprocess
 import sys
 
+from ..core.errors import UserError
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # What a desktop Blender's Python lacks and a feature needs (README "Installing"): scipy for the fabric
@@ -55,13 +57,13 @@ def blender_ext_tool() -> str:
     """Path of ``blender_ext.py`` inside the installed bpy wheel (no Blender binary needed)."""
     spec = importlib.util.find_spec("bpy")
     if spec is None or not spec.submodule_search_locations:
-        raise RuntimeError("bpy is not installed in this Python; run `make build` (it sets up .venv)")
+        raise UserError("bpy is not installed in this Python; run `make build` (it sets up .venv)")
     base = list(spec.submodule_search_locations)[0]
     hits = sorted(
         glob.glob(os.path.join(base, "*", "scripts", "addons_core", "bl_pkg", "cli", "blender_ext.py"))
     )
     if not hits:
-        raise RuntimeError(f"blender_ext.py not found under {base}")
+        raise UserError(f"blender_ext.py not found under {base}")
     return hits[-1]
 
 
@@ -127,7 +129,7 @@ def download_wheels(python: str, platform: str, cache: str) -> list[str]:
     if proc.returncode == 0 and present():
         return present()
     errors = " ".join(ln for ln in proc.stderr.splitlines() if ln.startswith("ERROR"))[:400]
-    raise RuntimeError(f"no wheels of {', '.join(want)} for {platform} / CPython {python}: {errors}")
+    raise UserError(f"no wheels of {', '.join(want)} for {platform} / CPython {python}: {errors}")
 
 
 def _stage(source_dir: str, stage: str, manifest: dict) -> None:
@@ -158,7 +160,7 @@ def _staged_manifest(text: str, python: str, wheels: list[str], platforms: list[
             lines += [f'  "./wheels/{os.path.basename(w)}",' for w in wheels]
             lines.append("]")
         elif line.startswith(("blender_version_max", "platforms", "wheels")):
-            raise RuntimeError(f"blender_manifest.toml: {line.split('=')[0].strip()} is written by the build")
+            raise UserError(f"blender_manifest.toml: {line.split('=')[0].strip()} is written by the build")
         else:
             lines.append(line)
     return "\n".join(lines) + "\n"

@@ -18,12 +18,14 @@ import os
 import shutil
 import sys
 import time
+import zipfile
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict
 
 import numpy as np
 
+from ..errors import BadFileError
 from ..folder_lock import FolderLock
 from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
@@ -74,6 +76,29 @@ def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, 
     return t, time.perf_counter() - start, res.iterations
 
 
+TILE_ARRAYS = {"quat": 4, "sigma": 2, "ks": 3, "kd": 3, "cost": 0}
+
+
+def read_tile(cache: str, t: tuple[int, int, int, int]) -> dict[str, np.ndarray]:
+    """A tile's checkpoint as ``name -> (th, tw[, C])`` arrays; a damaged one (truncated, not a .npz, arrays
+    missing or of the wrong size) is refused by name, with what to do about it."""
+    path = _tile_path(cache, t)
+    shp = (t[1] - t[0], t[3] - t[2])
+    try:
+        with np.load(path) as z:
+            return {k: z[k].reshape(shp + ((c,) if c else ())) for k, c in TILE_ARRAYS.items()}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise BadFileError(f"{path}: a damaged tile checkpoint ({type(exc).__name__}: {exc}); delete it and run "
+                           "the fit again to fit that tile anew") from None
+
+
+def check_tiles(cache: str, tiles: list[tuple[int, int, int, int]]) -> None:
+    """Read every tile checkpoint there is before any work, so that a damaged one stops the fit at once."""
+    for t in tiles:
+        if os.path.isfile(_tile_path(cache, t)):
+            read_tile(cache, t)
+
+
 def _directions_hash(wi: np.ndarray, wo: np.ndarray) -> str:
     return hashlib.sha1(np.ascontiguousarray(np.concatenate([wi, wo], 1)).tobytes()).hexdigest()
 
@@ -116,8 +141,11 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
     values_path = os.path.join(cache, "values.npy")
     old = None
     if os.path.isfile(meta_path):
-        with open(meta_path) as f:
-            old = json.load(f)
+        try:
+            with open(meta_path) as f:
+                old = json.load(f)
+        except (ValueError, UnicodeDecodeError):  # damaged: the cache is built anew, as for another BTF
+            old = None
     if old != meta or not os.path.isfile(values_path):
         shutil.rmtree(cache, ignore_errors=True)
         os.makedirs(os.path.join(cache, "tiles"), exist_ok=True)
@@ -182,6 +210,7 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
     hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress is True, checked)
     t_loaded = time.perf_counter()
     tiles = _tiles(hdr.height, hdr.width, tile)
+    check_tiles(cache, tiles)
     todo = [t for t in tiles if not os.path.isfile(_tile_path(cache, t))]
     init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
     bar = None
@@ -222,13 +251,9 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
     ks, kd, cost = np.zeros((h, w, 3)), np.zeros((h, w, 3)), np.zeros((h, w))
     for t in tiles:
         y0, y1, x0, x1 = t
-        with np.load(_tile_path(cache, t)) as z:
-            shp = (y1 - y0, x1 - x0)
-            quat[y0:y1, x0:x1] = z["quat"].reshape(shp + (4,))
-            sigma[y0:y1, x0:x1] = z["sigma"].reshape(shp + (2,))
-            ks[y0:y1, x0:x1] = z["ks"].reshape(shp + (3,))
-            kd[y0:y1, x0:x1] = z["kd"].reshape(shp + (3,))
-            cost[y0:y1, x0:x1] = z["cost"].reshape(shp)
+        z = read_tile(cache, t)
+        quat[y0:y1, x0:x1], sigma[y0:y1, x0:x1] = z["quat"], z["sigma"]
+        ks[y0:y1, x0:x1], kd[y0:y1, x0:x1], cost[y0:y1, x0:x1] = z["ks"], z["kd"], z["cost"]
     pref = None if preferred is None else np.asarray(preferred, dtype=np.float64)
     quat, sigma, labels = postprocess_basis(quat, sigma, pref)
     maps = make_maps(kd, ks, sigma, quat)

@@ -10,6 +10,8 @@ import json
 import os
 from dataclasses import dataclass, field, fields
 
+from ..errors import UserError
+
 # in a fit's output folder: the start trials (one folder per start, and the starts they run from) until one wins
 TRIALS_DIR = "start_trials"
 
@@ -36,6 +38,7 @@ class FitState:
     avg_sum: list | None = None
     avg_count: int = 0
     identity: dict | None = None  # what the fit was made for (optimise.fit_identity)
+    settings: dict | None = None  # the FitSettings it runs with (asdict; fit_settings.settings_from_dict)
 
 
 def load_state(path: str) -> FitState:
@@ -44,24 +47,28 @@ def load_state(path: str) -> FitState:
         with open(path) as f:
             d = json.load(f)
     except json.JSONDecodeError as e:
-        raise ValueError(f"{path!r} is not a fit checkpoint ({e})") from None
+        raise UserError(f"{path!r} is not a fit checkpoint ({e})") from None
     names = {f.name for f in fields(FitState)}
     if not isinstance(d, dict) or set(d) - names or "precond" in d or d.get("identity") is None:
-        raise ValueError(f"{path!r} is a checkpoint of an earlier version of the fit; start the fit again")
+        raise UserError(f"{path!r} is a checkpoint of an earlier version of the fit; start the fit again")
     try:
         return FitState(**d)
     except TypeError as e:
-        raise ValueError(f"{path!r} is not a complete fit checkpoint ({e})") from None
+        raise UserError(f"{path!r} is not a complete fit checkpoint ({e})") from None
 
 
 def check_identity(path: str, saved: dict, now: dict) -> None:
     """Refuse to resume the checkpoint at ``path`` (made for ``saved``) under ``now``, naming what differs."""
-    differ = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
+    # keys a checkpoint of an earlier version lacks: not compared where it lacks them
+    later = ("spp", "image_spp", "lr", "optimiser")
+    differ = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k) and (k in saved or k not in later)]
     if differ:
         what = {"capture": "the capture", "teeth": "the teeth", "layout": "the parameter layout",
-                "free": "the free parameters", "seed": "the seed", "held_out_lights": "the held-out lights"}
-        raise ValueError(f"{path!r} was made for another fit ({', '.join(what.get(k, k) for k in differ)} "
-                         "differ); resume with the fit's own capture and settings, or start a new fit")
+                "free": "the free parameters", "seed": "the seed", "held_out_lights": "the held-out lights",
+                "spp": "the samples per pixel", "image_spp": "the image samples per pixel",
+                "lr": "the learning rate", "optimiser": "the optimiser"}
+        raise UserError(f"{path!r} was made for another fit ({', '.join(what.get(k, k) for k in differ)} "
+                        "differ); resume with the fit's own capture and settings, or start a new fit")
 
 
 def stopped_fit(out_dir: str) -> bool:

@@ -359,7 +359,8 @@ def test_cli_fit_eval_score(tmp_path, capsys):
                      "--out", str(tmp_path / f"{d}.npz")]) == 0
     capsys.readouterr()
     assert main(["fabric", "score", str(tmp_path / "gt.npz"), hold]) == 0
-    assert json.loads(capsys.readouterr().out)["psnr_db"] > 60  # ground truth reproduces itself
+    score = json.loads(capsys.readouterr().out)  # ground truth reproduces itself (to the bit: PSNR null)
+    assert score["identical"] or score["psnr_db"] > 60
     assert main(["fabric", "score", str(tmp_path / "fit.npz"), hold]) == 0
     assert json.loads(capsys.readouterr().out)["psnr_db"] >= 30
     assert main(["fabric", "ndf", btf, "--texel", "2", "3", "--resolution", "32",
