@@ -186,6 +186,18 @@ def add_group_input(group, name: str, socket_type: str, default, lo=None, hi=Non
     return sock
 
 
+def describe_group_sockets(group, specs, outputs: dict[str, str] | None = None) -> None:
+    """Give the sockets of ``group`` (from a file made before they had tooltips) the descriptions of its input
+    ``specs`` and of ``outputs`` (name -> description) where they have none. An input's type stays as the
+    file has it: an on/off input that was an integer 0/1 renders the same as a boolean, and changing its type
+    would reset the value every material set."""
+    words = {spec[0]: spec[5] for spec in specs if len(spec) > 5}
+    words.update(outputs or {})
+    for item in group.interface.items_tree:
+        if item.item_type == "SOCKET" and not item.description and item.name in words:
+            item.description = words[item.name]
+
+
 def wire_lamp_shader_group(group, gin, script, gout, input_names, lamp_term: str):
     """Wire an OSL ``script`` node that returns a BSDF and a term it evaluates per lamp itself (fabric, scratch)
     inside ``group``: each of ``input_names`` from the group input ``gin`` to the script's input of that name,

@@ -29,6 +29,7 @@ from ..common import (
     add_group_input,
     add_osl_switch,
     array_to_image,
+    describe_group_sockets,
     group_material,
     group_node,
     osl_switch,
@@ -159,7 +160,9 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
 
 def ensure_closures_without_osl(group) -> None:
     """Give a group from an older file the closure path that renders without OSL (``native_closures``), and
-    link its switch to the script once the script has the ``OSLActive`` output."""
+    link its switch to the script once the script has the ``OSLActive`` output; its sockets get their tooltips."""
+    describe_group_sockets(group, GROUP_INPUTS, {"Shader": SHADER_OUTPUT_DESCRIPTION,
+                                                 VIEWPORT_OUTPUT: VIEWPORT_OUTPUT_DESCRIPTION})
     script = next((n for n in group.nodes if n.type == "SCRIPT" and "Lamp1Type" in n.inputs), None)
     if script is None:
         return

@@ -28,6 +28,7 @@ from ..common import (
     add_eevee_fallback,
     add_group_input,
     add_osl_switch,
+    describe_group_sockets,
     group_material,
     osl_switch,
     relink_osl_switch,
@@ -76,6 +77,8 @@ GROUP_INPUTS = [
      "What to show, for checks: 0 the material, 1 the scratch colour alone, 2 the part of the light the "
      "scratches take from the metal, 3 and 4 the pixel footprint"),
 ]
+SHADER_OUTPUT_DESCRIPTION = ("The scratched metal for Cycles (its scratches need Open Shading Language; the plain "
+                             "metal without)")
 
 
 def _load_script(tree, scene):
@@ -121,8 +124,7 @@ def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
     for spec in GROUP_INPUTS:
         add_group_input(group, *spec)
     group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader",
-                               description="The scratched metal for Cycles (its scratches need Open Shading "
-                               "Language; the plain metal without)")
+                               description=SHADER_OUTPUT_DESCRIPTION)
     nodes, links = group.nodes, group.links
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
     script = _load_script(group, scene)
@@ -156,7 +158,8 @@ def _base_metal(group, gin, tangent):
 
 def ensure_base_metal(group) -> None:
     """Give a scratch group from an older file the base metal that renders without OSL, and link its switch
-    once the script has the ``OSLActive`` output."""
+    once the script has the ``OSLActive`` output; its sockets get their tooltips."""
+    describe_group_sockets(group, GROUP_INPUTS, {"Shader": SHADER_OUTPUT_DESCRIPTION})
     script = script_node(group)
     if script is None:
         return

@@ -240,3 +240,61 @@ def test_boolean_switches_render_as_the_integers_of_older_files(addon_module):
     # each switch changes the render: FastPreview, UseFittedClosures (seen in Fast Preview), ExactWorld
     for on, off in (((1, 1, 1), (0, 1, 1)), ((1, 1, 1), (1, 0, 1)), ((0, 1, 1), (0, 1, 0))):
         assert np.abs(bools[on, True] - bools[off, True]).max() > 1e-4, (on, off)
+
+
+@pytest.mark.parametrize("idname, rows", [
+    ("scratch_generate", ["Length (um)", "Width (um)", "Depth (um)"]),
+    ("scratch_draw", ["Width (um)", "Depth (um)"]),
+])
+def test_redo_panels_label_the_micrometre_ranges_min_and_max(addon_module, monkeypatch, idname, rows):
+    """The Adjust Last Operation panel draws each (min, max) micrometre pair as its name, then Min and Max, and
+    Hairline Angle in degrees (drawn by the recorder of the README's panel pictures)."""
+    from material_structures.showcase import ui_panels
+
+    op_cls = next(c for c in sys.modules[f"{addon_module}.addon"].CLASSES
+                  if getattr(c, "bl_idname", "") == f"material_structures.{idname}")
+    props = bpy.context.window_manager.operator_properties_last(f"material_structures.{idname}")
+
+    class StandIn:  # the operator as its draw() sees it: its properties and a layout
+        layout = ui_panels.Layout()
+        bl_rna = props.bl_rna
+
+        def __getattr__(self, name):
+            return getattr(props, name)
+
+    describe = ui_panels.describe_prop
+    monkeypatch.setattr(ui_panels, "describe_prop",
+                        lambda data, *a, **kw: describe(props if isinstance(data, StandIn) else data, *a, **kw))
+    op = StandIn()
+    op_cls.draw(op, bpy.context)
+    texts = op.layout.texts()
+    for row in rows:
+        i = texts.index(row)
+        assert texts[i + 1] == "Min" and texts[i + 3] == "Max", texts
+    if idname == "scratch_generate":
+        assert "Hairline Angle" in texts and any(t.endswith("\N{DEGREE SIGN}") for t in texts), texts
+
+
+def test_groups_of_older_files_get_their_tooltips_on_load_and_keep_their_switches(addon_module):
+    """A file made before the tooltips: its fabric and scratch groups have sockets without descriptions and
+    integer 0..1 switches. After loading (the add-on's load handler), every socket has its description and
+    the switches stay integers with the values the materials set."""
+    groups = [g for g in _built_groups(addon_module) if g.name not in _teeth_group_names(addon_module,
+                                                                                          bpy.data.node_groups)]
+    fabric = next(g for g in groups if g.name == "SGGX Fabric")
+    old = fabric.interface.items_tree["FastPreview"]  # an int switch as older files have it
+    fabric.interface.remove(old)
+    sock = fabric.interface.new_socket("FastPreview", in_out="INPUT", socket_type="NodeSocketInt")
+    sock.min_value, sock.max_value = 0, 1
+    node = sys.modules[f"{addon_module}.addon.fabric.material"].fabric_group_node(
+        bpy.data.objects["Fabric"].active_material)
+    node.inputs["FastPreview"].default_value = 1
+    for group in groups:
+        for item in group.interface.items_tree:
+            if item.item_type == "SOCKET":
+                item.description = ""
+    sys.modules[f"{addon_module}.addon.handlers"].on_load_post()
+    assert not socket_problems([g for g in groups if g != fabric]), _report(socket_problems(groups))
+    assert set(socket_problems([fabric])) == {"SGGX Fabric: input FastPreview"}  # described, still an int
+    assert fabric.interface.items_tree["FastPreview"].description
+    assert node.inputs["FastPreview"].type == "INT" and node.inputs["FastPreview"].default_value == 1
