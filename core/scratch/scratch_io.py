@@ -30,6 +30,8 @@ for j in 0..count-1: m = cell_segments[offset + j]; fetch segments[m] and segmen
 from __future__ import annotations
 
 import os
+import zipfile
+import zlib
 
 import numpy as np
 
@@ -63,10 +65,18 @@ def save_scratch_set_npz(path: str | os.PathLike, s: ScratchSet) -> None:
             os.remove(tmp)
 
 
+def _array(path: str, z, name: str) -> np.ndarray:
+    """Array ``name`` of the .npz ``z``; one that cannot be read (Python objects, a damaged member) is refused."""
+    try:
+        return z[name]
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise UserError(f"{path}: field {name!r} cannot be read ({type(exc).__name__}: {exc})") from None
+
+
 def _field(path: str, name: str, z, dtype, scalar: bool = False):
     """Array ``name`` of the .npz ``z`` as ``dtype`` (a Python number with ``scalar``); an array of another
     kind (text, booleans, complex numbers, several values for one) is refused naming the file and the field."""
-    a = z[name]
+    a = _array(path, z, name)
     kinds = "iuf" if dtype is np.float64 else "iu"
     if a.dtype.kind == "f" and dtype is np.int64 and np.all(np.isfinite(a)) and np.all(a == np.round(a)):
         kinds += "f"  # whole numbers stored as floats
@@ -91,7 +101,8 @@ def _load_npz(path: str) -> ScratchSet:
         first = (str(exc).splitlines() or [type(exc).__name__])[0]
         raise UserError(f"{path}: not a readable .npz file ({first})") from exc
     with z:
-        if "format" not in z.files or z["format"].dtype.kind not in "US" or str(z["format"]) != FORMAT:
+        tag = _array(path, z, "format") if "format" in z.files else None
+        if tag is None or tag.dtype.kind not in "US" or str(tag) != FORMAT:
             raise UserError(f"{path}: not a scratch-set file (missing format tag {FORMAT!r})")
         version = _field(path, "version", z, np.int64, scalar=True) if "version" in z.files else None
         if version != VERSION:

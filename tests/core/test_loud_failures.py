@@ -182,6 +182,7 @@ def _scratch_npz(tmp_path, **change):
     ({"width_um": lambda a: a + 2j}, "field 'width_um' holds complex128 values"),
     ({"version": np.array("one")}, "field 'version' holds <U3 values"),
     ({"format": np.array(7)}, "not a scratch-set file"),
+    ({"width_um": np.array([None])}, "field 'width_um' cannot be read"),
 ])
 def test_scratch_set_values_of_the_wrong_type_are_one_line(tmp_path, capsys, change, said):
     path = _scratch_npz(tmp_path, **change)
@@ -191,6 +192,16 @@ def test_scratch_set_values_of_the_wrong_type_are_one_line(tmp_path, capsys, cha
     assert main(["scratch", "eval", str(path), "--size", "8", "--out", str(tmp_path / "e.exr")]) == 2
     _one_line(capsys, said)
     assert _tree(tmp_path) == before
+
+
+def test_a_truncated_scratch_set_is_one_line(tmp_path, capsys):
+    """Cut anywhere, a scratch set is refused naming the file (never a zipfile or zlib traceback)."""
+    path = _scratch_npz(tmp_path)
+    data = path.read_bytes()
+    for cut in range(8, len(data), max(1, len(data) // 12)):
+        path.write_bytes(data[:cut])
+        assert main(["scratch", "info", str(path)]) == 2
+        _one_line(capsys, f"{path}: ")
 
 
 def test_whole_number_floats_still_load_as_integers(tmp_path, capsys):
