@@ -17,11 +17,11 @@ class MS_FabricBrushSettings(bpy.types.PropertyGroup):
     mode: bpy.props.EnumProperty(name="Mode", items=BRUSH_MODE_ITEMS, default="COMB",
                                  description="What a stroke does to the fabric's parameter maps")
     radius: bpy.props.FloatProperty(
-        name="Radius", default=0.03, min=0.001, max=0.5, subtype="FACTOR",
+        name="Radius", default=0.03, min=0.001, max=0.5,
         description="Brush radius as a fraction of the UV map's width (UV units: 1 = the whole map)"
     )
     strength: bpy.props.FloatProperty(
-        name="Strength", default=0.8, min=0.0, max=1.0, subtype="FACTOR",
+        name="Strength", default=0.8, min=0.0, max=1.0,
         description="How far one stroke moves the fabric toward the brush's result at the brush centre "
         "(0: not at all, 1: all the way; a factor, no unit)",
     )
