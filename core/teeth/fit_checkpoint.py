@@ -44,17 +44,24 @@ class FitState:
 def load_state(path: str) -> FitState:
     """The checkpoint at ``path``; a checkpoint of an earlier version is refused (start the fit again)."""
     try:
-        with open(path) as f:
+        with open(path, encoding="utf-8") as f:
             d = json.load(f)
-    except json.JSONDecodeError as e:
+    except ValueError as e:  # not JSON (cut short), or not text
         raise UserError(f"{path!r} is not a fit checkpoint ({e})") from None
     names = {f.name for f in fields(FitState)}
     if not isinstance(d, dict) or set(d) - names or "precond" in d or d.get("identity") is None:
         raise UserError(f"{path!r} is a checkpoint of an earlier version of the fit; start the fit again")
     try:
-        return FitState(**d)
+        state = FitState(**d)
     except TypeError as e:
         raise UserError(f"{path!r} is not a complete fit checkpoint ({e})") from None
+    kinds = {"phase": str, "iteration": int, "scene": dict, "y": list, "adam_n": int, "best_loss": (int, float),
+             "best_scene": dict, "log": list, "identity": dict, "settings": (dict, type(None))}
+    wrong = [k for k, kind in kinds.items() if not isinstance(getattr(state, k), kind)]
+    if wrong or not all(isinstance(e, dict) for e in state.log):
+        raise UserError(f"{path!r} is a damaged fit checkpoint (fields of the wrong kind: {wrong or ['log']}); "
+                        "start the fit again")
+    return state
 
 
 def check_identity(path: str, saved: dict, now: dict) -> None:

@@ -400,3 +400,20 @@ def test_a_free_pattern_that_names_no_parameter_is_refused(capture_dir, tmp_path
     err = capsys.readouterr().err
     assert err.startswith("error: --free *.albdo: no parameter of ") and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("content, said", [
+    (b"\xff\xfe\x00garbage", "is not a fit checkpoint"),
+    (json.dumps({"phase": "homogeneous", "iteration": "five", "scene": {}, "y": [], "adam_m": None, "adam_v": None,
+                 "adam_n": 0, "best_loss": 1.0, "best_scene": {}, "log": "none", "identity": {}}).encode(),
+     "a damaged fit checkpoint (fields of the wrong kind: ['iteration', 'log'])"),
+])
+def test_a_damaged_checkpoint_is_one_line(capture_dir, tmp_path, capsys, content, said):
+    out = tmp_path / "fit"
+    out.mkdir()
+    (out / "checkpoint.json").write_bytes(content)
+    before = _digest(out)
+    assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--resume", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "checkpoint.json" in err and said in err and err.count("\n") == 1, err
+    assert _digest(out) == before
