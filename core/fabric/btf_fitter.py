@@ -146,8 +146,14 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
                 old = json.load(f)
         except (ValueError, UnicodeDecodeError):  # damaged: the cache is built anew, as for another BTF
             old = None
-    if old != meta or not os.path.isfile(values_path):
-        shutil.rmtree(cache, ignore_errors=True)
+    same = old == meta
+    if not same or not _cache_readable(cache, meta["shape"]):
+        if same:  # this BTF's copy or operator damaged: they are made again, the tiles fitted so far stay
+            for name in ("meta.json", "values.npy", "ndf_operator.npz"):
+                if os.path.exists(os.path.join(cache, name)):
+                    os.remove(os.path.join(cache, name))
+        else:
+            shutil.rmtree(cache, ignore_errors=True)
         os.makedirs(os.path.join(cache, "tiles"), exist_ok=True)
         tmp = values_path + ".tmp.npy"
         n, h, w, _ = meta["shape"]
@@ -167,6 +173,22 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
                  solid_angle=op.solid_angle, valid=op.valid, resolution=op.resolution)
         save_json(meta_path, meta)
     return hdr, cache, values_path
+
+
+def _cache_readable(cache: str, shape: list) -> bool:
+    """Whether the cache's BTF copy and NDF operator can be read (a damaged one is built anew: it is derived
+    from the BTF, so nothing is lost)."""
+    n, h, w, _ = shape
+    try:
+        values = np.load(os.path.join(cache, "values.npy"), mmap_mode="r")
+        ok = values.shape == (h, w, n, 3) and values.dtype == np.float32
+        del values
+        with np.load(os.path.join(cache, "ndf_operator.npz")) as z:
+            ok = ok and {"A", "directions", "solid_angle", "valid", "resolution"} <= set(z.files)
+            ok = ok and all(z[k] is not None for k in z.files)
+        return ok
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        return False
 
 
 class _CallbackBar:

@@ -275,3 +275,19 @@ def test_a_blend_file_blender_cannot_read_is_one_line(tmp_path):
     lines = [line for line in r.stderr.splitlines() if line.startswith("error: ")]
     assert lines and "x.blend: not a readable .blend file" in lines[-1] and "Traceback" not in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.blend"]
+
+
+def test_a_damaged_copy_of_the_btf_in_the_fit_cache_is_made_again(btf, tmp_path, capsys):
+    """The fit cache's copy of the BTF (values.npy) or its NDF operator cut short: derived data, made again
+    from the BTF on the next run, keeping the tiles fitted so far (was numpy's mmap ValueError)."""
+    out = tmp_path / "fit"
+    argv = ["fabric", "fit", str(btf), "--out", str(out), "--tile", "2", "--no-dask", "--workers", "1", "--no-progress"]
+    assert main(argv) == 0
+    cache = out / ".fit_cache"
+    for name in ("values.npy", "ndf_operator.npz"):
+        data = (cache / name).read_bytes()
+        (cache / name).write_bytes(data[: len(data) // 3])
+        capsys.readouterr()
+        assert main(argv) == 0
+        assert json.loads(capsys.readouterr().out)["tiles_fitted_this_run"] == 0
+        assert (cache / name).read_bytes() == data
