@@ -101,7 +101,10 @@ def _capture_of_table_points(picks, scale: float = 1.0):
     return pts, float(gs[1]), start, cap
 
 
-@pytest.mark.parametrize("picks", [((1, 1), (0, 0), (1, 0)), ((0, 0), (1, 1), (1, 0))])
+# the second assignment of the points to the channels is nightly (`make test-all`; 154 s of 3700 on a loaded
+# 2-core machine); `make test` runs the first, the same search and checks
+@pytest.mark.parametrize("picks", [((1, 1), (0, 0), (1, 0)),
+                                   pytest.param(((0, 0), (1, 1), (1, 0)), marks=pytest.mark.slow)])
 def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
     """Points of the table whose images differ (sigma_t 0.3 or 1.39 / mm, albedo 0.5 or 0.978). Denser or
     brighter neighbours (sigma_t 6.46 vs 30 / mm at albedo 0.5, albedo 0.978 vs 0.999 at sigma_t 0.3) give
