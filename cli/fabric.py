@@ -85,7 +85,7 @@ def _event(**fields) -> None:
 
 
 def run_fit(args: argparse.Namespace) -> int:
-    from ..core.fabric.btf_fitter import fit_btf
+    from ..core.fabric.btf_fitter import check_btf, fit_btf
     from ..core.fabric.tile_fit import FitOptions
 
     if args.tile < 1:
@@ -94,6 +94,11 @@ def run_fit(args: argparse.Namespace) -> int:
     options = FitOptions(weighting=args.weighting)
     if args.no_dask and args.scheduler:
         raise UserError("--no-dask and --scheduler exclude each other")
+    if args.scheduler and os.environ.get(PROGRESS_ENV) != "json":
+        from ..scaleout.cluster import check_scheduler
+
+        check_btf(args.btf)  # a BTF that cannot be fitted is said first
+        check_scheduler(args.scheduler)  # before anything is written
     if os.environ.get(PROGRESS_ENV) == "json":  # the Blender add-on: progress as JSON lines, a local process pool
         if args.scheduler:
             raise UserError(f"{PROGRESS_ENV}=json fits in local processes: leave out --scheduler")

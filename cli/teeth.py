@@ -409,6 +409,10 @@ def run_fit(args: argparse.Namespace) -> int:
         raise UserError("--workers is for fits in this process; on Dask, the cluster's workers render")
     if args.scheduler is not None and args.dask_workers is not None:
         raise UserError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
+    if args.scheduler is not None:
+        from ..scaleout.cluster import check_scheduler
+
+        check_scheduler(args.scheduler)  # before the start search and trials, minutes of work written to --out
     ckpt = os.path.join(args.out, "checkpoint.json")
     trials_path = os.path.join(args.out, "start_trials.json")
     trials_work = os.path.join(args.out, TRIALS_DIR)

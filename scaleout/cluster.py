@@ -11,6 +11,25 @@ from ..core.errors import UserError
 SCHEDULER_TIMEOUT_S = 10  # an address that does not answer: a mistyped host or port, or a scheduler not started
 
 
+def _connect(scheduler: str):
+    from distributed import Client
+
+    try:
+        return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+    except ValueError as exc:  # "missing port number", "unknown address scheme"
+        raise UserError(f"--scheduler {scheduler!r} is not a Dask scheduler address ({exc}); give one like "
+                        "tcp://HOST:8786") from None
+    except OSError as exc:
+        raise UserError(f"no Dask scheduler answers at {scheduler} within {SCHEDULER_TIMEOUT_S} s: start one "
+                        "(dask scheduler) or leave out --scheduler to use this machine's cores") from exc
+
+
+def check_scheduler(scheduler: str) -> None:
+    """Refuse a --scheduler that is not an address or where no scheduler answers, before a fit writes
+    anything (the fit connects again when it needs the cluster)."""
+    _connect(scheduler).close()
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, n_workers: int | None = None, threads_per_worker: int = 1):
     """``Client`` for ``scheduler`` (``tcp://host:8786``) or a local cluster of ``n_workers`` processes.
@@ -22,11 +41,7 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, thre
     from distributed import Client, LocalCluster
 
     if scheduler:
-        try:
-            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
-        except OSError as exc:
-            raise UserError(f"no Dask scheduler answers at {scheduler} within {SCHEDULER_TIMEOUT_S} s: start one "
-                            "(dask scheduler) or leave out --scheduler to use this machine's cores") from exc
+        client = _connect(scheduler)
         try:
             with _quiet_on_interrupt():
                 yield client

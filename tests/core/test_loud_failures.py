@@ -291,3 +291,21 @@ def test_a_damaged_copy_of_the_btf_in_the_fit_cache_is_made_again(btf, tmp_path,
         assert main(argv) == 0
         assert json.loads(capsys.readouterr().out)["tiles_fitted_this_run"] == 0
         assert (cache / name).read_bytes() == data
+
+
+@pytest.mark.parametrize("address, said", [
+    ("foo", "--scheduler 'foo' is not a Dask scheduler address (missing port number"),
+    ("xyz://a:b", "--scheduler 'xyz://a:b' is not a Dask scheduler address (unknown address scheme"),
+    ("tcp://127.0.0.1:9", "no Dask scheduler answers at tcp://127.0.0.1:9"),
+])
+def test_a_scheduler_that_is_no_address_or_does_not_answer_is_one_line(btf, tmp_path, capsys, address, said,
+                                                                       monkeypatch):
+    """Was a ValueError traceback (a malformed address), and a fit cache left behind in --out (no answer)."""
+    import material_structures.scaleout.cluster as cluster
+
+    monkeypatch.setattr(cluster, "SCHEDULER_TIMEOUT_S", 1)
+    capsys.readouterr()
+    assert main(["fabric", "fit", str(btf), "--out", str(tmp_path / "fit"), "--scheduler", address,
+                 "--no-progress"]) == 2
+    _one_line(capsys, said)
+    assert list(tmp_path.iterdir()) == []
