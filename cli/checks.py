@@ -88,3 +88,19 @@ def refuse_output_over_inputs(out: str, inputs: list[str]) -> None:
         i = os.path.realpath(inp)
         if o == i or o.startswith(i + os.sep) or i.startswith(o + os.sep):
             raise UserError(f"--out {out!r} would write over the input {inp!r}; choose another output")
+
+
+def refuse_unwritable_folder(path: str, flag: str = "--out") -> None:
+    """Refuse, before the work, an output folder that cannot be made: an existing file at ``path`` or at a
+    folder above it (the work would end in "Not a directory" after minutes)."""
+    p = os.path.abspath(path)
+    while True:
+        if os.path.exists(p):
+            if not os.path.isdir(p):
+                what = "is a file" if p == os.path.abspath(path) else f"lies under the file {p!r}"
+                raise UserError(f"{flag} {path!r} {what}, not a folder; choose another output")
+            return
+        parent = os.path.dirname(p)
+        if parent == p:
+            return
+        p = parent

@@ -15,7 +15,7 @@ import os
 from ..core.errors import MissingFileError, UserError
 from ..core.teeth.fit_checkpoint import TRIALS_DIR
 from ..core.teeth.fit_settings import FitSettings
-from .checks import at_least, between, positive_float, refuse_output_over_inputs, seed
+from .checks import at_least, between, positive_float, refuse_output_over_inputs, refuse_unwritable_folder, seed
 
 FIT_DEFAULTS = FitSettings()  # the defaults of ``teeth fit``: the fit's own, no second table
 
@@ -115,6 +115,7 @@ def run_synth(args: argparse.Namespace) -> int:
 
     if args.teeth < 1 or args.width < 4 or args.height < 4 or args.spp < 1:
         raise UserError("need --teeth >= 1, --width/--height >= 4 and --spp >= 1")
+    refuse_unwritable_folder(args.out, "OUT")
     if args.scene is not None:
         scene = load_scene(args.scene)
         if not scene.teeth:

@@ -309,3 +309,18 @@ def test_a_scheduler_that_is_no_address_or_does_not_answer_is_one_line(btf, tmp_
                  "--no-progress"]) == 2
     _one_line(capsys, said)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["teeth", "synth", "{f}/sub", "--width", "8", "--height", "8", "--lights", "1", "--cameras", "1"],
+     "OUT '{f}/sub' lies under the file '{f}', not a folder"),
+    (["fabric", "synth", "--out", "{f}", "--width", "2", "--height", "2"], "--out '{f}' is a file, not a folder"),
+    (["fabric", "synth", "--out", "{f}/b.npz", "--width", "2", "--height", "2"], "'{f}' is a file, not a folder"),
+])
+def test_an_output_under_a_file_is_refused_before_the_work(tmp_path, capsys, argv, said):
+    """Was "Not a directory" after the whole capture or BTF had been rendered."""
+    f = tmp_path / "file"
+    f.write_text("keep me")
+    assert main([a.format(f=f) for a in argv]) == 2
+    _one_line(capsys, said.format(f=f))
+    assert f.read_text() == "keep me" and list(tmp_path.iterdir()) == [f]
