@@ -20,11 +20,15 @@ __version__ = _manifest_version()
 
 def register() -> None:
     from .addon import register as _register
+    from .cli.blender_command import register_command
 
     _register()
+    register_command()  # blender -c material_structures ...
 
 
 def unregister() -> None:
     from .addon import unregister as _unregister
+    from .cli.blender_command import unregister_command
 
+    unregister_command()
     _unregister()

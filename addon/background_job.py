@@ -133,6 +133,7 @@ class BackgroundJob:
         self.cmd = list(cmd)
         self.out_dir = out_dir
         self.iterations = max(int(iterations), 1)
+        self.iterations_known = iterations > 1  # else the command reports its count; until then no "0/1"
         self.proc: subprocess.Popen | None = None
         self.done_iterations = 0
         self.loss: float | None = None
@@ -196,6 +197,7 @@ class BackgroundJob:
             self.done_iterations = int(event.get("iteration", self.done_iterations))
             if event.get("iterations"):
                 self.iterations = max(int(event["iterations"]), 1)
+                self.iterations_known = True
             if event.get("loss") is not None:
                 self.loss = float(event["loss"])
             if "message" in event:
@@ -282,4 +284,6 @@ class BackgroundJob:
     def status_text(self) -> str:
         loss = "" if self.loss is None else f", loss {self.loss:.3e}"
         doing = f", {self.message}" if self.message else ""
+        if not self.iterations_known and not self.done_iterations:
+            return f"{self.label}: starting{doing} (Esc cancels)"
         return f"{self.label}: {self.unit} {self.done_iterations}/{self.iterations}{loss}{doing} (Esc cancels)"

@@ -51,6 +51,42 @@ class MaterialPanel(Panel):
         return mat is not None and bool(mat.get(cls.marker))
 
 
+def shader_path(scene) -> tuple[str, str]:
+    """Which of a material's paths the scene renders, in words: (what renders, how to get the exact shader or
+    "" when it renders). Cycles runs the OSL scripts on the CPU (and on OptiX GPUs); its SVM (OSL off, CUDA,
+    HIP, Metal, oneAPI) renders the closure path built from Cycles' own nodes; EEVEE the viewport look."""
+    if scene.render.engine != "CYCLES":
+        return ("EEVEE / Workbench: the viewport look (an approximation)",
+                "The exact shader renders in Cycles with Open Shading Language")
+    cyc = scene.cycles
+    if not cyc.shading_system:
+        return ("Closure path (Open Shading Language is off): no exact lamps, world light or scratches",
+                "Turn on Open Shading Language (Render Properties) for the exact shader")
+    if cyc.device == "GPU":
+        if gpu_backend() == "OPTIX":
+            return ("OptiX runs the shader without trace() or table textures: fabric lamps unshadowed, no exact "
+                    "world light, no scratches", "Render on the CPU for the exact shader")
+        return ("Closure path (OSL runs on the CPU and OptiX only, not on this GPU backend)",
+                "Render on the CPU (or OptiX) for the exact shader")
+    return "Exact shader (Cycles + Open Shading Language, CPU)", ""
+
+
+def gpu_backend() -> str:
+    """Cycles' compute device type in the preferences (OPTIX, CUDA, HIP, METAL, ONEAPI; NONE without one)."""
+    addon = bpy.context.preferences.addons.get("cycles")
+    return getattr(addon.preferences, "compute_device_type", "NONE") if addon is not None else "NONE"
+
+
+def draw_shader_path(layout, scene) -> None:
+    """The line every material panel shows: which path renders here, and a button to the exact one."""
+    what, how = shader_path(scene)
+    box = layout.box()
+    box.label(text=what, icon="CHECKMARK" if not how else "INFO")
+    if how:
+        box.label(text=how)
+        box.operator("material_structures.setup_cycles_osl", icon="SHADING_RENDERED")
+
+
 def draw_group_inputs(layout, node, controls, linked: str = "linked") -> None:
     """One row per ``(socket name, label)`` of a group node: its value, or ``linked`` when a link drives it."""
     col = layout.column()
@@ -137,14 +173,29 @@ def add_eevee_fallback(mat, cycles_output, shader, location=(400, -350), name: s
     return out
 
 
-def add_group_input(group, name: str, socket_type: str, default, lo=None, hi=None):
-    """A new input socket ``name`` of node group ``group`` with its default and, unless ``lo`` is None, its
-    range [lo, hi] (the ``(name, socket_type, default, lo, hi)`` specs of the features' groups)."""
+def add_group_input(group, name: str, socket_type: str, default, lo=None, hi=None, description: str = ""):
+    """A new input socket ``name`` of node group ``group`` with its default, unless ``lo`` is None its range
+    [lo, hi], and its tooltip ``description`` (the ``(name, socket_type, default, lo, hi, description)`` specs
+    of the features' groups; on/off inputs are ``NodeSocketBool`` with no range)."""
     sock = group.interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
     sock.default_value = default
     if lo is not None:
         sock.min_value, sock.max_value = lo, hi
+    if description:
+        sock.description = description
     return sock
+
+
+def describe_group_sockets(group, specs, outputs: dict[str, str] | None = None) -> None:
+    """Give the sockets of ``group`` (from a file made before they had tooltips) the descriptions of its input
+    ``specs`` and of ``outputs`` (name -> description) where they have none. An input's type stays as the
+    file has it: an on/off input that was an integer 0/1 renders the same as a boolean, and changing its type
+    would reset the value every material set."""
+    words = {spec[0]: spec[5] for spec in specs if len(spec) > 5}
+    words.update(outputs or {})
+    for item in group.interface.items_tree:
+        if item.item_type == "SOCKET" and not item.description and item.name in words:
+            item.description = words[item.name]
 
 
 def wire_lamp_shader_group(group, gin, script, gout, input_names, lamp_term: str):
@@ -300,6 +351,45 @@ class CancelBackgroundJob:
         return {"FINISHED"}
 
 
+# -- undo ------------------------------------------------------------------------------------------------
+REVISION_PROP = "material_structures_revision"  # on images the add-on writes: counts its packed writes
+_WRITTEN: dict[int, int] = {}  # image session_uid -> the revision its pixels hold in this Blender session
+
+
+def mark_written(image) -> None:
+    """Record that ``image``'s pixels were written and packed: its revision (an ID property, so the .blend
+    and Blender's undo keep it) goes up and this session remembers that its pixels hold that revision."""
+    revision = int(image.get(REVISION_PROP, 0)) + 1
+    image[REVISION_PROP] = revision
+    _WRITTEN[image.session_uid] = revision
+
+
+def reload_stale_images() -> list[str]:
+    """After a global undo or redo: reload every image the add-on wrote in this session whose packed data
+    (restored by the undo) holds another revision than its pixels (Blender keeps image buffers across undo),
+    so what the viewport shows and renders is what is stored. Returns the names of the reloaded images."""
+    reloaded = []
+    for image in bpy.data.images:
+        uid = image.session_uid
+        if uid not in _WRITTEN or image.packed_file is None:
+            continue
+        revision = int(image.get(REVISION_PROP, 0))
+        if _WRITTEN[uid] != revision:
+            image.reload()
+            _WRITTEN[uid] = revision
+            reloaded.append(image.name)
+    return reloaded
+
+
+def push_undo(message: str) -> bool:
+    """Make what was just done one step of Blender's undo (Ctrl+Z, Edit > Undo History), for work that is
+    not an operator's own step (a stroke inside the modal brush). Whether a step was pushed: False where
+    Blender has no undo stack (undo steps 0, or no window)."""
+    if not bpy.ops.ed.undo_push.poll():
+        return False
+    return bpy.ops.ed.undo_push(message=message) == {"FINISHED"}
+
+
 # -- float images ---------------------------------------------------------------------------------------
 def array_to_image(array: np.ndarray, name: str, pack: bool = True, replace: bool = True):
     """A float, Non-Color, channel-packed image holding ``array`` (H, W, C<=4), row 0 = top.
@@ -324,6 +414,7 @@ def array_to_image(array: np.ndarray, name: str, pack: bool = True, replace: boo
     image.update()
     if pack:
         image.pack()
+        mark_written(image)
     return image
 
 
@@ -412,18 +503,22 @@ class MS_StrokePoint(bpy.types.PropertyGroup):
 
     location: bpy.props.FloatVectorProperty(name="Location", size=3, description="World-space point (3D strokes)")
     uv: bpy.props.FloatVectorProperty(name="UV", size=2, description="UV point (UV strokes)")
-    pressure: bpy.props.FloatProperty(name="Pressure", default=1.0, min=0.0, max=1.0)
+    pressure: bpy.props.FloatProperty(name="Pressure", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
+                                      description="Tablet pressure at the point (0-1; 1 without a tablet)")
 
 
 def stroke_property():
     """The ``stroke`` property of a stroke tool: the points its EXEC path replays."""
-    return bpy.props.CollectionProperty(type=MS_StrokePoint, options={"SKIP_SAVE"})
+    return bpy.props.CollectionProperty(type=MS_StrokePoint, options={"SKIP_SAVE"}, name="Stroke",
+                                        description="The points of a recorded stroke (for scripts; empty when "
+                                        "drawing with the mouse)")
 
 
 def stroke_space_property():
     """The ``stroke_space`` property of a stroke tool: whether the points are UVs or 3D points."""
     return bpy.props.EnumProperty(
         name="Stroke Space",
+        description="Whether the stroke's points are UV coordinates or 3D points on the surface",
         items=[("UV", "UV", "Stroke points are UV coordinates"), ("WORLD", "World", "3D points on the surface")],
         default="UV",
         options={"SKIP_SAVE"},

@@ -1,6 +1,7 @@
 """App handlers: each feature's (``<feature>/handlers.py``: lamps kept current in the shaders that
-evaluate them, so moving a lamp just works) and the embedded shaders brought up to date after a file
-is loaded. Registered in this order: within one handler list, the fabric's run before the scratches'."""
+evaluate them, so moving a lamp just works), the embedded shaders brought up to date after a file
+is loaded, and images that match their stored data after an undo or redo. Registered in this order:
+within one handler list, the fabric's run before the scratches'."""
 
 from __future__ import annotations
 
@@ -8,18 +9,38 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ..render.osl import refresh_embedded_scripts
+from .common import reload_stale_images
+from .fabric.brushing import drop_sessions
 from .fabric.handlers import FABRIC_HANDLERS, sync_fabric_after_load
+from .fabric.material import MARKER as FABRIC_MARKER
+from .fabric.material import ensure_closures_without_osl
 from .scratch.handlers import SCRATCH_HANDLERS
+from .scratch.material import MARKER as SCRATCH_MARKER
+from .scratch.material import ensure_base_metal
 
 
 @persistent
 def on_load_post(*_args) -> None:
     """Shaders are embedded in the file; bring files from older versions (or an older extension) up to date."""
     refresh_embedded_scripts()  # compiles under Cycles + OSL lent to the scene, its own engine restored
+    for group in bpy.data.node_groups:  # groups of older files: the closures that render without OSL
+        if group.library is None and group.get(FABRIC_MARKER):
+            ensure_closures_without_osl(group)
+        elif group.library is None and group.get(SCRATCH_MARKER):
+            ensure_base_metal(group)
     sync_fabric_after_load()  # the world tables live in the temp folder: re-extract them for this file
 
 
-HANDLERS = [*FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_load_post), *SCRATCH_HANDLERS]
+@persistent
+def on_undo_redo_post(*_args) -> None:
+    """After Ctrl+Z / Ctrl+Shift+Z: images show what the restored file stores (painted maps, scratch tables),
+    and the brush sessions, which hold images the undo replaced, start again from the images."""
+    reload_stale_images()
+    drop_sessions()
+
+
+HANDLERS = [*FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_load_post), *SCRATCH_HANDLERS,
+            (bpy.app.handlers.undo_post, on_undo_redo_post), (bpy.app.handlers.redo_post, on_undo_redo_post)]
 
 
 def register_handlers() -> None:

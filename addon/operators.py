@@ -17,7 +17,9 @@ def osl_ready(scene) -> bool:
 
 
 class MS_OT_setup_cycles_osl(bpy.types.Operator):
-    """Use Cycles with Open Shading Language on the CPU (needed by the exact fabric and scratch shaders)"""
+    """Render this scene with Cycles and Open Shading Language on the CPU: the exact fabric, scratch and enamel
+    shaders (without it they render their closure path). Changes the scene's render engine, device and shading
+    system"""
 
     bl_idname = "material_structures.setup_cycles_osl"
     bl_label = "Use Cycles + OSL"

@@ -18,7 +18,8 @@ class MS_SceneSettings(bpy.types.PropertyGroup):
         get=lambda self: self.id_data.cycles.preview_samples,
         set=lambda self, value: setattr(self.id_data.cycles, "preview_samples", value),
     )
-    fabric_brush: bpy.props.PointerProperty(type=MS_FabricBrushSettings)
+    fabric_brush: bpy.props.PointerProperty(type=MS_FabricBrushSettings, name="Fabric Brush",
+                                            description="Settings of the pile-fabric brush (mode, radius, strength)")
     # Scratched metal: the K brightest regions of the world as lamps of the scratch term (addon/scratch/world.py).
     scratch_world_lamps: world_lamps_property()
 

@@ -8,11 +8,15 @@ its parser and sets ``func(args) -> int``. Heavy imports (bpy, scipy) happen ins
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import signal
 import sys
+import traceback
 
-SUBCOMMANDS = ("render", "build", "bench", "demo", "library", "fabric", "scratch", "teeth")
+from ..core.errors import MissingFileError, UserError
+
+SUBCOMMANDS = ("render", "build", "release", "bench", "demo", "library", "fabric", "scratch", "teeth")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -55,6 +59,27 @@ def _interrupt_on_sigterm():
         return None
 
 
+# OSErrors about a path the user gave (or a disk they write to), said in one line; any other is a bug
+_USER_OS_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)
+_USER_ERRNOS = (errno.ENOSPC, errno.EROFS, errno.EDQUOT, errno.ENAMETOOLONG, errno.ELOOP)
+
+
+def _user_os_error(exc: OSError) -> bool:
+    return exc.filename is not None and (isinstance(exc, _USER_OS_ERRORS) or exc.errno in _USER_ERRNOS)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split()) or "bad input"
+
+
+def _bug(exc: BaseException) -> int:
+    """An unexpected exception: a bug. Its traceback on stderr and exit status 1."""
+    traceback.print_exception(exc)
+    print(f"material_structures: internal error ({type(exc).__name__}); this is a bug, please report it with "
+          "the traceback above", file=sys.stderr)
+    return 1
+
+
 def main(argv: list[str] | None = None) -> int:
     if argv is None:
         argv = sys.argv[1:]
@@ -76,15 +101,22 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"error: not enough memory for this size ({exc}); choose a smaller one", file=sys.stderr)
         return 2
-    except (ValueError, OSError, RuntimeError) as exc:
-        # a user's mistake (a bad value, a file that is missing, unreadable, a directory, read-only, ...):
-        # one line; --debug shows the traceback
+    except (UserError, MissingFileError) as exc:  # bad input: the message says what and where (--debug: where)
         if getattr(args, "debug", False):
             raise
-        text = str(exc) if not isinstance(exc, OSError) or exc.filename is None else \
-            f"{exc.filename}: {exc.strerror or exc}"
-        print(f"error: {text}", file=sys.stderr)
+        print(f"error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        # a path the user gave that is missing, a directory, a file, read-only, or a disk that is full: one
+        # line. Any other OSError (and one without a file name) is a bug: its traceback, below
+        if getattr(args, "debug", False):
+            raise
+        if not _user_os_error(exc):
+            return _bug(exc)
+        print(f"error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug, not the user's mistake: its traceback, exit 1
+        return _bug(exc)
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

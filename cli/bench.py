@@ -7,6 +7,8 @@ import json
 import os
 import sys
 
+from ..core.errors import UserError
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="run a benchmark and print one JSON object")
@@ -40,8 +42,8 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps({name: result}))
         return 1 if failed else 0
     if not args.name:
-        raise ValueError("give a benchmark NAME, --list or --all")
+        raise UserError("give a benchmark NAME, --list or --all")
     if args.name not in names:
-        raise ValueError(f"unknown benchmark {args.name!r}; available: {', '.join(sorted(names))}")
+        raise UserError(f"unknown benchmark {args.name!r}; available: {', '.join(sorted(names))}")
     print(json.dumps(run_benchmark(args.name)))
     return 0

@@ -21,6 +21,8 @@ import subprocess
 import sys
 import tomllib
 
+from ..core.errors import UserError
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # Blender versions per CPython: 4.5 LTS and 5.0 ship 3.11, 5.1 and later 3.13 (the manifest's max is exclusive)
@@ -37,30 +39,44 @@ PLATFORMS: dict[str, tuple[str, ...]] = {
 }
 
 
+def wheel_cache() -> str:
+    """Where downloaded wheels are kept between builds (outside the checkout)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "material_structures", "wheels")
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build", help="validate and build the extension zips (dist/)")
-    p.add_argument("--out", default="dist", help="output folder (default: dist)")
+    add_build_options(p)
     p.add_argument("--validate-only", action="store_true", help="only validate the manifest")
+    p.add_argument("--no-wheels", action="store_true",
+                   help="one zip without wheels for every platform (needs scipy and numba installed by hand)")
+    p.set_defaults(func=run)
+
+
+def add_build_options(p: argparse.ArgumentParser) -> None:
+    """The options ``build`` and ``release`` share: where, for which platforms and Pythons, which version."""
+    p.add_argument("--out", default="dist", help="output folder (default: dist)")
     p.add_argument("--platform", action="append", choices=sorted(PLATFORMS), default=None,
                    help="build for this platform (repeatable; default: all)")
     p.add_argument("--python", action="append", choices=sorted(BLENDER_RANGE), default=None,
                    help="build for Blender with this CPython (repeatable; default: all)")
-    p.add_argument("--no-wheels", action="store_true",
-                   help="one zip without wheels for every platform (needs scipy and numba installed by hand)")
-    p.set_defaults(func=run)
+    p.add_argument("--set-version", default=None, metavar="X.Y.Z",
+                   help="write this version into the zips instead of blender_manifest.toml's (a release "
+                        "candidate; the update test publishes a newer build this way)")
 
 
 def blender_ext_tool() -> str:
     """Path of ``blender_ext.py`` inside the installed bpy wheel (no Blender binary needed)."""
     spec = importlib.util.find_spec("bpy")
     if spec is None or not spec.submodule_search_locations:
-        raise RuntimeError("bpy is not installed in this Python; run `make build` (it sets up .venv)")
+        raise UserError("bpy is not installed in this Python; run `make build` (it sets up .venv)")
     base = list(spec.submodule_search_locations)[0]
     hits = sorted(
         glob.glob(os.path.join(base, "*", "scripts", "addons_core", "bl_pkg", "cli", "blender_ext.py"))
     )
     if not hits:
-        raise RuntimeError(f"blender_ext.py not found under {base}")
+        raise UserError(f"blender_ext.py not found under {base}")
     return hits[-1]
 
 
@@ -160,7 +176,7 @@ def download_wheels(python: str, platform: str, cache: str) -> list[str]:
         return present()
     errors = " ".join(ln for ln in proc.stderr.splitlines() if ln.startswith("ERROR"))[:400]
     pins = ", ".join(f"{n}=={v}" for n, v, _ in want)
-    raise RuntimeError(f"no wheels of {pins} for {platform} / CPython {python}: {errors}")
+    raise UserError(f"no wheels of {pins} for {platform} / CPython {python}: {errors}")
 
 
 def _stage(source_dir: str, stage: str, manifest: dict) -> None:
@@ -178,14 +194,18 @@ def _stage(source_dir: str, stage: str, manifest: dict) -> None:
     shutil.copytree(source_dir, stage, ignore=ignore, symlinks=False)
 
 
-def _staged_manifest(text: str, python: str, wheels: list[str], platforms: list[str]) -> str:
-    """The checkout's manifest ``text`` with the Blender range of ``python``, ``platforms`` and ``wheels``."""
+def _staged_manifest(text: str, python: str, wheels: list[str], platforms: list[str],
+                     version: str | None = None) -> str:
+    """The checkout's manifest ``text`` with the Blender range of ``python``, ``platforms`` and ``wheels`` (and
+    ``version`` instead of its own when given)."""
     import tomlkit
 
     doc = tomlkit.parse(text)
+    if version is not None:
+        doc["version"] = version
     for key in ("blender_version_max", "platforms", "wheels"):
         if key in doc:
-            raise RuntimeError(f"blender_manifest.toml: {key} is written by the build")
+            raise UserError(f"blender_manifest.toml: {key} is written by the build")
     lo, hi = BLENDER_RANGE[python]
     doc["blender_version_min"] = lo
     if hi:
@@ -198,20 +218,37 @@ def _staged_manifest(text: str, python: str, wheels: list[str], platforms: list[
 
 
 def build_platforms(out_dir: str = "dist", source_dir: str = ROOT, platforms: list[str] | None = None,
-                    pythons: list[str] | None = None, work_dir: str | None = None) -> list[str]:
-    """One zip per Python version and platform, with that platform's wheels; returns their paths."""
+                    pythons: list[str] | None = None, version: str | None = None) -> list[str]:
+    """One zip per Python version and platform, with that platform's wheels; returns their paths. Writes
+    only into ``out_dir`` (wheels: :func:`wheel_cache`; staging: a temporary folder)."""
+    import tempfile
+
     validate(source_dir)
     manifest = _manifest(source_dir)
+    if version is not None:
+        _check_version(version)
+        manifest = {**manifest, "version": version}
     platforms = list(platforms or PLATFORMS)
     pythons = list(pythons or BLENDER_RANGE)
-    work_dir = os.path.abspath(work_dir or os.path.join(source_dir, "build"))
     out_dir = os.path.abspath(out_dir)
+    with tempfile.TemporaryDirectory(prefix="ms-build-") as work_dir:
+        return _build_platforms(out_dir, source_dir, manifest, platforms, pythons, version, work_dir)
+
+
+def _check_version(version: str) -> None:
+    parts = version.split(".")
+    if len(parts) != 3 or not all(p.isdigit() for p in parts):
+        raise UserError(f"--set-version must be a version like 1.2.3, got {version!r}")
+
+
+def _build_platforms(out_dir: str, source_dir: str, manifest: dict, platforms: list[str], pythons: list[str],
+                     version: str | None, work_dir: str) -> list[str]:
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(source_dir, "blender_manifest.toml"), encoding="utf-8") as f:
         manifest_text = f.read()
     written = []
     for python in pythons:
-        wheels = [w for p in platforms for w in download_wheels(python, p, os.path.join(work_dir, "wheels"))]
+        wheels = [w for p in platforms for w in download_wheels(python, p, wheel_cache())]
         cp = f"cp{python.replace('.', '')}"
         stage = os.path.join(work_dir, f"stage-{cp}")
         _stage(source_dir, stage, manifest)
@@ -219,7 +256,7 @@ def build_platforms(out_dir: str = "dist", source_dir: str = ROOT, platforms: li
         for w in wheels:
             shutil.copy2(w, os.path.join(stage, "wheels", os.path.basename(w)))
         with open(os.path.join(stage, "blender_manifest.toml"), "w", encoding="utf-8") as f:
-            f.write(_staged_manifest(manifest_text, python, wheels, platforms))
+            f.write(_staged_manifest(manifest_text, python, wheels, platforms, version))
         base = os.path.join(out_dir, f"{manifest['id']}-{manifest['version']}-{cp}.zip")
         expected = [base[:-4] + f"-{p.replace('-', '_')}.zip" for p in platforms]
         for path in expected:
@@ -244,6 +281,6 @@ def run(args: argparse.Namespace) -> int:
     if args.no_wheels:
         print(build(args.out))
         return 0
-    for path in build_platforms(args.out, platforms=args.platform, pythons=args.python):
+    for path in build_platforms(args.out, platforms=args.platform, pythons=args.python, version=args.set_version):
         print(f"{path}  {os.path.getsize(path) / 2**20:.1f} MiB")
     return 0

@@ -7,6 +7,8 @@ import argparse
 import math
 import os
 
+from ..core.errors import UserError
+
 
 def at_least(low: float, kind: type = int):
     """An argparse ``type`` that parses ``kind`` and refuses values below ``low`` (and NaN / inf)."""
@@ -39,6 +41,11 @@ def between(low: float, high: float, kind: type = float):
     return parse
 
 
+def seed(text: str) -> int:
+    """An argparse ``type`` for a random seed: an integer in [0, 2^31 - 1]."""
+    return between(0, 2**31 - 1, int)(text)
+
+
 def finite_float(text: str) -> float:
     """An argparse ``type``: any finite number."""
     return at_least(-math.inf, float)(text)
@@ -63,8 +70,8 @@ def check_memory(nbytes: float, what: str) -> None:
     """Refuse work whose arrays need more than the memory available, before allocating them."""
     avail = available_memory()
     if avail is not None and nbytes > avail:
-        raise ValueError(f"{what} needs about {nbytes / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB is "
-                         "available")
+        raise UserError(f"{what} needs about {nbytes / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB is "
+                        "available")
 
 
 def positive_float(text: str) -> float:
@@ -80,4 +87,20 @@ def refuse_output_over_inputs(out: str, inputs: list[str]) -> None:
     for inp in inputs:
         i = os.path.realpath(inp)
         if o == i or o.startswith(i + os.sep) or i.startswith(o + os.sep):
-            raise ValueError(f"--out {out!r} would write over the input {inp!r}; choose another output")
+            raise UserError(f"--out {out!r} would write over the input {inp!r}; choose another output")
+
+
+def refuse_unwritable_folder(path: str, flag: str = "--out") -> None:
+    """Refuse, before the work, an output folder that cannot be made: an existing file at ``path`` or at a
+    folder above it (the work would end in "Not a directory" after minutes)."""
+    p = os.path.abspath(path)
+    while True:
+        if os.path.exists(p):
+            if not os.path.isdir(p):
+                what = "is a file" if p == os.path.abspath(path) else f"lies under the file {p!r}"
+                raise UserError(f"{flag} {path!r} {what}, not a folder; choose another output")
+            return
+        parent = os.path.dirname(p)
+        if parent == p:
+            return
+        p = parent

@@ -7,6 +7,7 @@ import os
 import sys
 import time
 
+from ..core.errors import UserError
 from .checks import between
 
 WIDTH = 640  # the showcase's picture size; heights follow each scene's aspect
@@ -39,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
         known = {n for _, n in items}
         unknown = sorted(set(args.only) - known)
         if unknown:
-            raise ValueError(f"unknown scene(s)/material(s) {unknown}; available: {sorted(known)}")
+            raise UserError(f"unknown scene(s)/material(s) {unknown}; available: {sorted(known)}")
         items = [it for it in items if it[1] in args.only]
     os.makedirs(args.out, exist_ok=True)
     workdir = os.path.join(args.out, "work")

@@ -14,7 +14,16 @@ import argparse
 import json
 import os
 
-from .checks import at_least, between, check_memory, finite_float, refuse_output_over_inputs
+from ..core.errors import UserError
+from .checks import (
+    at_least,
+    between,
+    check_memory,
+    finite_float,
+    refuse_output_over_inputs,
+    refuse_unwritable_folder,
+    seed,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -55,7 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--noise-kind", choices=("relative", "peak"), default="relative",
                    help="multiplicative noise, or additive noise scaled by each texel's peak value")
     s.add_argument("--max-tilt", type=between(0.0, 89.0), default=30.0, help="largest fibre tilt (deg)")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=seed, default=0)
     s.add_argument("--gt-out", default=None, help="also write the ground-truth parameter folder here")
     s.set_defaults(func=run_synth)
 
@@ -84,18 +93,23 @@ def _event(**fields) -> None:
 
 
 def run_fit(args: argparse.Namespace) -> int:
-    from ..core.fabric.btf_fitter import fit_btf
+    from ..core.fabric.btf_fitter import check_btf, fit_btf
     from ..core.fabric.tile_fit import FitOptions
 
     if args.tile < 1:
-        raise ValueError("--tile must be >= 1")
+        raise UserError("--tile must be >= 1")
     refuse_output_over_inputs(args.out, [args.btf])
     options = FitOptions(weighting=args.weighting)
     if args.no_dask and args.scheduler:
-        raise ValueError("--no-dask and --scheduler exclude each other")
+        raise UserError("--no-dask and --scheduler exclude each other")
+    if args.scheduler and os.environ.get(PROGRESS_ENV) != "json":
+        from ..scaleout.cluster import check_scheduler
+
+        check_btf(args.btf)  # a BTF that cannot be fitted is said first
+        check_scheduler(args.scheduler)  # before anything is written
     if os.environ.get(PROGRESS_ENV) == "json":  # the Blender add-on: progress as JSON lines, a local process pool
         if args.scheduler:
-            raise ValueError(f"{PROGRESS_ENV}=json fits in local processes: leave out --scheduler")
+            raise UserError(f"{PROGRESS_ENV}=json fits in local processes: leave out --scheduler")
         _event(progress="status", message="reading the BTF")
 
         def tiles_done(done: int, total: int) -> None:
@@ -135,6 +149,9 @@ def run_synth(args: argparse.Namespace) -> int:
     from ..core.fabric.parameter_maps import save_params
     from ..core.fabric.synthetic_btf import light_view_pairs, render_btf, synthetic_maps
 
+    for out in (args.out, args.gt_out):
+        if out:
+            refuse_unwritable_folder(out if not out.lower().endswith(".npz") else os.path.dirname(out) or ".")
     # the BTF is rendered in memory (float64 while rendering) before it is written
     check_memory(args.width * args.height * args.lights * args.views * 3 * 8 * 2,
                  f"a {args.width} x {args.height} BTF of {args.lights * args.views} light/view pairs")
@@ -156,10 +173,12 @@ def run_ndf(args: argparse.Namespace) -> int:
     from ..core.fabric.ndf_extraction import ndf_operator
 
     refuse_output_over_inputs(args.out, [args.btf])
+    if not args.out.lower().endswith(".exr"):
+        raise UserError(f"--out {args.out!r}: the NDF map is written as OpenEXR: give a .exr file name")
     hdr = read_btf_header(args.btf)
     x, y = args.texel
     if not (0 <= x < hdr.width and 0 <= y < hdr.height):
-        raise ValueError(f"texel ({x}, {y}) is outside the {hdr.width}x{hdr.height} BTF")
+        raise UserError(f"texel ({x}, {y}) is outside the {hdr.width}x{hdr.height} BTF")
     f = np.concatenate([vals[:, y, x].mean(axis=1) for _, vals in iter_btf_blocks(args.btf)])
     op = ndf_operator(hdr.wi, hdr.wo, resolution=args.resolution)
     write_exr(args.out, op.to_image(op.apply(f / hdr.wi[:, 2])[:, 0]).astype(np.float32))
@@ -173,12 +192,17 @@ def run_score(args: argparse.Namespace) -> int:
 
     pred, ref = load_btf(args.pred), load_btf(args.ref)
     if pred.values.shape != ref.values.shape:
-        raise ValueError(f"shapes differ: {pred.values.shape} vs {ref.values.shape}")
+        raise UserError(f"shapes differ: {pred.values.shape} vs {ref.values.shape}")
     import numpy as np
 
     if not (np.allclose(pred.wi, ref.wi, atol=1e-5) and np.allclose(pred.wo, ref.wo, atol=1e-5)):
-        raise ValueError("the two BTFs have different directions")
+        raise UserError("the two BTFs have different directions")
     tp = texel_psnr(pred.values, ref.values)
-    print(json.dumps({"psnr_db": psnr(pred.values, ref.values), "texel_psnr_db_median": float(np.median(tp)),
-                      "texel_psnr_db_p5": float(np.percentile(tp, 5))}))
+
+    def db(x: float) -> float | None:  # JSON has no Infinity: identical values (no error) are null
+        return float(x) if np.isfinite(x) else None
+
+    print(json.dumps({"psnr_db": db(psnr(pred.values, ref.values)), "texel_psnr_db_median": db(np.median(tp)),
+                      "texel_psnr_db_p5": db(np.percentile(tp, 5)),
+                      "identical": bool(np.array_equal(pred.values, ref.values))}, allow_nan=False))
     return 0

@@ -5,17 +5,27 @@ from __future__ import annotations
 import argparse
 import os
 
+from ..core.errors import UserError
+from .checks import between
+
 
 def add_material_parser(fsub) -> None:
     m = fsub.add_parser("material", help="create the SGGX Fabric material from a fit folder (.blend, preview)")
     m.add_argument("params_dir", help="fit output folder (params.json + kd/ks/sigma/basis EXR maps)")
     m.add_argument("--out", default=None, help="output .blend (default: PARAMS_DIR/fabric.blend)")
     m.add_argument("--render", default=None, help="also render a shader-ball preview to this .png/.exr")
-    m.add_argument("--samples", type=int, default=16)
+    m.add_argument("--samples", type=between(1, 1 << 24, int), default=16)
     m.set_defaults(func=run_material)
 
 
 def run_material(args: argparse.Namespace) -> int:
+    if args.render and not args.render.lower().endswith((".exr", ".png")):
+        raise UserError(f"--render {args.render!r}: give a .exr (linear) or .png (sRGB) file name")
+    if args.out and not args.out.lower().endswith(".blend"):
+        raise UserError(f"--out {args.out!r}: give a .blend file name")
+    from ..core.fabric.parameter_maps import load_params
+
+    load_params(args.params_dir)  # a folder that is not a fit's: one line, before Blender starts
     from ..render.session import prepare_user_resources
 
     prepare_user_resources()

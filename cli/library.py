@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from .checks import between
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_DIR = os.path.join(ROOT, "samples", "library")
 
@@ -13,8 +15,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("library", help="build the material asset library (samples/library)")
     p.add_argument("action", choices=["build", "list"], help="build the .blend + catalogs + previews, or list")
     p.add_argument("--out", default=DEFAULT_DIR, help="library folder (default: samples/library)")
-    p.add_argument("--preview-size", type=int, default=128)
-    p.add_argument("--samples", type=int, default=16)
+    p.add_argument("--preview-size", type=between(8, 4096, int), default=128)
+    p.add_argument("--samples", type=between(1, 1 << 24, int), default=16)
     p.set_defaults(func=run)
 
 

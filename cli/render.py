@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import os
 
-from .checks import refuse_output_over_inputs
+from ..core.errors import MissingFileError, UserError
+from .checks import between, refuse_output_over_inputs, seed
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -14,9 +15,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--list", action="store_true", help="list the library scenes")
     p.add_argument("--blend", help="render this .blend file's scene instead of a library scene")
     p.add_argument("--out", default="out/render.exr", help="output .exr (linear) or .png (sRGB)")
-    p.add_argument("--samples", type=int, default=None, help="Cycles samples (scene default)")
+    p.add_argument("--samples", type=between(1, 1 << 24, int), default=None, help="Cycles samples (scene default)")
     p.add_argument("--resolution", default=None, help="WxH, e.g. 320x240 (scene default)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed, default=0)
     p.set_defaults(func=run)
 
 
@@ -29,11 +30,11 @@ def parse_resolution(text: str | None) -> tuple[int, int] | None:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise ValueError(f"--resolution must look like 320x240, got {text!r}") from None
+        raise UserError(f"--resolution must look like 320x240, got {text!r}") from None
     if w < 1 or h < 1:
-        raise ValueError("--resolution must be positive")
+        raise UserError("--resolution must be positive")
     if w > MAX_SIDE or h > MAX_SIDE:
-        raise ValueError(f"--resolution {w}x{h} is larger than {MAX_SIDE} pixels a side")
+        raise UserError(f"--resolution {w}x{h} is larger than {MAX_SIDE} pixels a side")
     return w, h
 
 
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.blend:
         refuse_output_over_inputs(args.out, [args.blend])
     if not args.out.lower().endswith((".exr", ".png")):
-        raise ValueError(f"--out {args.out!r}: give a .exr (linear) or .png (sRGB) file name")
+        raise UserError(f"--out {args.out!r}: give a .exr (linear) or .png (sRGB) file name")
     from ..render.session import prepare_user_resources
 
     prepare_user_resources()
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         workdir = os.path.join(os.path.dirname(os.path.abspath(args.out)), "work")
         rgba = library.render_library_scene(args.scene, workdir, resolution, args.samples)
     else:
-        raise ValueError("give a scene name, --blend FILE or --list")
+        raise UserError("give a scene name, --blend FILE or --list")
     save_image(args.out, rgba)
     print(args.out)
     return 0
@@ -85,8 +86,12 @@ def render_blend(path: str, resolution, samples, seed):
     from ..render import configure_cycles, render_to_array
 
     if not os.path.isfile(path):
-        raise FileNotFoundError(f"no such .blend file: {path}")
-    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
+        raise MissingFileError(f"no such .blend file: {path}", path)
+    try:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
+    except RuntimeError as exc:  # Blender's "Error: Cannot read file ...": not a .blend, or a damaged one
+        detail = " ".join(str(exc).split()) or "Blender cannot read it"
+        raise UserError(f"{path}: not a readable .blend file ({detail})") from None
     scene = bpy.context.scene
     res = resolution or (scene.render.resolution_x, scene.render.resolution_y)
     configure_cycles(scene, resolution=res, samples=samples or scene.cycles.samples, seed=seed)

@@ -16,7 +16,8 @@ import argparse
 import json
 import os
 
-from .checks import at_least, between, check_memory, finite_float, refuse_output_over_inputs
+from ..core.errors import MissingFileError, UserError
+from .checks import at_least, between, check_memory, finite_float, refuse_output_over_inputs, seed
 
 MAX_SCRATCHES = 2**24  # the grid index addresses at most 2^24 entries, each scratch has at least one
 SCRATCH_BYTES = 4096  # memory per scratch while a set is generated and indexed (2.4 KB measured, rounded up)
@@ -38,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--sigma-um", type=between(0.1, 1e4), default=60.0, help="coherence radius the index is built for")
     g.add_argument("--max-footprint-um", type=between(0.1, 1e5), default=500.0,
                    help="largest pixel footprint to index for")
-    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--seed", type=seed, default=0)
     g.add_argument("--out", required=True, help="output .npz file or EXR-table folder")
     g.set_defaults(func=run_generate)
 
@@ -63,9 +64,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _patch(values: list[float]) -> tuple[float, float]:
     if len(values) not in (1, 2) or min(values) <= 0:
-        raise ValueError("--patch-mm takes one or two positive sizes")
+        raise UserError("--patch-mm takes one or two positive sizes")
     v = [x * 1000.0 for x in values]
     return (v[0], v[-1])
+
+
+def _curve(path: str, k: int, points):
+    """Curve ``k`` of a curves file as an (n, 2) array of finite (u, v) points, or a one-line refusal."""
+    import numpy as np
+
+    try:
+        a = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or isinstance(points, (str, dict)) or a.ndim != 2 or a.shape[1] != 2:
+        raise UserError(f"{path}: curve {k} is not a list of [u, v] points of numbers")
+    if not np.isfinite(a).all():
+        raise UserError(f"{path}: curve {k} holds non-finite coordinates")
+    return a
 
 
 def run_generate(args: argparse.Namespace) -> int:
@@ -81,17 +97,17 @@ def run_generate(args: argparse.Namespace) -> int:
     kw = dict(seed=args.seed, sigma_um=args.sigma_um, max_footprint_um=args.max_footprint_um)
     if args.kind == "curves":
         if not args.curves:
-            raise ValueError("--kind curves needs --curves FILE.json")
+            raise UserError("--kind curves needs --curves FILE.json")
         if not os.path.isfile(args.curves):
-            raise FileNotFoundError(f"curves file not found: {args.curves}")
+            raise MissingFileError(f"curves file not found: {args.curves}", args.curves)
         with open(args.curves) as f:
             try:
                 curves = json.load(f)
             except json.JSONDecodeError as exc:
-                raise ValueError(f"{args.curves}: not valid JSON ({exc})") from exc
+                raise UserError(f"{args.curves}: not valid JSON ({exc})") from exc
         if not isinstance(curves, list) or not curves:
-            raise ValueError(f"{args.curves}: expected a non-empty list of curves")
-        s = sc.from_curves([np.asarray(c, dtype=float) for c in curves], patch, uv=True, **kw)
+            raise UserError(f"{args.curves}: expected a non-empty list of curves")
+        s = sc.from_curves([_curve(args.curves, k, c) for k, c in enumerate(curves)], patch, uv=True, **kw)
     elif args.kind == "wear":
         s = sc.uniform_wear(args.count, patch, **kw)
     elif args.kind == "polish":
@@ -132,11 +148,16 @@ def run_eval(args: argparse.Namespace) -> int:
     from ..core.scratch import SphereLight, load_scratch_set, scratch_radiance
 
     refuse_output_over_inputs(args.out, [args.path])
+    if not args.out.lower().endswith(".exr"):
+        raise UserError(f"--out {args.out!r}: the image is written as OpenEXR: give a .exr file name")
     s = load_scratch_set(args.path)
     n = int(args.size)
     check_memory(n * n * PIXEL_BYTES, f"a {n} x {n} image")
     if args.light[3] <= 0.0:
-        raise ValueError(f"--light: the radius R must be > 0, got {args.light[3]:g}")
+        raise UserError(f"--light: the radius R must be > 0, got {args.light[3]:g}")
+    if args.light[2] <= args.light[3]:
+        raise UserError(f"--light: the light must lie above the surface (Z > R), got Z {args.light[2]:g}, "
+                        f"R {args.light[3]:g}")
     px = s.patch_size_um / n
     u = (np.arange(n) + 0.5) * px[0]
     v = (np.arange(n) + 0.5) * px[1]

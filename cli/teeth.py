@@ -12,9 +12,10 @@ import argparse
 import json
 import os
 
+from ..core.errors import MissingFileError, UserError
 from ..core.teeth.fit_checkpoint import TRIALS_DIR
 from ..core.teeth.fit_settings import FitSettings
-from .checks import at_least, between, positive_float, refuse_output_over_inputs
+from .checks import at_least, between, positive_float, refuse_output_over_inputs, refuse_unwritable_folder, seed
 
 FIT_DEFAULTS = FitSettings()  # the defaults of ``teeth fit``: the fit's own, no second table
 
@@ -37,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--spp-background", type=at_least(0), default=2, help="samples per other pixel")
     s.add_argument("--resolution", type=between(4, 1024, int), default=32,
                    help="tooth mesh resolution of the built-in jaw section")
-    s.add_argument("--seed", type=int, default=12345)
+    s.add_argument("--seed", type=seed, default=12345)
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
                    help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "
                         "llvm_ad_rgb where Dr.Jit's LLVM backend loads, else scalar_rgb; needs mitsuba, as .venv has): "
@@ -58,20 +59,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--init", choices=("literature", "scene", "perturbed"), default="literature",
                    help="start point: the teeth's materials from a literature-table search (default, as the "
                         "thesis; gums and cavity from the scene), the scene's values, or a perturbation of them")
-    f.add_argument("--iterations", type=at_least(1), default=FIT_DEFAULTS.iterations,
+    f.add_argument("--iterations", type=at_least(1), default=None,
                    help=f"iterations (default {FIT_DEFAULTS.iterations}; fewer: a quicker, rougher fit)")
-    f.add_argument("--textured-iterations", type=at_least(0), default=FIT_DEFAULTS.textured_iterations,
+    f.add_argument("--textured-iterations", type=at_least(0), default=None,
                    help="then this many iterations with the enamel transmittance as a texture (default "
                         f"{FIT_DEFAULTS.textured_iterations})")
-    f.add_argument("--held-out-lights", type=at_least(0), default=FIT_DEFAULTS.held_out_lights,
+    f.add_argument("--held-out-lights", type=at_least(0), default=None,
                    help=f"lights left out of the fit to check it by (default {FIT_DEFAULTS.held_out_lights})")
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to fit (default: every material, a_t and the "
                         "dentin shape)")
-    f.add_argument("--seed", type=int, default=FIT_DEFAULTS.seed,
+    f.add_argument("--seed", type=seed, default=None,
                    help="random seed of the perturbed start, the lights of each iteration and the path samples "
                         f"(default {FIT_DEFAULTS.seed}); another seed gives an independent fit")
-    f.add_argument("--resume", action="store_true", help="continue an interrupted fit from its --out folder")
+    f.add_argument("--resume", action="store_true",
+                   help="continue an interrupted fit from its --out folder, with the settings it started with")
     f.add_argument("--scheduler", default=None,
                    help="Dask scheduler address (tcp://host:8786): per-view gradient renders become tasks there")
     f.add_argument("--dask-workers", type=at_least(1), default=None,
@@ -87,7 +89,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("capture")
     r.add_argument("--out", required=True)
     r.add_argument("--spp", type=at_least(1), default=16)
-    r.add_argument("--seed", type=int, default=1)
+    r.add_argument("--seed", type=seed, default=1)
     r.set_defaults(func=run_render)
 
     v = tsub.add_parser("sensitivity",
@@ -112,11 +114,12 @@ def run_synth(args: argparse.Namespace) -> int:
     from ..core.teeth.synthetic import make_scene, render_capture, scene_target
 
     if args.teeth < 1 or args.width < 4 or args.height < 4 or args.spp < 1:
-        raise ValueError("need --teeth >= 1, --width/--height >= 4 and --spp >= 1")
+        raise UserError("need --teeth >= 1, --width/--height >= 4 and --spp >= 1")
+    refuse_unwritable_folder(args.out, "OUT")
     if args.scene is not None:
         scene = load_scene(args.scene)
         if not scene.teeth:
-            raise ValueError(f"{args.scene} has no teeth to render")
+            raise UserError(f"{args.scene} has no teeth to render")
     else:
         scene = make_scene(n_teeth=args.teeth, resolution=args.resolution)
     span = max(12.0, 8.6 * len(scene.teeth) + 6.0)
@@ -187,13 +190,71 @@ def _bar(total: int, desc: str, unit: str, disable: bool = False):
     return tqdm(total=total, desc=desc, unit=unit)
 
 
+# the FitSettings that ``teeth fit`` flags set (the flag of each); --workers says only where the fit renders
+FIT_FLAGS = {"iterations": "--iterations", "textured_iterations": "--textured-iterations",
+             "held_out_lights": "--held-out-lights", "seed": "--seed", "free": "--free"}
+
+
+# flags a resumed fit takes: how many iterations it runs (its checkpoints continue to any length)
+RESUME_SCHEDULE = ("iterations", "textured_iterations")
+
+
+def _given_settings(args: argparse.Namespace) -> dict:
+    """The settings given by flags on the command line (a flag left out is not among them)."""
+    given = {name: getattr(args, name) for name in FIT_FLAGS if getattr(args, name) is not None}
+    if "free" in given:
+        given["free"] = tuple(p.strip() for p in given["free"].split(",") if p.strip()) or FIT_DEFAULTS.free
+    return given
+
+
 def fit_settings(args: argparse.Namespace) -> FitSettings:
     """The FitSettings of a ``teeth fit`` command line: FitSettings' defaults, with the flags given."""
     from dataclasses import replace
 
-    free = tuple(p.strip() for p in args.free.split(",") if p.strip()) if args.free else FIT_DEFAULTS.free
-    return replace(FIT_DEFAULTS, iterations=args.iterations, textured_iterations=args.textured_iterations,
-                   held_out_lights=args.held_out_lights, seed=args.seed, free=free, workers=args.workers)
+    return replace(FIT_DEFAULTS, **_given_settings(args), workers=args.workers)
+
+
+def resumed_settings(args: argparse.Namespace, saved: dict | None, where: str) -> FitSettings:
+    """The settings a resumed fit goes on with: those it started with (``saved``, read from ``where``; None
+    from a fit of an earlier version, which saved none: the flags'), with this run's --workers and, where
+    given, its --iterations and --textured-iterations (a fit may be resumed to run longer or shorter). Any
+    other flag given with another value than the fit started with is refused, naming both."""
+    from dataclasses import replace
+
+    from ..core.errors import UserError
+    from ..core.teeth.fit_settings import settings_from_dict
+
+    if saved is None:
+        return fit_settings(args)
+    try:
+        fs = settings_from_dict(saved)
+    except UserError as exc:
+        raise UserError(f"{where}: {exc}; start the fit again without --resume") from None
+
+    def shown(v) -> str:
+        return ",".join(v) if isinstance(v, tuple) else str(v)
+
+    given = _given_settings(args)
+    schedule = {k: given.pop(k) for k in RESUME_SCHEDULE if k in given}
+    conflicts = [f"{FIT_FLAGS[k]} {shown(v)} (it started with {shown(getattr(fs, k))})"
+                 for k, v in given.items() if getattr(fs, k) != v]
+    if conflicts:
+        raise UserError(f"--resume goes on with the settings the fit in {args.out!r} started with, not "
+                        f"{'; '.join(conflicts)}: leave out the flag, or start a new fit without --resume")
+    return replace(fs, **schedule, workers=args.workers)
+
+
+def _saved_settings(out: str, state) -> dict | None:
+    """The settings a stopped fit in ``out`` started with: its checkpoint's, or (a checkpoint of an earlier
+    version) those of the loss.json written beside it; None where neither has them."""
+    if state.settings is not None:
+        return state.settings
+    try:
+        with open(os.path.join(out, "loss.json")) as f:
+            saved = json.load(f).get("settings")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return saved if isinstance(saved, dict) else None
 
 
 def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str,
@@ -203,6 +264,7 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
     and scene files moved into ``--out``, where the fit resumes them. ``resume_trials``: an interrupted fit's
     trials go on from their checkpoints, from the starts its search saved (no search)."""
     import shutil
+    from dataclasses import asdict
 
     from ..core.json_io import save_json
     from ..core.teeth.fit_checkpoint import load_state
@@ -217,9 +279,9 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
         try:
             with open(starts_path) as f:
                 return [TeethScene.from_dict(d) for d in json.load(f)["starts"]]
-        except (ValueError, KeyError, TypeError) as exc:
-            raise ValueError(f"{starts_path}: not the starts of a fit's trials ({exc}); run the fit again "
-                             "without --resume") from None
+        except (ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
+            raise UserError(f"{starts_path}: not the starts of a fit's trials ({exc}); run the fit again "
+                            "without --resume") from None
 
     if resume_trials:
         starts = saved_starts()
@@ -233,7 +295,7 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
         shutil.rmtree(work, ignore_errors=True)  # an interrupted fit's trials
         os.makedirs(work)
         # the trials run from the starts as saved (a resumed trial starts from them read back, to the bit)
-        save_json(starts_path, {"starts": [s.to_dict() for s in starts]})
+        save_json(starts_path, {"starts": [s.to_dict() for s in starts], "settings": asdict(fs)})
         starts = saved_starts()
     n_trial = min(fs.start_trials, fs.iterations)
     if as_json:
@@ -269,6 +331,43 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
     return starts[trials.chosen], True
 
 
+def _check_free_patterns(patterns: tuple, scene, scene_path: str) -> None:
+    """Refuse a --free pattern that names no parameter of the scene (a typo would silently fit less)."""
+    import fnmatch
+
+    from ..core.teeth.param_vector import ParamLayout
+
+    names = [e.name for e in ParamLayout(scene).entries]
+    unmatched = [p for p in patterns if not any(fnmatch.fnmatch(n, p) for n in names)]
+    if unmatched:
+        kinds = sorted({n.rsplit(".", 1)[-1] for n in names})
+        raise UserError(f"--free {','.join(unmatched)}: no parameter of {scene_path} matches; the parameters are "
+                        f"PART.NAME with NAME one of {', '.join(kinds)} (e.g. {names[0]})")
+
+
+def _chosen_trial(trials_path: str) -> int:
+    """The start that won the trials, as ``start_trials.json`` says."""
+    try:
+        with open(trials_path) as f:
+            chosen = json.load(f)["chosen"]
+        if isinstance(chosen, bool) or not isinstance(chosen, int) or chosen < 0:
+            raise TypeError(f"'chosen' is {chosen!r}")
+    except (ValueError, KeyError, TypeError) as exc:
+        raise UserError(f"{trials_path}: not the result of a fit's start trials ({exc}); run the fit again "
+                        "without --resume") from None
+    return chosen
+
+
+def _trials_settings(work: str) -> dict | None:
+    """The settings saved with the starts of a fit stopped during its start trials (None: none saved)."""
+    try:
+        with open(os.path.join(work, "starts.json")) as f:
+            saved = json.load(f).get("settings")
+    except (OSError, ValueError, AttributeError):
+        return None  # damaged starts are refused, naming the file, where they are read
+    return saved if isinstance(saved, dict) else None
+
+
 def _adopt_trial(work: str, chosen: int, out: str) -> None:
     """Move the winning trial's files into ``out`` (its checkpoint last: once it is there, so is the rest)
     and remove the trials' folder. Run again after an interruption, it finishes the move."""
@@ -302,13 +401,19 @@ def run_fit(args: argparse.Namespace) -> int:
     scene_path = args.scene or os.path.join(args.capture, "scene.json")
     scene = load_scene(scene_path)
     if len(cap.cameras) == 0 or len(cap.lights) == 0:
-        raise ValueError("the capture has no cameras or lights")
+        raise UserError("the capture has no cameras or lights")
     fs = fit_settings(args)
+    if args.free is not None:
+        _check_free_patterns(fs.free, scene, scene_path)
     on_dask = args.scheduler is not None or args.dask_workers is not None
     if args.workers != 1 and on_dask:
-        raise ValueError("--workers is for fits in this process; on Dask, the cluster's workers render")
+        raise UserError("--workers is for fits in this process; on Dask, the cluster's workers render")
     if args.scheduler is not None and args.dask_workers is not None:
-        raise ValueError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
+        raise UserError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
+    if args.scheduler is not None:
+        from ..scaleout.cluster import check_scheduler
+
+        check_scheduler(args.scheduler)  # before the start search and trials, minutes of work written to --out
     ckpt = os.path.join(args.out, "checkpoint.json")
     trials_path = os.path.join(args.out, "start_trials.json")
     trials_work = os.path.join(args.out, TRIALS_DIR)
@@ -319,17 +424,20 @@ def run_fit(args: argparse.Namespace) -> int:
         os.path.isfile(trials_path) or os.path.isfile(os.path.join(trials_work, "starts.json")))
     if args.resume and not stopped_in_trials:
         if not os.path.isfile(ckpt):
-            raise FileNotFoundError(f"no checkpoint to resume from in {args.out!r} (the fit stopped before its "
-                                    "first one: run it again without --resume)")
-        before = load_state(ckpt).log  # a malformed or foreign checkpoint is a one-line error here
+            raise MissingFileError(f"no checkpoint to resume from in {args.out!r} (the fit stopped before its "
+                            "first one: run it again without --resume)", ckpt)
+        state = load_state(ckpt)  # a malformed or foreign checkpoint is a one-line error here
+        before = state.log
+        fs = resumed_settings(args, _saved_settings(args.out, state), ckpt)
+    elif stopped_in_trials:
+        fs = resumed_settings(args, _trials_settings(trials_work), os.path.join(trials_work, "starts.json"))
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     os.makedirs(args.out, exist_ok=True)  # before the search and the trials: a bad --out fails at once
     resume = args.resume
     if stopped_in_trials:
         with FolderLock(args.out):
             if os.path.isfile(trials_path):
-                with open(trials_path) as f:
-                    _adopt_trial(trials_work, int(json.load(f)["chosen"]), args.out)
+                _adopt_trial(trials_work, _chosen_trial(trials_path), args.out)
             else:
                 scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path, resume_trials=True)
     elif not args.resume:
@@ -340,7 +448,7 @@ def run_fit(args: argparse.Namespace) -> int:
             if args.init == "literature":
                 scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path)
         if args.init == "perturbed":
-            scene = perturbed_start(scene, seed=args.seed)
+            scene = perturbed_start(scene, seed=fs.seed)
     if resume and not before:  # the winning start's trial, moved into --out by this run
         before = load_state(ckpt).log
     total = fs.iterations + fs.textured_iterations

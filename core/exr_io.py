@@ -8,15 +8,18 @@ Blender), the ``OpenImageIO`` module that Blender bundles. Both give identical a
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Sequence
 
 import numpy as np
 
+from .errors import BadFileError, MissingFileError
+
 DEFAULT_CHANNELS = {1: ("Y",), 2: ("R", "G"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 
-class ExrError(ValueError):
+class ExrError(BadFileError):
     """An EXR file is missing, unreadable or does not hold what the caller needs."""
 
 
@@ -63,6 +66,11 @@ def write_exr(path: str | os.PathLike, array: np.ndarray, channels: Sequence[str
     if len(channels) != n or len(set(channels)) != n:
         raise ExrError(f"{n} channels need {n} distinct names, got {channels}")
     path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):  # the libraries say so in a RuntimeError without the path
+        raise MissingFileError(f"{path}: cannot write there, the folder {folder} does not exist", folder)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(errno.EACCES, "cannot write into this folder", folder)
     tmp = f"{path}.tmp-{os.getpid()}.exr"
     try:
         if _backend() == "oiio":

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import os
 
+from .errors import UserError
+
 
 class FolderLock:
     """``FOLDER/.fit.lock`` holding this process's id while a fit writes to FOLDER: a second fit into the
@@ -24,15 +26,15 @@ class FolderLock:
                 except (OSError, ValueError):
                     pid = 0
                 if pid and _alive(pid):
-                    raise ValueError(f"another fit (process {pid}) is writing to {os.path.dirname(self.path)!r}; "
-                                     "wait for it, stop it, or choose another output folder") from None
+                    raise UserError(f"another fit (process {pid}) is writing to {os.path.dirname(self.path)!r}; "
+                                    "wait for it, stop it, or choose another output folder") from None
                 os.remove(self.path)  # stale: its process is gone
                 continue
             with os.fdopen(fd, "w") as f:
                 f.write(str(os.getpid()))
             self.held = True
             return self
-        raise ValueError(f"cannot lock {os.path.dirname(self.path)!r} for the fit")
+        raise UserError(f"cannot lock {os.path.dirname(self.path)!r} for the fit")
 
     def __exit__(self, *exc) -> None:
         if self.held:

@@ -56,6 +56,7 @@ def fit_btf_dask(
     with FolderLock(out_dir):  # the tiles; fit_btf below takes the lock again for the assembly
         hdr, cache, values_path = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress, checked)
         tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
+        btf_fitter.check_tiles(cache, tiles)
         todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
         init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
         if todo:

@@ -13,6 +13,7 @@ import bpy
 import numpy as np
 
 from ..addon.fabric.material import sync_fabric_lamps
+from ..core.errors import UserError
 from ..render import configure_cycles, dark_world, denoise_for_display, render_to_array, reset_scene
 from . import scenes, scenes_fabric, scenes_scratch, scenes_teeth  # noqa: F401  (they register on import)
 from .registry import MATERIALS, SCENES, LibraryMaterial, LibraryScene  # noqa: F401  (the registries, re-exported)
@@ -58,7 +59,7 @@ def render_material_preview(
     """Render library material ``name`` on its preview stage; returns linear RGBA. ``denoise``: for
     display (the showcase), not for references."""
     if name not in MATERIALS:
-        raise ValueError(f"unknown library material {name!r}; available: {', '.join(sorted(MATERIALS))}")
+        raise UserError(f"unknown library material {name!r}; available: {', '.join(sorted(MATERIALS))}")
     scene = _fresh_scene(workdir, resolution, samples)
     entry = MATERIALS[name]
     material = entry.build(scene, workdir)
@@ -79,7 +80,7 @@ def render_library_scene(
     """Build scene ``name`` from scratch and render it; returns linear RGBA (H, W, 4). ``denoise``: for
     display (the showcase), not for references."""
     if name not in SCENES:
-        raise ValueError(f"unknown scene {name!r}; available: {', '.join(sorted(SCENES))}")
+        raise UserError(f"unknown scene {name!r}; available: {', '.join(sorted(SCENES))}")
     entry = SCENES[name]
     scene = _fresh_scene(workdir, resolution or entry.resolution, samples or entry.samples)
     entry.build(scene, workdir)

@@ -1,14 +1,31 @@
-"""Shared pytest configuration: the ``--update-refs`` switch of the render-regression suite."""
+"""Shared pytest configuration: the render-regression switches (``--update-refs``, ``--cycles-kernel``) and
+the numba warm-up.
+
+Markers are registered in pyproject.toml and are strict (``--strict-markers``): a misspelt marker is an error.
+
+The numba warm-up: the compiled teeth tracer's kernels are cached on disk (``cache=True``), but a cold cache
+compiles them in every process that needs them first, which under ``pytest -n 2`` is both workers and the
+fits' subprocesses at once. The controlling process (or a run without xdist) therefore starts
+``tests/warm_numba.py`` in the background when the session starts; tests of the teeth tracer (``teeth`` in
+their file's or their own name, the Dask suite) wait for it before they run, the others run meanwhile. So the kernels
+compile once per run, and a warm cache costs the warm-up a second or two.
+"""
 
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
+import time
 
 import pytest
 
 # Test helpers (``regression``) import as top-level modules under --import-mode=importlib.
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, TESTS_DIR)
+
+_WARM_ENV = "MS_TEST_NUMBA_WARM"  # path of the warm-up's done file, set by the controlling process
+_WARM_TIMEOUT = 900.0
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -18,7 +35,68 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         default=False,
         help="rewrite the reference EXRs under tests/references/ instead of comparing (make refs)",
     )
+    parser.addoption(
+        "--cycles-kernel",
+        choices=("native", "sse42"),
+        default="native",
+        help="the Cycles CPU kernel of the render-regression suite: native (the best this CPU runs) or sse42 "
+             "(forced through Cycles' debug flags)",
+    )
+    parser.addoption(
+        "--no-numba-warmup",
+        action="store_true",
+        default=False,
+        help="do not compile the teeth tracer's numba kernels in the background first",
+    )
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "regression: render-regression test against tests/references/")
+@pytest.fixture(scope="session")
+def cycles_kernel(request) -> str:
+    return request.config.getoption("--cycles-kernel")
+
+
+def _needs_numba(nodeid: str) -> bool:
+    """Tests of the teeth tracer: ``teeth`` in the file's, the test's or a parameter's name (the library's teeth
+    fit demo), or the Dask suite."""
+    nodeid = nodeid.replace(os.sep, "/")
+    return "teeth" in nodeid.rsplit("/", 1)[-1] or nodeid.startswith("tests/scaleout/")
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    config = session.config
+    if hasattr(config, "workerinput") or os.environ.get(_WARM_ENV):
+        return  # an xdist worker (or a nested pytest): the controlling process started the warm-up
+    if config.getoption("--no-numba-warmup") or config.getoption("--collect-only"):
+        return
+    try:
+        import numba  # noqa: F401
+    except ImportError:  # the 4.5 environment: the numpy tracer, nothing to compile
+        return
+    import tempfile
+
+    done = os.path.join(tempfile.mkdtemp(prefix="ms-numba-warm-"), "done")
+    os.environ[_WARM_ENV] = done  # inherited by the xdist workers, started after this hook
+    log = open(done + ".log", "w")  # noqa: SIM115  (the child writes it after this returns)
+    config._ms_numba_warm = subprocess.Popen(  # type: ignore[attr-defined]
+        [sys.executable, os.path.join(TESTS_DIR, "warm_numba.py"), done], stdout=log, stderr=subprocess.STDOUT,
+    )
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    proc = getattr(session.config, "_ms_numba_warm", None)
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+@pytest.fixture(autouse=True)
+def _numba_warm(request) -> None:
+    """Tests of the teeth tracer wait until the background warm-up has compiled its kernels."""
+    done = os.environ.get(_WARM_ENV)
+    if not done or not _needs_numba(request.node.nodeid):
+        return
+    start = time.monotonic()
+    while not os.path.exists(done) and not os.path.exists(done + ".failed"):
+        if time.monotonic() - start > _WARM_TIMEOUT:
+            break
+        time.sleep(0.2)

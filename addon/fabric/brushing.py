@@ -4,15 +4,22 @@ A :class:`BrushSession` keeps a material's four maps in memory twice: as core ar
 = top) and as Blender RGBA pixel buffers (mesh frame, row 0 = bottom). Each stroke segment edits
 only the window around its capsule (core functions on a sub-map), writes that window into both
 copies and uploads the changed images once (``foreach_set``), so an update of a 2048 x 2048 map
-costs a few milliseconds plus the upload. Every stroke records the windows it overwrote, so
-:meth:`BrushSession.undo_stroke` restores the maps exactly. The sessions of this Blender session are kept
-by material name (:func:`session_for`); the save handler packs them, loading another file drops them.
+costs a few milliseconds plus the upload. A finished stroke packs what it changed into the .blend and
+is one step of Blender's undo (:meth:`BrushSession.end_stroke`): Ctrl+Z, Ctrl+Shift+Z and Edit > Undo
+History take strokes back and forth, and the undo handlers (``addon/handlers.py``) reload the images
+whose pixels no longer match their packed data and drop the sessions (they hold images the undo
+replaced). The sessions of this Blender session are kept by material (``session_uid``: renames do not
+matter, :func:`session_for`); the save handler packs them, loading another file drops them.
+
+Materials own their images: a material whose maps another material also reads (Shift+D with a
+single-user copy, Make Single User, a material copied in its slot) gets copies of them on its first
+stroke (:func:`own_images`), so brushing it never changes the other one.
 
 Fitted closure maps (what world and indirect light see, ``core.fabric.closure_fit``) follow the painted
 maps segment by segment: a segment that changes sigma or the basis looks the closures of its changed
 texels up in the precomputed table (``core.fabric.closure_table``, multilinear in the fibre geometry,
-about 3 us per texel instead of 0.1-0.2 s per distinct geometry for the optimisation) and records the
-closure windows it overwrote, so the stroke's undo restores them. The closure images are uploaded
+about 3 us per texel instead of 0.1-0.2 s per distinct geometry for the optimisation), and Blender's undo
+restores them with the maps. The closure images are uploaded
 with the maps at most every half second during a stroke (eight more 2048 x 2048 uploads per segment
 would double an update) and at its end. Colour strokes (k_d, k_s) leave the closures as they are:
 the fit is of the k_s = 1 term.
@@ -22,18 +29,19 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+import bpy
 import numpy as np
 
 from ...core.fabric import brushing as core_brush
 from ...core.fabric.closure_table import lookup_closure_texels
 from ...core.fabric.parameter_maps import MAP_FILES, FabricMaps, load_params
+from ..common import mark_written, push_undo
 from .maps import CLOSURE_CHANNELS, CLOSURE_KEYS, WEIGHT_KEYS, btf_quat_to_mesh
-from .material import complete_closure_images, material_map_images
+from .material import CLOSURE_NODE_PREFIX, complete_closure_images, material_map_images
 
 MODES = ("COMB", "RECOLOR", "SMOOTH", "ANISOTROPY", "DATA_DRIVEN")
-MAX_UNDO = 32
 CLOSURE_UPLOAD_S = 0.5  # during a stroke the closure images are uploaded at most this often
 
 
@@ -48,11 +56,6 @@ class BrushSettings:
     smooth_factor: float = 0.8
     anisotropy_factor: float = 0.8
     states: core_brush.BrushStates | None = None
-
-
-@dataclass
-class _Stroke:
-    saved: list = field(default_factory=list)  # (key, r0, r1, c0, c1, old array); "fit KEY" = closures
 
 
 class BrushSession:
@@ -86,8 +89,7 @@ class BrushSession:
                 buf = np.empty(h * w * 4, dtype=np.float32)
                 self.closures[key].pixels.foreach_get(buf)
                 self.closure_buffers[key] = buf.reshape(h, w, 4)
-        self.undo_stack: list[_Stroke] = []
-        self._stroke: _Stroke | None = None
+        self._stroke_changed = False  # the current stroke changed a texel
         self._dirty: set[str] = set()  # changed, not uploaded to the images yet
         self._unpacked: set[str] = set()  # uploaded, not packed into the .blend yet
         self._closure_upload = 0.0  # perf_counter of the last closure upload
@@ -104,16 +106,18 @@ class BrushSession:
 
     # -- strokes -----------------------------------------------------------------------------
     def begin_stroke(self) -> None:
-        self._stroke = _Stroke()
+        self._stroke_changed = False
 
-    def end_stroke(self) -> None:
-        """Close the stroke (one undo step), upload and pack what it changed: saving is safe after it."""
-        if self._stroke is not None and self._stroke.saved:
-            self.undo_stack.append(self._stroke)
-            del self.undo_stack[:-MAX_UNDO]
-        self._stroke = None
+    def end_stroke(self) -> bool:
+        """Close the stroke: upload and pack what it changed (saving is safe after it) and make it one step of
+        Blender's undo. Returns whether the stroke changed any texel (a stroke that did not makes no step)."""
+        changed = self._stroke_changed
+        self._stroke_changed = False
         self.flush(closures=True)
         self.pack()
+        if changed:
+            push_undo("Fabric Stroke")
+        return changed
 
     def segment(self, uv0, uv1, settings: BrushSettings, pressure: float = 1.0) -> bool:
         """Apply one stroke segment from ``uv0`` to ``uv1``; returns whether any texel changed."""
@@ -149,30 +153,23 @@ class BrushSession:
             old_sub, new_sub = getattr(sub, key), getattr(new, key)
             if new_sub is old_sub:
                 continue
-            if self._stroke is not None:
-                self._stroke.saved.append((key, r0, r1, c0, c1, old_sub.copy()))
             new_sub = np.asarray(new_sub, dtype=np.float32)
             if key in ("sigma", "basis") and self.closures:
                 fibres |= np.any(new_sub != old_sub, axis=-1)
             self._write(key, r0, r1, c0, c1, new_sub, c)
-            changed = True
+            changed = self._stroke_changed = True
         if fibres.any():
             self._refit_window(r0, r1, c0, c1, fibres)
         return changed
 
     def _refit_window(self, r0, r1, c0, c1, mask) -> None:
-        """Closures of the window's texels in ``mask`` (rows from the top) from the table, recording
-        the window's old closure values in the stroke."""
+        """Closures of the window's texels in ``mask`` (rows from the top) from the table."""
         rows, cols = np.nonzero(mask)
         rows, cols = rows + r0, cols + c0
         wts, shp, scl = lookup_closure_texels(self.top["sigma"][rows, cols], self.top["basis"][rows, cols])
         new = {key: wts[:, j, :] for j, key in enumerate(WEIGHT_KEYS)}
         new["shape"], new["shape2"], new["ggx_scale"] = shp[:, :4], shp[:, 4:6], scl
-        h = self.height
         for key in CLOSURE_KEYS:
-            if self._stroke is not None:
-                self._stroke.saved.append(("fit " + key, r0, r1, c0, c1,
-                                           self.closure_buffers[key][h - r1:h - r0, c0:c1].copy()))
             self._closure_write(key, rows, cols, new[key])
 
     def _closure_write(self, key, rows, cols, values) -> None:
@@ -197,22 +194,6 @@ class BrushSession:
         self.buffers[key][h - r1 : h - r0, c0:c1, :c] = mesh[::-1]
         self._dirty.add(key)
 
-    def undo_stroke(self) -> bool:
-        """Restore the maps as they were before the last stroke; False when there is none."""
-        if not self.undo_stack:
-            return False
-        stroke = self.undo_stack.pop()
-        h = self.height
-        for key, r0, r1, c0, c1, old in reversed(stroke.saved):
-            if key.startswith("fit "):
-                self.closure_buffers[key[4:]][h - r1:h - r0, c0:c1] = old
-                self._dirty.add(key)
-            else:
-                self._write(key, r0, r1, c0, c1, old, MAP_FILES[key][1])
-        self.flush(closures=True)
-        self.pack()
-        return True
-
     def flush(self, closures: bool | None = None) -> None:
         """Upload the changed images to Blender (what the viewport and renders see). The eight closure
         images (about 10 ms each at 2048 x 2048) go up with the maps at most every
@@ -234,8 +215,19 @@ class BrushSession:
         """Store the uploaded pixels of the changed maps in the .blend (packed images): what save,
         autosave and undo keep. About 0.15 s per 2048 x 2048 map, so once per stroke, not per segment."""
         for key in sorted(self._unpacked):
-            self._image(key).pack()
+            image = self._image(key)
+            image.pack()
+            mark_written(image)
         self._unpacked.clear()
+
+    def valid(self) -> bool:
+        """Whether every image of the session still exists (an undo or a deletion removes them)."""
+        try:
+            for image in (*self.images.values(), *self.closures.values()):
+                image.name  # noqa: B018 (raises ReferenceError for a removed image)
+        except ReferenceError:
+            return False
+        return True
 
     def _image(self, key):
         return self.closures[key[4:]] if key.startswith("fit ") else self.images[key]
@@ -244,28 +236,62 @@ class BrushSession:
         return self.closure_buffers[key[4:]] if key.startswith("fit ") else self.buffers[key]
 
 
-_SESSIONS: dict[str, BrushSession] = {}  # material name -> its brush session, for this Blender session
+_SESSIONS: dict[int, BrushSession] = {}  # material session_uid -> its brush session, for this Blender session
+
+
+def own_images(mat) -> int:
+    """Give ``mat`` its own copy of every map and closure image another material also reads (copy on first
+    edit: a Shift+D single-user copy, Make Single User, a material copied in its slot). Returns how many
+    images it copied. Raises ValueError for a material or image linked from a library (read-only here)."""
+    if mat.library is not None:
+        raise ValueError(f"'{mat.name}' is linked from a library: make it local (Object > Relations > Make "
+                         "Local) to brush it")
+    nodes = [n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE" and n.image is not None
+             and (n.name.startswith("map_") or n.name.startswith(CLOSURE_NODE_PREFIX))]
+    mine = {n.image.name for n in nodes}
+    shared = set()
+    for other in bpy.data.materials:
+        if other == mat or other.node_tree is None:
+            continue
+        for node in other.node_tree.nodes:
+            if node.type == "TEX_IMAGE" and node.image is not None and node.image.name in mine:
+                shared.add(node.image.name)
+    copies: dict[str, object] = {}
+    for node in nodes:
+        image = node.image
+        if image.library is not None or image.name in shared:
+            if image.name not in copies:
+                copy = image.copy()
+                if copy.packed_file is None:
+                    copy.pack()
+                copies[image.name] = copy
+            node.image = copies[image.name]
+    return len(copies)
 
 
 def session_for(mat) -> BrushSession:
-    """The brush session of ``mat`` (rebuilt when its images changed)."""
+    """The brush session of ``mat`` (rebuilt when its images changed), its images made its own first."""
+    own_images(mat)
     images = material_map_images(mat)
     closures = complete_closure_images(mat)
-    session = _SESSIONS.get(mat.name)
-    if session is not None:
+    session = _SESSIONS.get(mat.session_uid)
+    if session is not None and session.valid():
         same = all(session.images.get(k) == images.get(k) for k in session.images) and all(
             tuple(images[k].size) == (session.width, session.height) for k in images
         ) and all(session.closures.get(k) == closures.get(k) for k in set(session.closures) | set(closures))
         if same:
             return session
     session = BrushSession(images, closures)
-    _SESSIONS[mat.name] = session
+    _SESSIONS[mat.session_uid] = session
     return session
 
 
 def open_session(mat) -> BrushSession | None:
-    """The session of ``mat`` if one was opened (None otherwise)."""
-    return _SESSIONS.get(mat.name) if mat is not None else None
+    """The session of ``mat`` if one was opened and is still valid (None otherwise)."""
+    if mat is None:
+        return None
+    session = _SESSIONS.get(mat.session_uid)
+    return session if session is not None and session.valid() else None
 
 
 def drop_sessions() -> None:
@@ -274,7 +300,10 @@ def drop_sessions() -> None:
 
 def pack_sessions() -> None:
     """Upload and pack whatever the brush sessions changed and have not packed yet."""
-    for session in _SESSIONS.values():
+    for uid, session in list(_SESSIONS.items()):
+        if not session.valid():
+            del _SESSIONS[uid]
+            continue
         session.flush(closures=True)
         session.pack()
 

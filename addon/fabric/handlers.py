@@ -10,10 +10,10 @@ from .brushing import drop_sessions, pack_sessions
 from .material import fabric_script_nodes, has_fabric_links, sync_fabric_lamps
 
 # Updates that can change which lamps the fabric evaluates or which objects wear it: lamps, objects,
-# meshes (material slots on the data), materials, the scene (render engine, OSL switch) and the world
-# (its environment is the exact world light's).
-_FABRIC_UPDATES = (bpy.types.Light, bpy.types.Object, bpy.types.Mesh, bpy.types.Material, bpy.types.Scene,
-                   bpy.types.World)
+# meshes (material slots on the data), materials and their node trees (the fabric group unlinked), the
+# scene (render engine, OSL switch) and the world (its environment is the exact world light's).
+_FABRIC_UPDATES = (bpy.types.Light, bpy.types.Object, bpy.types.Mesh, bpy.types.Material, bpy.types.NodeTree,
+                   bpy.types.Scene, bpy.types.World)
 
 
 def _has_fabric() -> bool:

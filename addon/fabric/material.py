@@ -29,6 +29,7 @@ from ..common import (
     add_group_input,
     add_osl_switch,
     array_to_image,
+    describe_group_sockets,
     group_material,
     group_node,
     osl_switch,
@@ -46,46 +47,70 @@ SCRIPT_NODE = "SGGX Exact"
 MARKER = "material_structures_fabric"  # custom property on groups/materials made here
 CLOSURE_NODE_PREFIX = "fit_"  # image nodes of the fitted closure maps (map_* are the parameter maps)
 
-# (socket name, socket type, default, min, max); the OSL input of the same name takes it.
+# (socket name, socket type, default, min, max, tooltip); the OSL input of the same name takes it. On/off inputs
+# are booleans (no range); Cycles hands a boolean to the shader's int input as 0/1 (measured: renders identical to
+# the integer sockets of older files, which keep their type).
+_FIT = "Fitted closure mix (linked from the material's closure images)"
 GROUP_INPUTS = [
-    ("Kd", "NodeSocketColor", (0.05, 0.02, 0.02, 1.0), None, None),
-    ("Ks", "NodeSocketColor", (0.6, 0.2, 0.2, 1.0), None, None),
-    ("SigmaX", "NodeSocketFloat", 0.5, 1e-3, 10.0),
-    ("SigmaY", "NodeSocketFloat", 0.5, 1e-3, 10.0),
+    ("Kd", "NodeSocketColor", (0.05, 0.02, 0.02, 1.0), None, None,
+     "Diffuse colour k_d of the pile (linear RGB albedo, 0-1; from the kd map when linked)"),
+    ("Ks", "NodeSocketColor", (0.6, 0.2, 0.2, 1.0), None, None,
+     "Specular (sheen) colour k_s of the fibres (linear RGB albedo, 0-1; from the ks map when linked)"),
+    ("SigmaX", "NodeSocketFloat", 0.5, 1e-3, 10.0,
+     "Fibre roughness sigma_x: spread of the fibre directions across the first fibre axis (SGGX, no unit; "
+     "from the sigma map when linked)"),
+    ("SigmaY", "NodeSocketFloat", 0.5, 1e-3, 10.0,
+     "Fibre roughness sigma_y: spread of the fibre directions across the second fibre axis (SGGX, no unit; "
+     "from the sigma map when linked)"),
     # a vector, not a colour: colour socket values are clamped to >= 0, quaternions are signed
-    ("QuatWXY", "NodeSocketVector", (1.0, 0.0, 0.0), -1.0, 1.0),
-    ("QuatZ", "NodeSocketFloat", 0.0, -1.0, 1.0),
-    ("Tint", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None),
-    ("SigmaScale", "NodeSocketFloat", 1.0, 0.05, 20.0),
-    ("Anisotropy", "NodeSocketFloat", 0.0, 0.0, 0.95),
-    ("FastPreview", "NodeSocketInt", 0, 0, 1),
+    ("QuatWXY", "NodeSocketVector", (1.0, 0.0, 0.0), -1.0, 1.0,
+     "Fibre orientation: w, x, y of the unit quaternion turning the UV frame into the fibre frame (no unit; "
+     "from the basis map when linked)"),
+    ("QuatZ", "NodeSocketFloat", 0.0, -1.0, 1.0,
+     "Fibre orientation: z of the unit quaternion turning the UV frame into the fibre frame (no unit; "
+     "from the basis map when linked)"),
+    ("Tint", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None,
+     "Multiplies the diffuse and specular colours (linear RGB, 1 = as fitted)"),
+    ("SigmaScale", "NodeSocketFloat", 1.0, 0.05, 20.0,
+     "Roughness Scale: multiplies both fibre roughnesses (1 = as fitted; below 1 a sharper highlight)"),
+    ("Anisotropy", "NodeSocketFloat", 0.0, 0.0, 0.95,
+     "Shrinks the smaller fibre roughness by this fraction (0 = as fitted; 0-0.95)"),
+    ("FastPreview", "NodeSocketBool", False, None, None,
+     "Render with Cycles' closures only (quick, approximate) instead of the exact fabric light under the lights"),
 ]
 # Fitted closures (issue 38): linked from the closure images, switched on by UseFittedClosures.
 FIT_INPUTS = [
-    ("UseFittedClosures", "NodeSocketInt", 0, 0, 1),
-    ("FitDiffuse", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
-    ("FitDiffuseA", "NodeSocketFloat", 0.0, 0.0, 1e4),
-    ("FitSheen", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
-    ("FitSheenA", "NodeSocketFloat", 0.0, 0.0, 1e4),
-    ("FitVelvet", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
-    ("FitVelvetA", "NodeSocketFloat", 0.0, 0.0, 1e4),
-    ("FitGGX", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
-    ("FitGGXA", "NodeSocketFloat", 0.0, 0.0, 1e4),
-    ("FitShape", "NodeSocketColor", (1.0, 0.4, 0.0, 1.0), None, None),
-    ("FitShapeA", "NodeSocketFloat", 0.0, 0.0, 1.0),
-    ("FitGGXScale", "NodeSocketFloat", 1.0, 0.0, 10.0),
+    ("UseFittedClosures", "NodeSocketBool", False, None, None,
+     "Bounced and world light use the closure mix fitted per texel (on once its images are linked)"),
+    ("FitDiffuse", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None, f"{_FIT}: diffuse weight coefficients"),
+    ("FitDiffuseA", "NodeSocketFloat", 0.0, 0.0, 1e4, f"{_FIT}: diffuse weight, 4th coefficient (no unit)"),
+    ("FitSheen", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None, f"{_FIT}: sheen weight coefficients"),
+    ("FitSheenA", "NodeSocketFloat", 0.0, 0.0, 1e4, f"{_FIT}: sheen weight, 4th coefficient (no unit)"),
+    ("FitVelvet", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None, f"{_FIT}: velvet weight coefficients"),
+    ("FitVelvetA", "NodeSocketFloat", 0.0, 0.0, 1e4, f"{_FIT}: velvet weight, 4th coefficient (no unit)"),
+    ("FitGGX", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None, f"{_FIT}: GGX weight coefficients"),
+    ("FitGGXA", "NodeSocketFloat", 0.0, 0.0, 1e4, f"{_FIT}: GGX weight, 4th coefficient (no unit)"),
+    ("FitShape", "NodeSocketColor", (1.0, 0.4, 0.0, 1.0), None, None,
+     f"{_FIT}: sheen roughness, velvet sigma, velvet normal tilt toward the fibres (R, G, B; no unit)"),
+    ("FitShapeA", "NodeSocketFloat", 0.0, 0.0, 1.0, f"{_FIT}: GGX normal tilt toward the fibres (0-1)"),
+    ("FitGGXScale", "NodeSocketFloat", 1.0, 0.0, 10.0, f"{_FIT}: GGX roughness multiplier c_g (no unit)"),
 ]
 # Exact world light (world_light.py): on by default; off gives the world to the fitted closures.
-WORLD_INPUTS = [("ExactWorld", "NodeSocketInt", 1, 0, 1)]
+WORLD_INPUTS = [("ExactWorld", "NodeSocketBool", True, None, None,
+                 "Exact World Light: light from the world's environment is computed exactly by the fabric shader "
+                 "(off: the fitted closures see it, and bounced light too)")]
 # The second velvet of the fitted mix (weight 0, i.e. the mix of older files, until its images are linked).
 VELVET2_INPUTS = [
-    ("FitVelvet2", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None),
-    ("FitVelvet2A", "NodeSocketFloat", 0.0, 0.0, 1e4),
-    ("FitShape2", "NodeSocketColor", (0.4, 0.0, 0.0, 1.0), None, None),
+    ("FitVelvet2", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None, None, f"{_FIT}: second velvet weight coefficients"),
+    ("FitVelvet2A", "NodeSocketFloat", 0.0, 0.0, 1e4, f"{_FIT}: second velvet weight, 4th coefficient (no unit)"),
+    ("FitShape2", "NodeSocketColor", (0.4, 0.0, 0.0, 1.0), None, None,
+     f"{_FIT}: second velvet sigma and normal tilt toward the fibres (R, G; no unit)"),
 ]
 FIT_INPUTS = FIT_INPUTS + WORLD_INPUTS + VELVET2_INPUTS  # added to groups from older files like the fit inputs
 GROUP_INPUTS = GROUP_INPUTS + FIT_INPUTS
 SHADER_INPUTS = [name for name, *_ in GROUP_INPUTS] + ["Tangent"]
+SHADER_OUTPUT_DESCRIPTION = "The pile fabric for Cycles (exact with Open Shading Language, its closures without)"
+VIEWPORT_OUTPUT_DESCRIPTION = "An approximate look of the fabric for EEVEE and Material Preview"
 # closure image key -> (group input of its Color output, group input of its Alpha output)
 CLOSURE_SOCKETS = {
     "diffuse": ("FitDiffuse", "FitDiffuseA"),
@@ -118,8 +143,10 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     group[MARKER] = 1
     for spec in GROUP_INPUTS:
         add_group_input(group, *spec)
-    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
-    group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
+    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader",
+                               description=SHADER_OUTPUT_DESCRIPTION)
+    group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader",
+                               description=VIEWPORT_OUTPUT_DESCRIPTION)
     gin = group.nodes.new("NodeGroupInput")
     gout = group.nodes.new("NodeGroupOutput")
     script = _load_script(group, scene)
@@ -133,7 +160,9 @@ def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
 
 def ensure_closures_without_osl(group) -> None:
     """Give a group from an older file the closure path that renders without OSL (``native_closures``), and
-    link its switch to the script once the script has the ``OSLActive`` output."""
+    link its switch to the script once the script has the ``OSLActive`` output; its sockets get their tooltips."""
+    describe_group_sockets(group, GROUP_INPUTS, {"Shader": SHADER_OUTPUT_DESCRIPTION,
+                                                 VIEWPORT_OUTPUT: VIEWPORT_OUTPUT_DESCRIPTION})
     script = next((n for n in group.nodes if n.type == "SCRIPT" and "Lamp1Type" in n.inputs), None)
     if script is None:
         return
@@ -169,7 +198,8 @@ def ensure_fit_inputs(group, scene=None) -> None:
 def ensure_viewport_look(group) -> None:
     """Give a group from an older file its "Viewport" output (EEVEE look from the same inputs)."""
     if VIEWPORT_OUTPUT not in group.interface.items_tree:
-        group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
+        group.interface.new_socket(VIEWPORT_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader",
+                                   description=VIEWPORT_OUTPUT_DESCRIPTION)
         _build_viewport_look(group)
 
 
@@ -431,17 +461,45 @@ def fabric_script_nodes():
                 yield node
 
 
+def _cycles_output(mat):
+    """The material output Cycles renders (the active one of those targeting Cycles or all engines)."""
+    outs = [n for n in mat.node_tree.nodes if n.type == "OUTPUT_MATERIAL" and n.target in {"ALL", "CYCLES"}]
+    return next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+
+
+def rendered_fabric_node(mat):
+    """The SGGX Fabric group node whose shader reaches the surface Cycles renders for ``mat`` (None when the
+    material has none, or the artist disconnected or replaced it, e.g. by a Principled BSDF)."""
+    if mat is None or mat.node_tree is None:
+        return None
+    out = _cycles_output(mat)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return None
+    seen, todo = set(), [out.inputs["Surface"].links[0].from_node]
+    while todo:
+        node = todo.pop()
+        if node.name in seen or node.mute:
+            continue
+        seen.add(node.name)
+        if node.type == "GROUP" and node.node_tree is not None and node.node_tree.get(MARKER):
+            return node
+        todo += [link.from_node for sock in node.inputs for link in sock.links if not link.is_muted]
+    return None
+
+
 def _exact_path_on(mat) -> bool:
-    """Whether a fabric material evaluates lamps itself (FastPreview off on its group node)."""
-    node = fabric_group_node(mat)
+    """Whether a fabric material evaluates lamps itself: its fabric group renders (reaches the Cycles output)
+    with FastPreview off."""
+    node = rendered_fabric_node(mat)
     if node is None:
-        return True
+        return False
     sock = node.inputs["FastPreview"]
     return sock.is_linked or not sock.default_value
 
 
 def fabric_objects(scene, exact_only: bool = False):
-    """Meshes with a fabric material (``exact_only``: one whose exact lamp path is on)."""
+    """Meshes with a fabric material (``exact_only``: one whose exact lamp path renders: the fabric group
+    reaches the material's Cycles output and FastPreview is off)."""
     out = []
     for obj in scene.objects:
         if obj.type != "MESH":

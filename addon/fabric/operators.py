@@ -2,10 +2,11 @@
 brushing tool.
 
 The brushing tool is a modal viewport operator with an EXEC path that replays recorded strokes: drag with
-the left mouse button over a fabric-mapped mesh to paint; Ctrl+Z inside the tool (or the "Undo Stroke"
-button) takes back the last stroke; Esc / right click leaves the tool. Every finished stroke and every undo
-packs the changed maps into the .blend, so saving is safe at any time (a save in the middle of a stroke packs
-through the save handler). Headless: pass the stroke as properties and call EXEC.
+the left mouse button over a fabric-mapped mesh to paint; Esc / right click leaves the tool. Every finished
+stroke packs the changed maps into the .blend and is one step of Blender's undo, so Ctrl+Z (inside the tool it
+leaves the tool and undoes the last stroke), Ctrl+Shift+Z and Edit > Undo History work on strokes like on any
+other edit, and saving is safe at any time (a save in the middle of a stroke packs through the save handler).
+Headless: pass the stroke as properties and call EXEC.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from ..common import (
     stroke_uvs,
 )
 from . import fit_job
-from .brushing import BrushSettings, load_brush_states, open_session, session_for
+from .brushing import BrushSettings, load_brush_states, session_for
 from .maps import CLOSURE_KEYS, images_to_closure_maps, images_to_maps, maps_to_images
 from .material import (
     GROUP_NAME,
@@ -54,7 +55,8 @@ class MS_OT_fabric_new_material(bpy.types.Operator):
     bl_label = "New Fabric Material"
     bl_options = {"REGISTER", "UNDO"}
 
-    preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default="VELVET")
+    preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default="VELVET",
+                                   description="Which pile fabric the new material starts as")
 
     def execute(self, context):
         obj = context.active_object
@@ -76,6 +78,9 @@ class MS_OT_fabric_import_maps(FolderPicker, bpy.types.Operator):
     bl_idname = "material_structures.fabric_import_maps"
     bl_label = "Import Fitted Fabric Maps"
     bl_options = {"REGISTER", "UNDO"}
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+                                        description="A fit's output folder (kd, ks, sigma, basis maps, params.json)")
 
     def execute(self, context):
         obj = context.active_object
@@ -110,6 +115,9 @@ class MS_OT_fabric_save_maps(FolderPicker, bpy.types.Operator):
     bl_idname = "material_structures.fabric_save_maps"
     bl_label = "Save Fabric Maps"
     bl_options = {"REGISTER"}
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+                                        description="Folder the maps are written to (EXR maps and params.json)")
 
     @classmethod
     def poll(cls, context):
@@ -182,6 +190,8 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
     bl_label = "Fit BTF"
     bl_options = {"REGISTER"}
 
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+                                        description="The measured BTF folder (btf.json and its images)")
     out_dir: bpy.props.StringProperty(name="Output Folder", subtype="DIR_PATH",
                                       description="Where the fitted maps are written (default: beside the BTF "
                                                   "folder, its name + _fit)")
@@ -299,11 +309,9 @@ class MS_OT_fabric_brush(bpy.types.Operator):
             return {"CANCELLED"}
         session = self.session
         session.begin_stroke()
-        changed = False
         for (uv0, _), (uv1, p1) in zip(points[:-1], points[1:], strict=True):
-            changed |= session.segment(uv0, uv1, self.settings, p1 if self.use_pressure else 1.0)
-        session.end_stroke()
-        if not changed:
+            session.segment(uv0, uv1, self.settings, p1 if self.use_pressure else 1.0)
+        if not session.end_stroke():
             self.report({"ERROR"}, "The stroke changed no texel (it misses the map, or strength is 0)")
             return {"CANCELLED"}
         return {"FINISHED"}
@@ -321,6 +329,7 @@ class MS_OT_fabric_brush(bpy.types.Operator):
         except (ValueError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        self.material_uid = fabric_material(context.active_object).session_uid
         self.painting = False
         self.last_uv = None
         context.window_manager.modal_handler_add(self)
@@ -331,7 +340,7 @@ class MS_OT_fabric_brush(bpy.types.Operator):
         s = self.settings
         context.area.header_text_set(
             f"Fabric brush: {s.mode.title()}  radius {s.radius:.3f}  strength {s.strength:.2f}  |  "
-            "LMB paint, Ctrl+Z undo stroke, Esc/RMB done"
+            "LMB paint, Ctrl+Z leave and undo the last stroke, Esc/RMB done"
         )
 
     def _uv_under_mouse(self, context, event):
@@ -340,13 +349,18 @@ class MS_OT_fabric_brush(bpy.types.Operator):
     def modal(self, context, event):
         if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
             return self._finish(context)
-        if event.type == "Z" and event.ctrl and event.value == "PRESS":
-            if self.session.undo_stroke():
-                self.report({"INFO"}, "Stroke undone")
-            return {"RUNNING_MODAL"}
+        if event.type == "Z" and (event.ctrl or event.oskey) and event.value == "PRESS":
+            # Blender's undo takes the stroke back: leave the tool and let the key reach Edit > Undo
+            self._finish(context)
+            return {"FINISHED", "PASS_THROUGH"}
         if event.type == "LEFTMOUSE":
             if event.value == "PRESS":
                 self.painting = True
+                mat = fabric_material(context.active_object)
+                if mat is None or mat.session_uid != self.material_uid:  # the material changed meanwhile
+                    self._finish(context)
+                    return {"CANCELLED"}
+                self.session = session_for(mat)  # a session dropped by an undo starts again
                 self.session.begin_stroke()
                 self.last_uv = self._uv_under_mouse(context, event)
             elif event.value == "RELEASE":
@@ -365,25 +379,10 @@ class MS_OT_fabric_brush(bpy.types.Operator):
         return {"PASS_THROUGH"}
 
     def _finish(self, context):
-        self.session.end_stroke()
+        if self.painting:
+            self.painting = False
+            self.session.end_stroke()
         context.area.header_text_set(None)
-        return {"FINISHED"}
-
-
-class MS_OT_fabric_brush_undo(bpy.types.Operator):
-    """Take back the last brush stroke on the active fabric's maps"""
-
-    bl_idname = "material_structures.fabric_brush_undo"
-    bl_label = "Undo Stroke"
-    bl_options = {"REGISTER"}
-
-    @classmethod
-    def poll(cls, context):
-        session = open_session(fabric_material(context.active_object))
-        return session is not None and bool(session.undo_stack)
-
-    def execute(self, context):
-        open_session(fabric_material(context.active_object)).undo_stroke()
         return {"FINISHED"}
 
 
@@ -396,5 +395,4 @@ CLASSES: list[type] = [
     MS_OT_fabric_sync_lamps,
     MS_OT_fabric_add_group_node,
     MS_OT_fabric_brush,
-    MS_OT_fabric_brush_undo,
 ]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..common import MaterialPanel, SidebarPanel, draw_group_inputs
+from ..common import MaterialPanel, SidebarPanel, draw_group_inputs, draw_shader_path
 from . import fit_job
 from .material import GROUP_NAME, MARKER, fabric_group_node, material_map_images
 from .world_light import world_light_status
@@ -26,6 +26,7 @@ class MATERIAL_PT_material_structures_fabric(MaterialPanel, bpy.types.Panel):
         if node is None:
             layout.label(text=f"No '{GROUP_NAME}' node in this material", icon="ERROR")
             return
+        draw_shader_path(layout, context.scene)
         draw_group_inputs(layout, node, [m for m in MULTIPLIERS if m[0] in node.inputs], linked="from a map")
         if "ExactWorld" in node.inputs and node.inputs["ExactWorld"].default_value:
             layout.label(text=world_light_status(context.scene), icon="WORLD")
@@ -87,9 +88,8 @@ class VIEW3D_PT_material_structures_fabric(SidebarPanel, bpy.types.Panel):
             box.prop(brush, "anisotropy_factor")
         else:
             box.prop(brush, "states_dir")
-        row = box.row()
-        row.operator("material_structures.fabric_brush", icon="BRUSH_DATA")
-        row.operator("material_structures.fabric_brush_undo", icon="LOOP_BACK")
+        box.operator("material_structures.fabric_brush", icon="BRUSH_DATA")
+        box.label(text="Each stroke is one step of Edit > Undo (Ctrl+Z)", icon="INFO")
 
 
 CLASSES: list[type] = [MATERIAL_PT_material_structures_fabric, VIEW3D_PT_material_structures_fabric]

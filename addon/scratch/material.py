@@ -24,7 +24,16 @@ import os
 import bpy
 
 from ...render import load_osl_script, osl_flip_t
-from ..common import add_eevee_fallback, add_group_input, group_material, wire_lamp_shader_group
+from ..common import (
+    add_eevee_fallback,
+    add_group_input,
+    add_osl_switch,
+    describe_group_sockets,
+    group_material,
+    osl_switch,
+    relink_osl_switch,
+    wire_lamp_shader_group,
+)
 from ..common import group_node as _group_node
 from ..lamp_sync import scene_shader_lamps, write_lamp_inputs
 from .tables import (
@@ -43,19 +52,33 @@ SHADER = "ms_scratch_metal"
 SCRIPT_NODE = "Scratch Shader"
 MARKER = "material_structures_scratch"
 GROUP_PREFIX = "Scratched Metal"
+BASE_METAL_NODE = "Base Metal Without OSL"
 
-# (socket name, socket type, default, min, max); the OSL input of the same name takes it.
+# (socket name, socket type, default, min, max, tooltip); the OSL input of the same name takes it. On/off inputs
+# are booleans (no range): Cycles hands them to the shader's int input as 0/1.
 GROUP_INPUTS = [
-    ("BaseColor", "NodeSocketColor", (0.91, 0.92, 0.92, 1.0), None, None),
-    ("EdgeTint", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None),
-    ("Roughness", "NodeSocketFloat", 0.08, 0.0, 1.0),
-    ("Coherence", "NodeSocketFloat", 60.0, 1.0, 500.0),
-    ("Intensity", "NodeSocketFloat", 1.0, 0.0, 1000.0),
-    ("Spectral", "NodeSocketInt", 0, 0, 1),
-    ("Tiling", "NodeSocketFloat", 1.0, 1e-3, 1e4),
-    ("FootprintScale", "NodeSocketFloat", 0.5, 1e-3, 10.0),
-    ("Debug", "NodeSocketInt", 0, 0, 2),
+    ("BaseColor", "NodeSocketColor", (0.91, 0.92, 0.92, 1.0), None, None,
+     "Colour of the metal seen head-on (linear RGB reflectance, 0-1)"),
+    ("EdgeTint", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None,
+     "Colour of the metal at grazing angles (linear RGB, 0-1; the F82 tint)"),
+    ("Roughness", "NodeSocketFloat", 0.08, 0.0, 1.0,
+     "Roughness of the metal between the scratches (0 = mirror, 1 = matte; GGX alpha = Roughness squared)"),
+    ("Coherence", "NodeSocketFloat", 60.0, 1.0, 500.0,
+     "Coherence length of the light, in micrometres (um): how far apart scratches still interfere"),
+    ("Intensity", "NodeSocketFloat", 1.0, 0.0, 1000.0,
+     "Scratch Intensity: multiplies the light the scratches scatter (1 = physical; no unit)"),
+    ("Spectral", "NodeSocketBool", False, None, None,
+     "Scratch colours from 16 wavelength bands instead of 3 (slower, smoother iridescence)"),
+    ("Tiling", "NodeSocketFloat", 1.0, 1e-3, 1e4,
+     "Scratch patches per UV unit: the patch repeats this many times across the UV map (no unit)"),
+    ("FootprintScale", "NodeSocketFloat", 0.5, 1e-3, 10.0,
+     "Size of the surface area one pixel averages over, as a fraction of the pixel's footprint (no unit)"),
+    ("Debug", "NodeSocketInt", 0, 0, 4,
+     "What to show, for checks: 0 the material, 1 the scratch colour alone, 2 the part of the light the "
+     "scratches take from the metal, 3 and 4 the pixel footprint"),
 ]
+SHADER_OUTPUT_DESCRIPTION = ("The scratched metal for Cycles (its scratches need Open Shading Language; the plain "
+                             "metal without)")
 
 
 def _load_script(tree, scene):
@@ -100,7 +123,8 @@ def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
     group[MARKER] = 1
     for spec in GROUP_INPUTS:
         add_group_input(group, *spec)
-    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader",
+                               description=SHADER_OUTPUT_DESCRIPTION)
     nodes, links = group.nodes, group.links
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
     script = _load_script(group, scene)
@@ -109,7 +133,45 @@ def _build_group(name: str, scene) -> bpy.types.ShaderNodeTree:
     links.new(texco.outputs["UV"], script.inputs["UV"])
     gin.location, script.location, texco.location = (-500, 0), (-150, 0), (-500, -300)
     tangent.location, add.location, gout.location = (-500, -500), (150, 0), (350, 0)
+    add_osl_switch(group, script, _base_metal(group, gin, tangent))
     return group
+
+
+def _base_metal(group, gin, tangent):
+    """The base metal from Cycles' own Metallic BSDF (GGX, F82 tint from BaseColor and EdgeTint, alpha =
+    Roughness^2, like the script's ``microfacet_f82_tint``): what renders where OSL does not run (Cycles'
+    SVM, GPUs but OptiX), the scratches left out. Returns its shader output."""
+    note = group.nodes.new("NodeFrame")  # read where the extension is missing (node editor): why no scratches
+    note.name = "Needs Material Structures"
+    note.label = "Scratches render with the Material Structures extension (it extracts their tables)"
+    note.location = (-150, 250)
+    metal = group.nodes.new("ShaderNodeBsdfMetallic")
+    metal.name = metal.label = BASE_METAL_NODE
+    metal.distribution = "GGX"
+    metal.fresnel_type = "F82"
+    metal.location = (-150, -450)
+    for name, socket in (("BaseColor", "Base Color"), ("EdgeTint", "Edge Tint"), ("Roughness", "Roughness")):
+        group.links.new(gin.outputs[name], metal.inputs[socket])
+    group.links.new(tangent.outputs["Tangent"], metal.inputs["Tangent"])
+    return metal.outputs[0]
+
+
+def ensure_base_metal(group) -> None:
+    """Give a scratch group from an older file the base metal that renders without OSL, and link its switch
+    once the script has the ``OSLActive`` output; its sockets get their tooltips."""
+    describe_group_sockets(group, GROUP_INPUTS, {"Shader": SHADER_OUTPUT_DESCRIPTION})
+    script = script_node(group)
+    if script is None:
+        return
+    if osl_switch(group) is None:
+        gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
+        tangent = next((n for n in group.nodes if n.type == "TANGENT"), None)
+        if tangent is None:
+            tangent = group.nodes.new("ShaderNodeTangent")
+            tangent.direction_type = "UV_MAP"
+        add_osl_switch(group, script, _base_metal(group, gin, tangent))
+    else:
+        relink_osl_switch(group, script)
 
 
 def _store(group, scratch_set, name: str, images: dict | None) -> None:

@@ -7,6 +7,7 @@ active object's scratched material's own set, or give the object a new material 
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Callable
@@ -44,6 +45,36 @@ from .material import (
 )
 
 PATTERN_ITEMS = [(k, k.title(), v) for k, v in PATTERNS.items()]
+
+
+def _um_range(name: str, what: str, default, lo: float, hi: float | None = None):
+    """A (min, max) pair of micrometre lengths on the scratch's own scale (not a scene length: the unit is
+    in the name and the tooltip); ``draw_um_range`` shows it as "Min" and "Max"."""
+    kw = {} if hi is None else {"max": hi}
+    return bpy.props.FloatVectorProperty(
+        name=f"{name} (um)", size=2, default=default, min=lo, **kw,
+        description=f"Smallest and largest {what} of a scratch, in micrometres (um); each scratch gets a "
+        "random value between them",
+    )
+
+
+def draw_um_range(layout, op, prop: str) -> None:
+    """One row of a micrometre range: its name, then its two values labelled Min and Max."""
+    row = layout.row(align=True)
+    row.label(text=op.bl_rna.properties[prop].name)
+    row.prop(op, prop, index=0, text="Min")
+    row.prop(op, prop, index=1, text="Max")
+
+
+def _get_angle_deg(op) -> float:
+    return math.degrees(op.angle)
+
+
+def _set_angle_deg(op, value: float) -> None:
+    op.angle = math.radians(max(-180.0, min(180.0, value)))
+
+
+SEED_DESCRIPTION = "Random seed: the same seed and settings give the same scratches (a number, no unit)"
 MODAL_MIN_COUNT = 2000  # fewer scratches take about a second or less: generated at once, no Esc needed
 JOB_THREAD_NAME = "Material Structures scratch generation"
 
@@ -112,22 +143,43 @@ class MS_OT_scratch_generate(bpy.types.Operator):
     bl_label = "Generate Scratches"
     bl_options = {"REGISTER", "UNDO"}
 
-    pattern: bpy.props.EnumProperty(name="Pattern", items=PATTERN_ITEMS, default="WEAR")
+    pattern: bpy.props.EnumProperty(name="Pattern", items=PATTERN_ITEMS, default="WEAR",
+                                    description="How the scratches are laid out on the patch")
     count: bpy.props.IntProperty(name="Scratches", description="Number of scratches on one patch", default=500,
                                  min=1, max=200000)
     patch_mm: bpy.props.FloatProperty(name="Patch Size (mm)", description="Side of the square patch that tiles "
-                                      "the UV map", default=20.0, min=0.5, max=1000.0)
-    length_um: bpy.props.FloatVectorProperty(name="Length (um)", size=2, default=(300.0, 4000.0), min=1.0)
-    width_um: bpy.props.FloatVectorProperty(name="Width (um)", size=2, default=(0.8, 6.0), min=0.05, max=100.0)
-    depth_um: bpy.props.FloatVectorProperty(name="Depth (um)", size=2, default=(0.8, 6.0), min=0.0, max=100.0)
-    angle_deg: bpy.props.FloatProperty(name="Hairline Angle", default=0.0, min=-180.0, max=180.0)
+                                      "the UV map, in millimetres (mm) on the object", default=20.0, min=0.5,
+                                      max=1000.0)
+    length_um: _um_range("Length", "length (random wear)", (300.0, 4000.0), 1.0)
+    width_um: _um_range("Width", "width", (0.8, 6.0), 0.05, 100.0)
+    depth_um: _um_range("Depth", "depth", (0.8, 6.0), 0.0, 100.0)
+    angle: bpy.props.FloatProperty(
+        name="Hairline Angle", default=0.0, min=-math.pi, max=math.pi, subtype="ANGLE",
+        description="Hairline: direction of the lines, measured from the UV map's U axis toward V (degrees)",
+    )
+    # Before the angle had a unit it was this, in degrees: kept for scripts, stored in ``angle``.
+    angle_deg: bpy.props.FloatProperty(
+        name="Hairline Angle (Degrees)", min=-180.0, max=180.0, get=_get_angle_deg, set=_set_angle_deg,
+        options={"HIDDEN", "SKIP_SAVE"},
+        description="Hairline Angle as a plain number of degrees (for scripts written before it had a unit)",
+    )
     fine_wear: bpy.props.BoolProperty(name="Fine Wear", description=f"Coherence length {FINE_WEAR_SIGMA_UM:g} um "
                                       "instead of 60 um", default=False)
-    seed: bpy.props.IntProperty(name="Seed", default=0, min=0)
+    seed: bpy.props.IntProperty(name="Seed", default=0, min=0, description=SEED_DESCRIPTION)
     replace: bpy.props.BoolProperty(name="Replace", description="Replace the current set (else add to it)",
                                     default=True)
     set_name: bpy.props.StringProperty(name="Set Name", description="Name of a new material's set (made unique; "
                                        "an existing scratched material keeps its own set)", default="Scratches")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = False
+        for prop in ("pattern", "count", "patch_mm"):
+            layout.prop(self, prop)
+        for prop in ("length_um", "width_um", "depth_um"):
+            draw_um_range(layout, self, prop)
+        for prop in ("angle", "fine_wear", "seed", "replace", "set_name"):
+            layout.prop(self, prop)
 
     def _check(self, context) -> bool:
         if not require_uv_mesh(self, context.active_object):
@@ -151,7 +203,13 @@ class MS_OT_scratch_generate(bpy.types.Operator):
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         mat = apply_set(context, obj, s, self.set_name)
-        self.report({"INFO"}, f"{s.n_scratches} scratches ({s.n_segments} segments) on '{mat.name}'")
+        lost = self.count - new.n_scratches
+        why = ""
+        if lost > 0:  # arcs or lines that lie wholly outside the square patch are clipped away
+            why = (f"; {lost} of the {self.count} generated lie wholly outside the "
+                   f"{self.patch_mm:g} mm patch and were left out")
+        self.report({"WARNING" if lost > 0 else "INFO"},
+                    f"{s.n_scratches} scratches ({s.n_segments} segments) on '{mat.name}'{why}")
         return {"FINISHED"}
 
     def execute(self, context):
@@ -234,9 +292,15 @@ class MS_OT_scratch_draw(bpy.types.Operator):
 
     stroke: stroke_property()
     stroke_space: stroke_space_property()
-    width_um: bpy.props.FloatVectorProperty(name="Width (um)", size=2, default=(2.0, 4.0), min=0.05, max=100.0)
-    depth_um: bpy.props.FloatVectorProperty(name="Depth (um)", size=2, default=(1.0, 3.0), min=0.0, max=100.0)
-    seed: bpy.props.IntProperty(name="Seed", default=0, min=0)
+    width_um: _um_range("Width", "width", (2.0, 4.0), 0.05, 100.0)
+    depth_um: _um_range("Depth", "depth", (1.0, 3.0), 0.0, 100.0)
+    seed: bpy.props.IntProperty(name="Seed", default=0, min=0, description=SEED_DESCRIPTION)
+
+    def draw(self, context):
+        layout = self.layout
+        for prop in ("width_um", "depth_um"):
+            draw_um_range(layout, self, prop)
+        layout.prop(self, "seed")
 
     @classmethod
     def poll(cls, context):
@@ -348,8 +412,10 @@ class MS_OT_scratch_import(FilePicker, bpy.types.Operator):
     bl_label = "Import Scratch Set"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(name="File or Folder", subtype="FILE_PATH")
-    set_name: bpy.props.StringProperty(name="Set Name", default="")
+    filepath: bpy.props.StringProperty(name="File or Folder", subtype="FILE_PATH",
+                                       description="A scratch set's .npz file, or its folder of EXR tables")
+    set_name: bpy.props.StringProperty(name="Set Name", default="",
+                                       description="Name of a new material's set (empty: the file's name)")
 
     def execute(self, context):
         obj = context.active_object
@@ -375,7 +441,11 @@ class MS_OT_scratch_export(FileSaver, bpy.types.Operator):
     bl_label = "Export Scratch Set"
     bl_options = {"REGISTER"}
 
-    filepath: bpy.props.StringProperty(name="File", subtype="FILE_PATH")
+    filepath: bpy.props.StringProperty(
+        name="File", subtype="FILE_PATH",
+        description="Where to write: a path ending .npz writes one file, a path without an extension a folder "
+        "of EXR tables",
+    )
     filename_ext = ".npz"
     check_extension = None  # a path without an extension writes a folder of EXR tables: keep it as typed
 

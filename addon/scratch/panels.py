@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..common import MaterialPanel, SidebarPanel, draw_group_inputs
+from ..common import MaterialPanel, SidebarPanel, draw_group_inputs, draw_shader_path
 from .material import MARKER, group_node
 from .tables import PROP
 
@@ -37,6 +37,7 @@ class MATERIAL_PT_material_structures_scratch(MaterialPanel, bpy.types.Panel):
             box.label(text=f"Set '{meta['name']}': {meta['n_segments']} segments")
             px, py = meta["patch_size_um"]
             box.label(text=f"Patch {px / 1000:.2f} x {py / 1000:.2f} mm, indexed for sigma {meta['sigma_um']:g} um")
+        draw_shader_path(layout, context.scene)
         draw_group_inputs(layout, node, CONTROLS)
         layout.prop(context.scene.material_structures, "scratch_world_lamps", text="World Lights")
         row = layout.row()

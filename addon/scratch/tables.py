@@ -31,7 +31,7 @@ import numpy as np
 
 from ...core.scratch.scratch_io import save_scratch_set_exr, scratch_set_tables, wrap_table
 from ...core.scratch.scratch_set import ScratchSet, validate_scratch_set
-from ..common import array_to_image, image_to_array
+from ..common import array_to_image, image_to_array, mark_written
 
 IMAGE_PREFIX = "MS Scratch"
 TABLES = {"segments": 4, "params": 4, "grid": 2, "cells": 1}
@@ -67,6 +67,7 @@ def _rewrite_image(image, arr: np.ndarray) -> None:
     image.pixels.foreach_set(rgba[::-1].ravel())
     image.update()
     image.pack()
+    mark_written(image)  # Blender's undo restores the packed data; the undo handler reloads the pixels
 
 
 def store_scratch_set(s: ScratchSet, name: str, images: dict | None = None) -> tuple[dict, dict]:

@@ -18,12 +18,14 @@ import os
 import shutil
 import sys
 import time
+import zipfile
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict
 
 import numpy as np
 
+from ..errors import BadFileError
 from ..folder_lock import FolderLock
 from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
@@ -74,6 +76,29 @@ def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, 
     return t, time.perf_counter() - start, res.iterations
 
 
+TILE_ARRAYS = {"quat": 4, "sigma": 2, "ks": 3, "kd": 3, "cost": 0}
+
+
+def read_tile(cache: str, t: tuple[int, int, int, int]) -> dict[str, np.ndarray]:
+    """A tile's checkpoint as ``name -> (th, tw[, C])`` arrays; a damaged one (truncated, not a .npz, arrays
+    missing or of the wrong size) is refused by name, with what to do about it."""
+    path = _tile_path(cache, t)
+    shp = (t[1] - t[0], t[3] - t[2])
+    try:
+        with np.load(path) as z:
+            return {k: z[k].reshape(shp + ((c,) if c else ())) for k, c in TILE_ARRAYS.items()}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise BadFileError(f"{path}: a damaged tile checkpoint ({type(exc).__name__}: {exc}); delete it and run "
+                           "the fit again to fit that tile anew") from None
+
+
+def check_tiles(cache: str, tiles: list[tuple[int, int, int, int]]) -> None:
+    """Read every tile checkpoint there is before any work, so that a damaged one stops the fit at once."""
+    for t in tiles:
+        if os.path.isfile(_tile_path(cache, t)):
+            read_tile(cache, t)
+
+
 def _directions_hash(wi: np.ndarray, wo: np.ndarray) -> str:
     return hashlib.sha1(np.ascontiguousarray(np.concatenate([wi, wo], 1)).tobytes()).hexdigest()
 
@@ -116,10 +141,19 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
     values_path = os.path.join(cache, "values.npy")
     old = None
     if os.path.isfile(meta_path):
-        with open(meta_path) as f:
-            old = json.load(f)
-    if old != meta or not os.path.isfile(values_path):
-        shutil.rmtree(cache, ignore_errors=True)
+        try:
+            with open(meta_path) as f:
+                old = json.load(f)
+        except (ValueError, UnicodeDecodeError):  # damaged: the cache is built anew, as for another BTF
+            old = None
+    same = old == meta
+    if not same or not _cache_readable(cache, meta["shape"]):
+        if same:  # this BTF's copy or operator damaged: they are made again, the tiles fitted so far stay
+            for name in ("meta.json", "values.npy", "ndf_operator.npz"):
+                if os.path.exists(os.path.join(cache, name)):
+                    os.remove(os.path.join(cache, name))
+        else:
+            shutil.rmtree(cache, ignore_errors=True)
         os.makedirs(os.path.join(cache, "tiles"), exist_ok=True)
         tmp = values_path + ".tmp.npy"
         n, h, w, _ = meta["shape"]
@@ -139,6 +173,22 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
                  solid_angle=op.solid_angle, valid=op.valid, resolution=op.resolution)
         save_json(meta_path, meta)
     return hdr, cache, values_path
+
+
+def _cache_readable(cache: str, shape: list) -> bool:
+    """Whether the cache's BTF copy and NDF operator can be read (a damaged one is built anew: it is derived
+    from the BTF, so nothing is lost)."""
+    n, h, w, _ = shape
+    try:
+        values = np.load(os.path.join(cache, "values.npy"), mmap_mode="r")
+        ok = values.shape == (h, w, n, 3) and values.dtype == np.float32
+        del values
+        with np.load(os.path.join(cache, "ndf_operator.npz")) as z:
+            ok = ok and {"A", "directions", "solid_angle", "valid", "resolution"} <= set(z.files)
+            ok = ok and all(z[k] is not None for k in z.files)
+        return ok
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        return False
 
 
 class _CallbackBar:
@@ -182,6 +232,7 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
     hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress is True, checked)
     t_loaded = time.perf_counter()
     tiles = _tiles(hdr.height, hdr.width, tile)
+    check_tiles(cache, tiles)
     todo = [t for t in tiles if not os.path.isfile(_tile_path(cache, t))]
     init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
     bar = None
@@ -222,13 +273,9 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
     ks, kd, cost = np.zeros((h, w, 3)), np.zeros((h, w, 3)), np.zeros((h, w))
     for t in tiles:
         y0, y1, x0, x1 = t
-        with np.load(_tile_path(cache, t)) as z:
-            shp = (y1 - y0, x1 - x0)
-            quat[y0:y1, x0:x1] = z["quat"].reshape(shp + (4,))
-            sigma[y0:y1, x0:x1] = z["sigma"].reshape(shp + (2,))
-            ks[y0:y1, x0:x1] = z["ks"].reshape(shp + (3,))
-            kd[y0:y1, x0:x1] = z["kd"].reshape(shp + (3,))
-            cost[y0:y1, x0:x1] = z["cost"].reshape(shp)
+        z = read_tile(cache, t)
+        quat[y0:y1, x0:x1], sigma[y0:y1, x0:x1] = z["quat"], z["sigma"]
+        ks[y0:y1, x0:x1], kd[y0:y1, x0:x1], cost[y0:y1, x0:x1] = z["ks"], z["kd"], z["cost"]
     pref = None if preferred is None else np.asarray(preferred, dtype=np.float64)
     quat, sigma, labels = postprocess_basis(quat, sigma, pref)
     maps = make_maps(kd, ks, sigma, quat)

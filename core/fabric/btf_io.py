@@ -14,13 +14,19 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
 
 UNIT_TOL = 1e-3
+
+
+MAX_SIDE = 16384  # texels a side (fabric synth makes at most as many)
 
 
 @dataclass
@@ -54,23 +60,23 @@ def validate_directions(wi: np.ndarray, wo: np.ndarray, where: str = "BTF") -> t
     for name, w in (("wi", wi), ("wo", wo)):
         w = np.asarray(w, dtype=np.float64)
         if w.ndim != 2 or w.shape[1] != 3:
-            raise ValueError(f"{where}: {name} must have shape (N, 3), got {w.shape}")
+            raise UserError(f"{where}: {name} must have shape (N, 3), got {w.shape}")
         if not np.all(np.isfinite(w)):
-            raise ValueError(f"{where}: {name} holds non-finite values (NaN/Inf)")
+            raise UserError(f"{where}: {name} holds non-finite values (NaN/Inf)")
         n = np.linalg.norm(w, axis=1)
         bad = np.flatnonzero(np.abs(n - 1.0) > UNIT_TOL)
         if bad.size:
-            raise ValueError(f"{where}: {name}[{bad[0]}] = {w[bad[0]].tolist()} is not a unit vector "
-                             f"(|w| = {n[bad[0]]:.6g}); {bad.size} such sample(s)")
+            raise UserError(f"{where}: {name}[{bad[0]}] = {w[bad[0]].tolist()} is not a unit vector "
+                            f"(|w| = {n[bad[0]]:.6g}); {bad.size} such sample(s)")
         below = np.flatnonzero(w[:, 2] <= 0.0)
         if below.size:
-            raise ValueError(f"{where}: {name}[{below[0]}] = {w[below[0]].tolist()} is below the horizon "
-                             f"(z <= 0); {below.size} such sample(s)")
+            raise UserError(f"{where}: {name}[{below[0]}] = {w[below[0]].tolist()} is below the horizon "
+                            f"(z <= 0); {below.size} such sample(s)")
         out.append(w / n[:, None])
     if out[0].shape[0] != out[1].shape[0]:
-        raise ValueError(f"{where}: wi has {out[0].shape[0]} rows but wo has {out[1].shape[0]}")
+        raise UserError(f"{where}: wi has {out[0].shape[0]} rows but wo has {out[1].shape[0]}")
     if out[0].shape[0] == 0:
-        raise ValueError(f"{where}: no samples")
+        raise UserError(f"{where}: no samples")
     return out[0], out[1]
 
 
@@ -79,7 +85,7 @@ def _json_path(path: str) -> tuple[str, str]:
         return path, os.path.join(path, "btf.json")
     if os.path.basename(path).endswith(".json"):
         return os.path.dirname(path) or ".", path
-    raise FileNotFoundError(f"BTF not found: {path} (expected a folder with btf.json, a btf.json or a .npz)")
+    raise MissingFileError(f"BTF not found: {path} (expected a folder with btf.json, a btf.json or a .npz)", path)
 
 
 def read_btf_header(path: str | os.PathLike) -> BtfHeader:
@@ -87,55 +93,64 @@ def read_btf_header(path: str | os.PathLike) -> BtfHeader:
     path = os.fspath(path)
     if path.endswith(".npz"):
         if not os.path.isfile(path):
-            raise FileNotFoundError(f"BTF file not found: {path}")
+            raise MissingFileError(f"BTF file not found: {path}", path)
         try:
             z = np.load(path)
         except Exception as exc:
-            raise ValueError(f"{path}: not a readable .npz file ({exc})") from exc
-        with z:
-            for key in ("values", "wi", "wo"):
-                if key not in z.files:
-                    raise ValueError(f"{path}: missing array {key!r}; has {sorted(z.files)}")
-            wi, wo = validate_directions(z["wi"], z["wo"], path)
-        shape = _npz_shape(path, "values")
+            raise UserError(f"{path}: not a readable .npz file ({exc})") from exc
+        try:
+            with z:
+                for key in ("values", "wi", "wo"):
+                    if key not in z.files:
+                        raise UserError(f"{path}: missing array {key!r}; has {sorted(z.files)}")
+                wi, wo = z["wi"], z["wo"]
+            shape = _npz_shape(path, "values")
+        except UserError:
+            raise
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # truncated, damaged
+            raise UserError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+        if wi.dtype.kind not in "iuf" or wo.dtype.kind not in "iuf":
+            raise UserError(f"{path}: wi and wo must hold numbers, got {wi.dtype} and {wo.dtype}")
+        wi, wo = validate_directions(wi, wo, path)
         if len(shape) != 4 or shape[3] != 3:
-            raise ValueError(f"{path}: values must have shape (N, H, W, 3), got {shape}")
+            raise UserError(f"{path}: values must have shape (N, H, W, 3), got {shape}")
         if shape[0] != wi.shape[0]:
-            raise ValueError(f"{path}: values has {shape[0]} images but wi/wo have {wi.shape[0]} rows")
+            raise UserError(f"{path}: values has {shape[0]} images but wi/wo have {wi.shape[0]} rows")
         return BtfHeader(width=shape[2], height=shape[1], wi=wi, wo=wo, source=path)
     folder, jpath = _json_path(path)
     if not os.path.isfile(jpath):
-        raise FileNotFoundError(f"BTF description not found: {jpath}")
+        raise MissingFileError(f"BTF description not found: {jpath}", jpath)
     try:
-        with open(jpath) as f:
+        with open(jpath, encoding="utf-8") as f:
             desc = json.load(f)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{jpath}: not valid JSON ({exc})") from exc
+    except ValueError as exc:  # not JSON, or not text
+        raise UserError(f"{jpath}: not valid JSON ({exc})") from None
     if not isinstance(desc, dict):
-        raise ValueError(f"{jpath}: expected an object with width, height, samples")
+        raise UserError(f"{jpath}: expected an object with width, height, samples")
     for key in ("width", "height", "samples"):
         if key not in desc:
-            raise ValueError(f"{jpath}: missing key {key!r}")
+            raise UserError(f"{jpath}: missing key {key!r}")
     width, height = desc["width"], desc["height"]
-    if not (isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0):
-        raise ValueError(f"{jpath}: width/height must be positive integers, got {width!r}, {height!r}")
+    if not (isinstance(width, int) and isinstance(height, int) and not isinstance(width, bool)
+            and not isinstance(height, bool) and 0 < width <= MAX_SIDE and 0 < height <= MAX_SIDE):
+        raise UserError(f"{jpath}: width/height must be integers from 1 to {MAX_SIDE}, got {width!r}, {height!r}")
     samples = desc["samples"]
     if not isinstance(samples, list) or not samples:
-        raise ValueError(f"{jpath}: samples must be a non-empty list")
+        raise UserError(f"{jpath}: samples must be a non-empty list")
     wi, wo, images = [], [], []
     for k, s in enumerate(samples):
         if not isinstance(s, dict) or not all(key in s for key in ("wi", "wo", "image")):
-            raise ValueError(f"{jpath}: samples[{k}] needs keys wi, wo, image")
+            raise UserError(f"{jpath}: samples[{k}] needs keys wi, wo, image")
         try:
             wi.append([float(v) for v in s["wi"]])
             wo.append([float(v) for v in s["wo"]])
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers") from exc
+            raise UserError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers") from exc
         if len(wi[-1]) != 3 or len(wo[-1]) != 3:
-            raise ValueError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers")
+            raise UserError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers")
         img = os.path.join(folder, str(s["image"]))
         if not os.path.isfile(img):
-            raise FileNotFoundError(f"{jpath}: samples[{k}] image not found: {img}")
+            raise MissingFileError(f"{jpath}: samples[{k}] image not found: {img}", img)
         images.append(img)
     wi_a, wo_a = validate_directions(np.array(wi), np.array(wo), jpath)
     return BtfHeader(width=width, height=height, wi=wi_a, wo=wo_a, source=folder, images=images)
@@ -153,8 +168,6 @@ def _npz_member_header(zf, key: str):
 
 
 def _npz_shape(path: str, key: str) -> tuple[int, ...]:
-    import zipfile
-
     with zipfile.ZipFile(path) as zf:
         f, shape, _, _ = _npz_member_header(zf, key)
         f.close()
@@ -175,26 +188,33 @@ def iter_btf_blocks(path: str | os.PathLike, block: int = 256, progress: bool = 
 
         bar = tqdm(total=hdr.count, desc="read BTF", unit="img")
     if hdr.images is None:
-        import zipfile
-
         with zipfile.ZipFile(hdr.source) as zf:
             f, shape, fortran, dtype = _npz_member_header(zf, "values")
             with f:
                 if fortran:
-                    raise ValueError(f"{hdr.source}: values must be stored in C order")
+                    raise UserError(f"{hdr.source}: values must be stored in C order")
                 if not np.issubdtype(dtype, np.floating):
-                    raise ValueError(f"{hdr.source}: values must be floating point, got {dtype}")
+                    raise UserError(f"{hdr.source}: values must be floating point, got {dtype}")
                 per = h * w * 3 * dtype.itemsize
                 for k0 in range(0, hdr.count, block):
                     m = min(block, hdr.count - k0)
-                    buf = f.read(per * m)
+                    try:
+                        buf = f.read(per * m)
+                    except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+                        raise UserError(f"{hdr.source}: values cannot be read near image {k0} "
+                                        f"({type(exc).__name__}: {exc})") from None
                     if len(buf) != per * m:
-                        raise ValueError(f"{hdr.source}: values is truncated near image {k0}")
+                        raise UserError(f"{hdr.source}: values is truncated near image {k0}")
                     vals = np.frombuffer(buf, dtype=dtype).reshape(m, h, w, 3).astype(np.float32)
                     finite = np.isfinite(vals).all(axis=(1, 2, 3))
                     if not finite.all():
                         bad = k0 + int(np.flatnonzero(~finite)[0])
-                        raise ValueError(f"{hdr.source}: values[{bad}] holds non-finite values (NaN/Inf)")
+                        raise UserError(f"{hdr.source}: values[{bad}] holds non-finite values (NaN/Inf)")
+                    negative = (vals < 0).any(axis=(1, 2, 3))
+                    if negative.any():
+                        bad = k0 + int(np.flatnonzero(negative)[0])
+                        raise UserError(f"{hdr.source}: values[{bad}] holds negative radiance (a BTF's values are "
+                                        "reflected radiance, >= 0)")
                     if bar:
                         bar.update(m)
                     yield k0, vals
@@ -207,10 +227,14 @@ def iter_btf_blocks(path: str | os.PathLike, block: int = 256, progress: bool = 
                 try:
                     img = read_exr(hdr.images[k], channels=("R", "G", "B"))
                 except ExrError as exc:
-                    raise ValueError(f"BTF sample {k}: {exc}") from exc
+                    raise UserError(f"BTF sample {k}: {exc}") from exc
                 if img.shape[:2] != (h, w):
-                    raise ValueError(f"BTF sample {k}: {hdr.images[k]} is {img.shape[1]}x{img.shape[0]} "
-                                     f"(W x H), btf.json says {w}x{h}")
+                    raise UserError(f"BTF sample {k}: {hdr.images[k]} is {img.shape[1]}x{img.shape[0]} "
+                                    f"(W x H), btf.json says {w}x{h}")
+                if (img < 0).any():
+                    raise UserError(f"BTF sample {k}: {hdr.images[k]} holds negative radiance in "
+                                    f"{int((img < 0).any(axis=-1).sum())} pixels (a BTF's values are reflected "
+                                    "radiance, >= 0)")
                 vals[j] = img
                 if bar:
                     bar.update(1)
@@ -269,12 +293,15 @@ def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         return hdr.wi, hdr.wo
     _, jpath = _json_path(path)
     if not os.path.isfile(jpath):
-        raise FileNotFoundError(f"directions file not found: {jpath}")
-    with open(jpath) as f:
-        desc = json.load(f)
+        raise MissingFileError(f"directions file not found: {jpath}", jpath)
+    try:
+        with open(jpath, encoding="utf-8") as f:
+            desc = json.load(f)
+    except ValueError as exc:
+        raise UserError(f"{jpath}: not valid JSON ({exc})") from None
     try:
         wi = np.array([s["wi"] for s in desc["samples"]], dtype=np.float64)
         wo = np.array([s["wo"] for s in desc["samples"]], dtype=np.float64)
     except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{jpath}: samples must each hold wi and wo") from exc
+        raise UserError(f"{jpath}: samples must each hold wi and wo") from exc
     return validate_directions(wi, wo, jpath)

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import UserError
+
 
 def parabolic_coords(w: np.ndarray) -> np.ndarray:
     """eq. 3.12: unit upper-hemisphere vectors -> ``(x', y')`` in [0, 1]^2."""
@@ -112,6 +114,6 @@ def check_ndf_coverage(op: NdfOperator, source: str, pairs: int) -> None:
     n_valid = int(op.valid.sum())
     if n_valid < MIN_NDF_CELLS:
         cells = int((op.solid_angle > 0).sum())
-        raise ValueError(f"{source}: its {pairs} light/view pairs cover {n_valid} of the {cells} half-vector cells "
-                         f"of the fibre distribution, the fit needs at least {MIN_NDF_CELLS}: measure more "
-                         "directions (e.g. 8 lights x 8 views or more)")
+        raise UserError(f"{source}: its {pairs} light/view pairs cover {n_valid} of the {cells} half-vector cells "
+                        f"of the fibre distribution, the fit needs at least {MIN_NDF_CELLS}: measure more "
+                        "directions (e.g. 8 lights x 8 views or more)")

@@ -13,6 +13,7 @@ import os
 
 import numpy as np
 
+from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
 from .quaternion import quat_normalize
 
@@ -34,11 +35,11 @@ class FabricMaps:
         for name, (_, c) in MAP_FILES.items():
             a = getattr(self, name)
             if a.ndim != 3 or a.shape[2] != c:
-                raise ValueError(f"map {name!r} must be (H, W, {c}), got {a.shape}")
+                raise UserError(f"map {name!r} must be (H, W, {c}), got {a.shape}")
             if shape is None:
                 shape = a.shape[:2]
             elif a.shape[:2] != shape:
-                raise ValueError(f"map {name!r} is {a.shape[:2]}, other maps are {shape}")
+                raise UserError(f"map {name!r} is {a.shape[:2]}, other maps are {shape}")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -103,23 +104,29 @@ def load_params(params_dir: str | os.PathLike) -> FabricMaps:
     params_dir = os.fspath(params_dir)
     jpath = os.path.join(params_dir, "params.json")
     if not os.path.isfile(jpath):
-        raise FileNotFoundError(f"not a fabric parameter folder (no params.json): {params_dir}")
-    with open(jpath) as f:
-        try:
+        raise MissingFileError(f"not a fabric parameter folder (no params.json): {params_dir}", params_dir)
+    try:
+        with open(jpath, encoding="utf-8") as f:
             desc = json.load(f)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{jpath}: not valid JSON ({exc})") from exc
+    except ValueError as exc:  # not JSON, or not text
+        raise UserError(f"{jpath}: not valid JSON ({exc})") from None
     if not isinstance(desc, dict) or not isinstance(desc.get("maps", {}), dict):
-        raise ValueError(f"{jpath}: expected an object with a 'maps' object")
+        raise UserError(f"{jpath}: expected an object with a 'maps' object")
     arrays = {}
     for name, (default_file, c) in MAP_FILES.items():
         entry = desc.get("maps", {}).get(name, {})
-        path = os.path.join(params_dir, entry.get("file", default_file))
-        chans = tuple(entry.get("channels", ("R", "G", "B", "A")[:c]))
+        if not isinstance(entry, dict):
+            raise UserError(f"{jpath}: maps.{name} must be an object with 'file' and 'channels'")
+        file, chans = entry.get("file", default_file), entry.get("channels", ("R", "G", "B", "A")[:c])
+        if not isinstance(file, str) or not file:
+            raise UserError(f"{jpath}: maps.{name}.file must be a file name, got {file!r}")
+        if not (isinstance(chans, (list, tuple)) and len(chans) == c and all(isinstance(x, str) for x in chans)):
+            raise UserError(f"{jpath}: maps.{name}.channels must name {c} channels, got {chans!r}")
+        path, chans = os.path.join(params_dir, file), tuple(chans)
         try:
             arrays[name] = read_exr(path, channels=chans)
         except ExrError as exc:
-            raise ValueError(f"parameter map {name!r}: {exc}") from exc
+            raise UserError(f"parameter map {name!r}: {exc}") from exc
     check_maps(arrays, params_dir)
     return make_maps(**arrays)
 
@@ -129,18 +136,18 @@ def check_maps(arrays: dict, source: str) -> None:
     that are not > 0 (NaN predictions), quaternions of zero length. One line naming the folder."""
     shapes = {name: a.shape[:2] for name, a in arrays.items()}
     if len(set(shapes.values())) > 1:
-        raise ValueError(f"{source}: the maps differ in size: {shapes}")
+        raise UserError(f"{source}: the maps differ in size: {shapes}")
     for name, a in arrays.items():
         bad = ~np.isfinite(a)
         if bad.any():
-            raise ValueError(f"{source}: map {name!r} holds {int(bad.any(axis=-1).sum())} texels that are NaN or "
-                             "infinite")
+            raise UserError(f"{source}: map {name!r} holds {int(bad.any(axis=-1).sum())} texels that are NaN or "
+                            "infinite")
     for name in ("kd", "ks"):
         if (arrays[name] < 0).any():
             n_neg = int((arrays[name] < 0).any(axis=-1).sum())
-            raise ValueError(f"{source}: map {name!r} has negative albedo in {n_neg} texels")
+            raise UserError(f"{source}: map {name!r} has negative albedo in {n_neg} texels")
     if (arrays["sigma"] <= 0).any():
-        raise ValueError(f"{source}: map 'sigma' must be > 0; {int((arrays['sigma'] <= 0).any(axis=-1).sum())} texels "
-                         "are not")
+        raise UserError(f"{source}: map 'sigma' must be > 0; {int((arrays['sigma'] <= 0).any(axis=-1).sum())} texels "
+                        "are not")
     if (np.linalg.norm(arrays["basis"], axis=-1) < 1e-8).any():
-        raise ValueError(f"{source}: map 'basis' has quaternions of zero length")
+        raise UserError(f"{source}: map 'basis' has quaternions of zero length")

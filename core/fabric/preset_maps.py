@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from ..errors import UserError
 from .parameter_maps import FabricMaps, make_maps
 from .quaternion import quat_from_axis_angle, quat_multiply
 
@@ -36,7 +37,7 @@ def preset_maps(preset: str, size: int = MAP_SIZE, seed: int = 0) -> FabricMaps:
     """The maps of ``preset`` (``size`` x ``size`` texels, BTF frame), with a little texel-level
     variation of the colours (real pile is never uniform); corduroy with its wales."""
     if preset not in PRESETS:
-        raise ValueError(f"unknown fabric preset {preset!r}; one of {', '.join(PRESETS)}")
+        raise UserError(f"unknown fabric preset {preset!r}; one of {', '.join(PRESETS)}")
     p = PRESETS[preset]
     rng = np.random.default_rng(seed)
     jitter = 1.0 + 0.08 * rng.standard_normal((size, size, 1))

@@ -34,6 +34,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..errors import UserError
 from .scratch_set import Progress, ProgressFn, ScratchSet, make_scratch_set
 
 THESIS_RANGE_UM = (0.8, 6.0)
@@ -78,7 +79,7 @@ def polylines_to_segments(
     Returns (segments (M, 4), scratch index (M,)). ``progress``: fraction of the polylines done.
     """
     if boundary not in BOUNDARIES:
-        raise ValueError(f"boundary must be one of {BOUNDARIES}; got {boundary!r}")
+        raise UserError(f"boundary must be one of {BOUNDARIES}; got {boundary!r}")
     ps = np.asarray(patch_size_um, dtype=np.float64)
     segs, ids = [], []
     every = max(1, len(polylines) // 100)
@@ -87,9 +88,9 @@ def polylines_to_segments(
             progress(i / len(polylines))
         p = np.asarray(pl, dtype=np.float64).reshape(-1, 2)
         if p.shape[0] < 2:
-            raise ValueError(f"curve {i} needs at least two points, got {p.shape[0]}")
+            raise UserError(f"curve {i} needs at least two points, got {p.shape[0]}")
         if not np.all(np.isfinite(p)):
-            raise ValueError(f"curve {i} holds non-finite coordinates")
+            raise UserError(f"curve {i} holds non-finite coordinates")
         d = np.linalg.norm(np.diff(p, axis=0), axis=1)
         p = p[np.concatenate([[True], d > 0])]
         if p.shape[0] < 2:
@@ -201,7 +202,7 @@ def circular_polish(
         radius_um = (0.05 * ps.min(), 0.7 * ps.min())
     if centres is not None:
         if int(centres) < 1:
-            raise ValueError(f"centres must be >= 1; got {centres}")
+            raise UserError(f"centres must be >= 1; got {centres}")
         cs = rng.uniform(0, 1, (int(centres), 2)) * ps
     else:
         cs = (ps / 2 if centre_um is None else np.asarray(centre_um, dtype=np.float64))[None]
@@ -284,7 +285,7 @@ def from_curves(
             return np.full(n, float(a))
         if a.shape == (n,):
             return a
-        raise ValueError(f"{name} must be a (lo, hi) tuple, a scalar or one value per curve ({n})")
+        raise UserError(f"{name} must be a (lo, hi) tuple, a scalar or one value per curve ({n})")
 
     w, d = per_curve(width_um, "width_um"), per_curve(depth_um, "depth_um")
     prog = Progress(progress)

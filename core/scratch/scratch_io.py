@@ -30,9 +30,12 @@ for j in 0..count-1: m = cell_segments[offset + j]; fetch segments[m] and segmen
 from __future__ import annotations
 
 import os
+import zipfile
+import zlib
 
 import numpy as np
 
+from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
 from .scratch_set import ScratchSet, validate_scratch_set
 
@@ -62,43 +65,70 @@ def save_scratch_set_npz(path: str | os.PathLike, s: ScratchSet) -> None:
             os.remove(tmp)
 
 
+def _array(path: str, z, name: str) -> np.ndarray:
+    """Array ``name`` of the .npz ``z``; one that cannot be read (Python objects, a damaged member) is refused."""
+    try:
+        return z[name]
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise UserError(f"{path}: field {name!r} cannot be read ({type(exc).__name__}: {exc})") from None
+
+
+def _field(path: str, name: str, z, dtype, scalar: bool = False):
+    """Array ``name`` of the .npz ``z`` as ``dtype`` (a Python number with ``scalar``); an array of another
+    kind (text, booleans, complex numbers, several values for one) is refused naming the file and the field."""
+    a = _array(path, z, name)
+    kinds = "iuf" if dtype is np.float64 else "iu"
+    if a.dtype.kind == "f" and dtype is np.int64 and np.all(np.isfinite(a)) and np.all(a == np.round(a)):
+        kinds += "f"  # whole numbers stored as floats
+    if a.dtype.kind not in kinds:
+        want = "numbers" if dtype is np.float64 else "integers"
+        raise UserError(f"{path}: field {name!r} holds {a.dtype} values, expected {want}")
+    if scalar:
+        if a.size != 1:
+            raise UserError(f"{path}: field {name!r} holds {a.size} values, expected one")
+        return float(a.reshape(())) if dtype is np.float64 else int(a.reshape(()))
+    return a.astype(dtype)
+
+
 def _load_npz(path: str) -> ScratchSet:
     with open(path, "rb") as f:
         magic = f.read(4)
     if magic != b"PK\x03\x04":  # every .npz is a zip archive; np.load would try other formats
-        raise ValueError(f"{path}: not a readable .npz file (not a zip archive)")
+        raise UserError(f"{path}: not a readable .npz file (not a zip archive)")
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as exc:
         first = (str(exc).splitlines() or [type(exc).__name__])[0]
-        raise ValueError(f"{path}: not a readable .npz file ({first})") from exc
+        raise UserError(f"{path}: not a readable .npz file ({first})") from exc
     with z:
-        if "format" not in z.files or str(z["format"]) != FORMAT:
-            raise ValueError(f"{path}: not a scratch-set file (missing format tag {FORMAT!r})")
-        if int(z["version"]) != VERSION:
-            raise ValueError(f"{path}: unsupported scratch-set version {int(z['version'])} (need {VERSION})")
+        tag = _array(path, z, "format") if "format" in z.files else None
+        if tag is None or tag.dtype.kind not in "US" or str(tag) != FORMAT:
+            raise UserError(f"{path}: not a scratch-set file (missing format tag {FORMAT!r})")
+        version = _field(path, "version", z, np.int64, scalar=True) if "version" in z.files else None
+        if version != VERSION:
+            raise UserError(f"{path}: unsupported scratch-set version {version} (need {VERSION})")
         missing = [k for k in _NPZ_KEYS if k not in z.files]
         if missing:
-            raise ValueError(f"{path}: scratch-set file lacks array(s) {missing}")
-        d = {k: z[k] for k in _NPZ_KEYS}
-    s = ScratchSet(
-        segments=d["segments"].astype(np.float64),
-        width_um=d["width_um"].astype(np.float64),
-        depth_um=d["depth_um"].astype(np.float64),
-        profile=d["profile"].astype(np.int64),
-        scratch_id=d["scratch_id"].astype(np.int64),
-        patch_size_um=d["patch_size_um"].astype(np.float64),
-        sigma_um=float(d["sigma_um"]),
-        cell_size_um=float(d["cell_size_um"]),
-        query_radius_um=float(d["query_radius_um"]),
-        grid_offset=d["grid_offset"].astype(np.int64),
-        grid_count=d["grid_count"].astype(np.int64),
-        cell_segments=d["cell_segments"].astype(np.int64),
-    )
+            raise UserError(f"{path}: scratch-set file lacks array(s) {missing}")
+        f, i = np.float64, np.int64
+        s = ScratchSet(
+            segments=_field(path, "segments", z, f),
+            width_um=_field(path, "width_um", z, f),
+            depth_um=_field(path, "depth_um", z, f),
+            profile=_field(path, "profile", z, i),
+            scratch_id=_field(path, "scratch_id", z, i),
+            patch_size_um=_field(path, "patch_size_um", z, f),
+            sigma_um=_field(path, "sigma_um", z, f, scalar=True),
+            cell_size_um=_field(path, "cell_size_um", z, f, scalar=True),
+            query_radius_um=_field(path, "query_radius_um", z, f, scalar=True),
+            grid_offset=_field(path, "grid_offset", z, i),
+            grid_count=_field(path, "grid_count", z, i),
+            cell_segments=_field(path, "cell_segments", z, i),
+        )
     try:
         validate_scratch_set(s)
     except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from exc
+        raise UserError(f"{path}: {exc}") from exc
     return s
 
 
@@ -125,7 +155,7 @@ def scratch_set_tables(s: ScratchSet) -> dict[str, np.ndarray]:
 
 def _unwrap(img: np.ndarray, n: int, name: str) -> np.ndarray:
     if img.shape[1] != TABLE_WIDTH or img.shape[0] * TABLE_WIDTH < n:
-        raise ValueError(f"{name}: expected a {TABLE_WIDTH}-wide table holding {n} entries, got {img.shape[:2]}")
+        raise UserError(f"{name}: expected a {TABLE_WIDTH}-wide table holding {n} entries, got {img.shape[:2]}")
     return img.reshape(-1, img.shape[2])[:n].astype(np.float64)
 
 
@@ -154,13 +184,14 @@ def save_scratch_set_exr(folder: str | os.PathLike, s: ScratchSet) -> list[str]:
 def _load_exr_folder(folder: str) -> ScratchSet:
     for f in EXR_FILES:
         if not os.path.isfile(os.path.join(folder, f)):
-            raise FileNotFoundError(f"{folder}: scratch-set EXR folder lacks {f} (needs {', '.join(EXR_FILES)})")
+            raise MissingFileError(f"{folder}: scratch-set EXR folder lacks {f} (needs {', '.join(EXR_FILES)})",
+                                   os.path.join(folder, f))
     try:
         meta = read_exr(os.path.join(folder, "meta.exr"), ["Y"])[0, :, 0].astype(np.float64)
         if meta.size < 11 or int(meta[0]) != VERSION:
-            raise ValueError(f"{folder}/meta.exr: unsupported version {meta[0] if meta.size else '?'}")
+            raise UserError(f"{folder}/meta.exr: unsupported version {meta[0] if meta.size else '?'}")
         if int(meta[10]) != TABLE_WIDTH:
-            raise ValueError(f"{folder}/meta.exr: table width {int(meta[10])}, expected {TABLE_WIDTH}")
+            raise UserError(f"{folder}/meta.exr: table width {int(meta[10])}, expected {TABLE_WIDTH}")
         m, k = int(meta[8]), int(meta[9])
         nx, ny = int(meta[3]), int(meta[4])
         seg = _unwrap(read_exr(os.path.join(folder, "segments.exr"), ["R", "G", "B", "A"]), m, "segments.exr")
@@ -169,13 +200,13 @@ def _load_exr_folder(folder: str) -> ScratchSet:
         )
         grid = read_exr(os.path.join(folder, "grid.exr"), ["R", "G"]).astype(np.float64)
         if grid.shape[:2] != (ny, nx):
-            raise ValueError(f"{folder}/grid.exr: shape {grid.shape[:2]} but meta says (ny, nx) = {(ny, nx)}")
+            raise UserError(f"{folder}/grid.exr: shape {grid.shape[:2]} but meta says (ny, nx) = {(ny, nx)}")
         cs = _unwrap(read_exr(os.path.join(folder, "cell_segments.exr"), ["Y"]), k, "cell_segments.exr")[:, 0]
     except ExrError as exc:
-        raise ValueError(str(exc)) from exc
+        raise UserError(str(exc)) from exc
     for name, a in (("segment_params", par[:, 2:]), ("grid", grid), ("cell_segments", cs)):
         if np.any(a != np.round(a)):
-            raise ValueError(f"{folder}: {name} holds non-integer indices")
+            raise UserError(f"{folder}: {name} holds non-integer indices")
     s = ScratchSet(
         segments=seg,
         width_um=par[:, 0],
@@ -193,7 +224,7 @@ def _load_exr_folder(folder: str) -> ScratchSet:
     try:
         validate_scratch_set(s)
     except ValueError as exc:
-        raise ValueError(f"{folder}: {exc}") from exc
+        raise UserError(f"{folder}: {exc}") from exc
     return s
 
 
@@ -204,11 +235,11 @@ def load_scratch_set(path: str | os.PathLike) -> ScratchSet:
     if os.path.isdir(path):
         return _load_exr_folder(path)
     if not os.path.exists(path):
-        raise FileNotFoundError(f"scratch set not found: {path}")
+        raise MissingFileError(f"scratch set not found: {path}", path)
     if not path.lower().endswith(".npz"):
         inside = os.path.basename(path) in EXR_FILES
         hint = " (a table of an EXR-table folder: import the folder)" if inside else ""
-        raise ValueError(f"{path}: not a scratch set: expected a .npz file or an EXR-table folder{hint}")
+        raise UserError(f"{path}: not a scratch set: expected a .npz file or an EXR-table folder{hint}")
     return _load_npz(path)
 
 
@@ -224,8 +255,8 @@ def save_scratch_set(path: str | os.PathLike, s: ScratchSet) -> None:
     elif kind == "folder":
         save_scratch_set_exr(path, s)
     else:
-        raise ValueError(f"{path}: cannot write a scratch set to a '{kind}' file: use a .npz file, or a folder "
-                         "path without an extension for EXR tables")
+        raise UserError(f"{path}: cannot write a scratch set to a '{kind}' file: use a .npz file, or a folder "
+                        "path without an extension for EXR tables")
 
 
 def save_kind(path: str | os.PathLike) -> str:

@@ -71,6 +71,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..errors import UserError
 from ..forked_map import forked_map
 from .cie_colour import spectral_to_srgb_matrix
 from .light_integration import (
@@ -372,7 +373,7 @@ def scratch_radiance(
     J = footprint_matrix(footprint, n, allow_shared=True)
     reach = s.query_radius_um - REACH_SIGMAS * sigma
     if reach <= 0:
-        raise ValueError("the scratch set's query radius is below 3.5 sigma; rebuild its index with this sigma")
+        raise UserError("the scratch set's query radius is below 3.5 sigma; rebuild its index with this sigma")
     amax = footprint_semi_major(J)
     shrink = np.where(amax > reach, reach / np.maximum(amax, 1e-300), 1.0)
     J = J * shrink[:, None, None]

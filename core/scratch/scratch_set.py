@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..errors import UserError
+
 PROFILE_RECTANGULAR = 0
 KNOWN_PROFILES = (PROFILE_RECTANGULAR,)
 MAX_TABLE_INDEX = 2**24  # integers stored in float32 tables are exact below this
@@ -107,44 +109,44 @@ def validate_scratch_set(s: ScratchSet) -> None:
     """Raise ValueError with a precise message if ``s`` is inconsistent."""
     seg = np.asarray(s.segments)
     if seg.ndim != 2 or seg.shape[1] != 4:
-        raise ValueError(f"segments must have shape (M, 4) = x0, y0, x1, y1; got {seg.shape}")
+        raise UserError(f"segments must have shape (M, 4) = x0, y0, x1, y1; got {seg.shape}")
     m = seg.shape[0]
     for name in ("width_um", "depth_um", "profile", "scratch_id"):
         a = np.asarray(getattr(s, name))
         if a.shape != (m,):
-            raise ValueError(f"{name} must have shape ({m},) like the segment table; got {a.shape}")
+            raise UserError(f"{name} must have shape ({m},) like the segment table; got {a.shape}")
     if not np.all(np.isfinite(seg)):
-        raise ValueError("segment table holds non-finite coordinates")
+        raise UserError("segment table holds non-finite coordinates")
     if m and np.any(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) <= 0):
-        raise ValueError("segment table holds zero-length segments")
+        raise UserError("segment table holds zero-length segments")
     w, d = np.asarray(s.width_um), np.asarray(s.depth_um)
     if m and (not np.all(np.isfinite(w)) or np.any(w <= 0)):
-        raise ValueError("scratch widths must be finite and > 0 um")
+        raise UserError("scratch widths must be finite and > 0 um")
     if m and (not np.all(np.isfinite(d)) or np.any(d < 0)):
-        raise ValueError("scratch depths must be finite and >= 0 um")
+        raise UserError("scratch depths must be finite and >= 0 um")
     bad = np.setdiff1d(np.unique(np.asarray(s.profile)), KNOWN_PROFILES)
     if bad.size:
-        raise ValueError(f"unknown scratch profile code(s) {bad.tolist()}; known: {list(KNOWN_PROFILES)}")
+        raise UserError(f"unknown scratch profile code(s) {bad.tolist()}; known: {list(KNOWN_PROFILES)}")
     ps = np.asarray(s.patch_size_um, dtype=np.float64)
     if ps.shape != (2,) or not np.all(np.isfinite(ps)) or np.any(ps <= 0):
-        raise ValueError(f"patch_size_um must be two positive numbers; got {ps}")
+        raise UserError(f"patch_size_um must be two positive numbers; got {ps}")
     for name in ("sigma_um", "cell_size_um", "query_radius_um"):
         v = float(getattr(s, name))
         if not np.isfinite(v) or v <= 0:
-            raise ValueError(f"{name} must be > 0; got {v}")
+            raise UserError(f"{name} must be > 0; got {v}")
     off, cnt, cs = np.asarray(s.grid_offset), np.asarray(s.grid_count), np.asarray(s.cell_segments)
     nx = int(np.ceil(ps[0] / s.cell_size_um - 1e-9))
     ny = int(np.ceil(ps[1] / s.cell_size_um - 1e-9))
     if off.shape != (ny, nx) or cnt.shape != (ny, nx):
-        raise ValueError(f"grid tables must have shape (ny, nx) = {(ny, nx)}; got {off.shape} and {cnt.shape}")
+        raise UserError(f"grid tables must have shape (ny, nx) = {(ny, nx)}; got {off.shape} and {cnt.shape}")
     if cs.ndim != 1:
-        raise ValueError("cell_segments must be one-dimensional")
+        raise UserError("cell_segments must be one-dimensional")
     if np.any(cnt < 0) or np.any(off < 0) or np.any(off + cnt > cs.size):
-        raise ValueError(f"grid offset/count point outside the cell-segment list (length {cs.size})")
+        raise UserError(f"grid offset/count point outside the cell-segment list (length {cs.size})")
     if cs.size and (cs.min() < 0 or cs.max() >= m):
-        raise ValueError(f"cell-segment list references segments outside 0..{m - 1}")
+        raise UserError(f"cell-segment list references segments outside 0..{m - 1}")
     if max(m, cs.size) >= MAX_TABLE_INDEX:
-        raise ValueError(f"too many entries for exact float32 tables (limit {MAX_TABLE_INDEX})")
+        raise UserError(f"too many entries for exact float32 tables (limit {MAX_TABLE_INDEX})")
 
 
 def image_range(
@@ -205,8 +207,8 @@ def build_grid_index(
     nx = int(np.ceil(ps[0] / c - 1e-9))
     ny = int(np.ceil(ps[1] / c - 1e-9))
     if nx * ny > MAX_TABLE_INDEX:  # the cell tables address cells through the same float32 index
-        raise ValueError(f"a grid of {nx} x {ny} cells of {c:g} um is more than the tables can address "
-                         f"({MAX_TABLE_INDEX} cells): use a larger footprint or coherence length, or a smaller patch")
+        raise UserError(f"a grid of {nx} x {ny} cells of {c:g} um is more than the tables can address "
+                        f"({MAX_TABLE_INDEX} cells): use a larger footprint or coherence length, or a smaller patch")
     if periodic and seg0.shape[0]:
         src, seg = periodic_images(seg0, ps, np.full(2, -r), np.array([nx * c, ny * c]) + r)
     else:
@@ -241,7 +243,7 @@ def build_grid_index(
         cells.append((iy * nx + ix)[keep])
         kept += int(keep.sum())
         if kept >= MAX_TABLE_INDEX:
-            raise ValueError(
+            raise UserError(
                 f"too many grid entries for exact float32 tables (more than {MAX_TABLE_INDEX} after "
                 f"{b} of {seg.shape[0]} segments): use fewer scratches, a larger patch or a smaller "
                 "footprint/coherence length"
@@ -321,7 +323,7 @@ def make_scratch_set(
     """
     seg = np.asarray(segments, dtype=np.float64)
     if seg.ndim != 2 or seg.shape[1] != 4:
-        raise ValueError(f"segments must have shape (M, 4) = x0, y0, x1, y1; got {seg.shape}")
+        raise UserError(f"segments must have shape (M, 4) = x0, y0, x1, y1; got {seg.shape}")
     m = seg.shape[0]
     q = float(max_footprint_um) + REACH_SIGMAS * float(sigma_um)
     c = float(cell_size_um) if cell_size_um is not None else 0.5 * q

@@ -41,6 +41,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..errors import UserError
 from .dentin_blend_shapes import DentinBlendShape, canonical_modes
 from .mesh import TriMesh
 from .tooth_mesh import ToothGeometry
@@ -431,16 +432,16 @@ def make_anatomical_tooth(template: str = "upper_central", resolution: int = 48)
     ``resolution``: vertices around the crown (even; the dentin uses 3/4); rows follow from it.
     """
     if template not in SPECS:
-        raise ValueError(f"unknown tooth template {template!r}; use one of {', '.join(SPECS)}")
+        raise UserError(f"unknown tooth template {template!r}; use one of {', '.join(SPECS)}")
     if resolution < 12:
-        raise ValueError("resolution must be >= 12")
+        raise UserError("resolution must be >= 12")
     return tooth_from_spec(SPECS[template], resolution)
 
 
 def tooth_from_spec(spec: ToothSpec, resolution: int = 48) -> ToothGeometry:
     """``make_anatomical_tooth`` for an explicit ``ToothSpec`` (e.g. ``dataclasses.replace`` of a table row)."""
     if spec.kind not in ANATOMY_KINDS:
-        raise ValueError(f"unknown tooth kind {spec.kind!r}; use one of {', '.join(ANATOMY_KINDS)}")
+        raise UserError(f"unknown tooth kind {spec.kind!r}; use one of {', '.join(ANATOMY_KINDS)}")
     n_u = max(12, int(resolution) // 2 * 2)
     n_crown = max(8, int(round(0.6 * n_u)))
     n_root = max(4, n_u // 5)

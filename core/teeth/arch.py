@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import UserError
 from .anatomy import SPECS, ToothSpec, cej_line, tooth_from_spec
 from .mesh import TriMesh
 from .tooth_mesh import ToothGeometry
@@ -147,7 +148,7 @@ def build_arch(jaw: str = "upper", templates: tuple | None = None, resolution: i
     ``gap``: enamel-to-enamel distance at the contact areas (mm, measured between vertices of a
     resolution-64 copy)."""
     if jaw not in ("upper", "lower"):
-        raise ValueError(f"jaw must be 'upper' or 'lower', got {jaw!r}")
+        raise UserError(f"jaw must be 'upper' or 'lower', got {jaw!r}")
     templates = templates or (UPPER_FRONT if jaw == "upper" else LOWER_FRONT)
     arch = Arch(k if k is not None else (0.0275 if jaw == "upper" else 0.034), y0)
     jaw_sign = 1.0 if jaw == "upper" else -1.0
@@ -157,7 +158,7 @@ def build_arch(jaw: str = "upper", templates: tuple | None = None, resolution: i
     for name in templates:
         spec = SPECS[name]
         if spec.jaw != jaw:
-            raise ValueError(f"template {name!r} is not a tooth of the {jaw} jaw")
+            raise UserError(f"template {name!r} is not a tooth of the {jaw} jaw")
         canon = tooth_from_spec(spec, 64).enamel.vertices
         z_edge = edge_z + jaw_sign * spec.edge_level
 

@@ -26,9 +26,21 @@ Queries (numba, per ray / point; float64 except the box tests, which run in floa
   distance to the point: the exact minimiser, as the dentin distance q of eq. 5.15 asks.
 
 Several trees can share one node array (``merge``): each keeps its own root index.
+
+Depth and stacks: the build refuses a tree deeper than ``MAX_DEPTH`` (a ``ValueError`` naming the depth), and
+each tree knows the stack its traversals need (``TriangleBVH.stack_size`` for ``closest_triangle``,
+``RayTree.stack_size`` for the ray queries: the most entries a depth-first traversal that pushes every child
+it enters can hold). The tracer sizes its stacks from these, so no traversal ever finds its stack full; the
+pushes still stop at the stack's end, which only a caller passing a smaller stack than the tree's
+``stack_size`` can reach.
+
+A wide child that is a leaf is stored as the negative code ``encode_leaf(first block, triangle count)``
+(``leaf_blocks`` reads it back).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from llvmlite import ir
@@ -37,9 +49,14 @@ from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
 
+from .numba_kernels import numba_callable
+
 LEAF_SIZE = 4  # at most, for the median fallback; the SAH decides below
 SAH_BINS = 16
-STACK_SIZE = 64
+STACK_SIZE = 64  # a traversal stack that serves every tree whose ``stack_size`` is at most this (the tests' trees)
+MAX_DEPTH = 64  # deepest binary tree the build accepts (a SAH tree over a million triangles is about 40 deep)
+LEAF_COUNT_BITS = 5  # a wide leaf code holds its triangle count in its low bits ...
+MAX_LEAF_COUNT = (1 << LEAF_COUNT_BITS) - 1  # ... so a leaf holds at most 31 triangles
 PACKET = 63  # rays per packet of ``packet_hits`` (bits of an int64 mask)
 WIDTH = 8  # children per node of the ray-query tree (one AVX register of float32 per box plane)
 LANES = 4  # triangles per leaf block of the ray-query layout (one AVX register of float64)
@@ -47,8 +64,58 @@ SLACK32 = np.float32(1.0 + 2.0**-18)  # a box is hit where t0 <= t1 * SLACK32 (f
 BOX_PAD = 2.0**-16  # the ray-query boxes' padding, relative to the scene's largest coordinate (float32 tests)
 
 
+class BinaryNodes(NamedTuple):
+    """The flat node arrays of one or more binary trees (``TriangleBVH.merge``), as ``closest_triangle`` reads
+    them: node i has box lo[i], hi[i]; an inner node's children are left[i] and left[i] + 1; a leaf (count[i] >
+    0) holds the triangles order[start[i]:start[i] + count[i]]."""
+
+    lo: np.ndarray  # (N, 3) float64
+    hi: np.ndarray  # (N, 3) float64
+    left: np.ndarray  # (N,) int64, -1 at a leaf
+    start: np.ndarray  # (N,) int64
+    count: np.ndarray  # (N,) int64, 0 at an inner node
+    order: np.ndarray  # (T,) int64 triangle ids in leaf order
+
+
+class RayTree(NamedTuple):
+    """The layout the ray queries read (``TriangleBVH.ray_arrays``)."""
+
+    wbox: np.ndarray  # (M, 6, WIDTH) float32: wide nodes' child boxes, rows lo x, y, z, hi x, y, z
+    wchild: np.ndarray  # (M, WIDTH) int64: a wide node index (>= 0) or a leaf code (``encode_leaf``, < 0)
+    tblk: np.ndarray  # (B, 9, LANES) float64: leaf triangles, rows v0, v1 - v0, v2 - v0, one lane each
+    tord: np.ndarray  # (B, LANES) int64: the lanes' triangle ids, -1 where unused
+    stack_size: int  # the most stack entries a traversal of this tree holds
+
+
+@numba_callable(inline="always")
+def encode_leaf(first, count):
+    """The wide-child code of a leaf whose triangles start at block (or slot) ``first``, ``count`` of them:
+    ~(first 2^LEAF_COUNT_BITS + count), negative (an inner child is its node index, >= 0). count <=
+    ``MAX_LEAF_COUNT``. Integers or int64 arrays; callable from numba code."""
+    return ~((first << LEAF_COUNT_BITS) | count)
+
+
+@numba_callable(inline="always")
+def decode_leaf(code):
+    """(first, count) of the leaf code ``code`` (``encode_leaf``'s inverse). Integers or int64 arrays; callable
+    from numba code."""
+    s = ~code
+    return s >> LEAF_COUNT_BITS, s & MAX_LEAF_COUNT
+
+
+@numba_callable(inline="always")
+def leaf_blocks(code):
+    """(first block, end block) of the leaf code ``code`` of a ray tree: its count triangles fill the blocks
+    first .. first + ceil(count / LANES) - 1. Callable from numba code."""
+    first, count = decode_leaf(code)
+    return first, first + (count + LANES - 1) // LANES
+
+
 class TriangleBVH:
-    """Flat BVH over ``triangles`` (T, 3, 3) restricted to the triangle ids ``ids`` (default: all)."""
+    """Flat BVH over ``triangles`` (T, 3, 3) restricted to the triangle ids ``ids`` (default: all).
+
+    ``depth``: edges from the root to the deepest leaf (at most ``MAX_DEPTH``, else the build raises a
+    ``ValueError``); ``stack_size = depth + 1``: the stack ``closest_triangle`` needs on this tree."""
 
     def __init__(self, triangles: np.ndarray, ids: np.ndarray | None = None):
         tris = np.asarray(triangles, dtype=np.float64)
@@ -68,9 +135,15 @@ class TriangleBVH:
             return len(lo) - 1
 
         root = new_node()
-        stack = [(root, 0, len(ids))]
+        stack = [(root, 0, len(ids), 0)]
+        depth = 0
         while stack:
-            node, a, b = stack.pop()
+            node, a, b, level = stack.pop()
+            depth = max(depth, level)
+            if depth > MAX_DEPTH:
+                raise ValueError(f"the BVH over {len(ids)} triangles grows deeper than MAX_DEPTH = {MAX_DEPTH} levels "
+                                 "(its traversal stacks are sized from the depth): degenerate geometry, such as "
+                                 "triangles of widely different sizes nested in one another")
             sel = perm[a:b]
             lo[node], hi[node] = tlo[sel].min(axis=0), thi[sel].max(axis=0)
             split = None if b - a <= LEAF_SIZE else _sah_split(cen[sel], tlo[sel], thi[sel])
@@ -83,8 +156,8 @@ class TriangleBVH:
             l_ = new_node()
             new_node()
             left[node] = l_
-            stack.append((l_, a, a + mid))
-            stack.append((l_ + 1, a + mid, b))
+            stack.append((l_, a, a + mid, level + 1))
+            stack.append((l_ + 1, a + mid, b, level + 1))
         self.lo = np.array(lo)
         self.hi = np.array(hi)
         self.left = np.array(left, dtype=np.int64)
@@ -92,6 +165,14 @@ class TriangleBVH:
         self.count = np.array(count, dtype=np.int64)
         self.order = order[perm]
         self.root = 0
+        self.depth = depth
+
+    @property
+    def stack_size(self) -> int:
+        """Entries ``closest_triangle``'s stack needs on this tree: it pops a node and pushes both children of an
+        inner one, so at most one sibling waits per level above the node it holds, + 2 at the deepest inner
+        node: depth + 1."""
+        return self.depth + 1
 
     def refit(self, triangles: np.ndarray) -> TriangleBVH:
         """This tree's topology (node structure, leaf triangles) with every box recomputed from
@@ -102,6 +183,7 @@ class TriangleBVH:
         tris = np.asarray(triangles, dtype=np.float64)
         out = object.__new__(TriangleBVH)
         out.left, out.start, out.count, out.order, out.root = self.left, self.start, self.count, self.order, self.root
+        out.depth = self.depth
         lo, hi = np.empty_like(self.lo), np.empty_like(self.hi)
         leaves = np.flatnonzero(self.count > 0)
         leaves = leaves[np.argsort(self.start[leaves], kind="stable")]  # their ranges tile ``order`` in this order
@@ -118,8 +200,8 @@ class TriangleBVH:
         return out
 
     @staticmethod
-    def merge(trees: list[TriangleBVH]) -> tuple[tuple, np.ndarray]:
-        """One node array holding ``trees``: ((lo, hi, left, start, count, order), roots)."""
+    def merge(trees: list[TriangleBVH]) -> tuple[BinaryNodes, np.ndarray]:
+        """One node array holding ``trees``: (``BinaryNodes``, roots)."""
         parts = [[] for _ in range(6)]
         roots = []
         n_nodes = n_tris = 0
@@ -135,24 +217,24 @@ class TriangleBVH:
             n_tris += len(t.order)
         if not trees:
             empty = (np.zeros((0, 3)), np.zeros((0, 3))) + tuple(np.zeros(0, dtype=np.int64) for _ in range(4))
-            return empty, np.zeros(0, dtype=np.int64)
-        return tuple(np.concatenate(p) for p in parts), np.array(roots, dtype=np.int64)
+            return BinaryNodes(*empty), np.zeros(0, dtype=np.int64)
+        return BinaryNodes(*(np.concatenate(p) for p in parts)), np.array(roots, dtype=np.int64)
 
-    def arrays(self) -> tuple:
-        return self.lo, self.hi, self.left, self.start, self.count, self.order
+    def arrays(self) -> BinaryNodes:
+        return BinaryNodes(self.lo, self.hi, self.left, self.start, self.count, self.order)
 
-    def ray_arrays(self, triangles: np.ndarray) -> tuple:
+    def ray_arrays(self, triangles: np.ndarray) -> RayTree:
         """The layout ``first_hit`` and ``hits_until_stop`` read: the binary tree collapsed into a
         ``WIDTH``-wide one (wide box (M, 6, WIDTH) float32: rows lo x, y, z, hi x, y, z, one column per child,
         each box padded by ``BOX_PAD`` times the largest coordinate and rounded outwards, so that the float32
         slab test of ``_slab_mask`` never misses a box the ray enters (see there); empty children with every
         plane at +inf; wide child (M, WIDTH): a wide node index (>= 0), or a
-        leaf ~(first block << 5 | triangle count); leaf triangles in blocks of ``LANES`` (B, 9, LANES): rows
+        leaf ``encode_leaf(first block, triangle count)``; leaf triangles in blocks of ``LANES`` (B, 9, LANES): rows
         v0, v1 - v0, v2 - v0 (x, y, z each), one lane per triangle, a leaf's triangles in leaf order over
         ceil(count / LANES) consecutive blocks, unused lanes NaN (no comparison holds for them); order
-        (B, LANES): the lanes' triangle ids, -1 where unused)."""
+        (B, LANES): the lanes' triangle ids, -1 where unused); the stack size its traversals need (``_collapse``)."""
         tv = np.asarray(triangles, dtype=np.float64)
-        wbox, wchild = self._collapse()
+        wbox, wchild, stack_size = self._collapse()
         wbox = _outward_float32(wbox, BOX_PAD * max(1.0, float(np.abs(tv).max(initial=0.0))))
         leaves = np.flatnonzero(self.count > 0)
         leaves = leaves[np.argsort(self.start[leaves], kind="stable")]
@@ -169,20 +251,24 @@ class TriangleBVH:
                 tblk[b, :, lane] = np.concatenate([v0, tv[tri, 1] - v0, tv[tri, 2] - v0])
                 tord[b, lane] = tri
         leaf = wchild < 0
-        slot, cnt = (~wchild[leaf]) >> 5, (~wchild[leaf]) & 31
-        wchild[leaf] = ~((np.array([block_of.get(int(x), 0) for x in slot], dtype=np.int64) << 5) | cnt)
-        return wbox, wchild, np.ascontiguousarray(tblk), tord
+        slot, cnt = decode_leaf(wchild[leaf])
+        wchild[leaf] = encode_leaf(np.array([block_of.get(int(x), 0) for x in slot], dtype=np.int64), cnt)
+        return RayTree(wbox, wchild, np.ascontiguousarray(tblk), tord, stack_size)
 
-    def _collapse(self) -> tuple[np.ndarray, np.ndarray]:
+    def _collapse(self) -> tuple[np.ndarray, np.ndarray, int]:
         """Wide nodes from the binary tree: each takes a binary node's children and keeps opening its
-        largest-area inner child until it has ``WIDTH`` children (Wald et al. 2008's collapse)."""
+        largest-area inner child until it has ``WIDTH`` children (Wald et al. 2008's collapse). Returns (boxes,
+        children with leaves coded by their slot in ``order``, stack size). The stack size: a traversal pops a
+        node and pushes (at most) its k children, so below wide nodes a_0 (the root) .. a_n it holds at most
+        sum_{i < n} (k_{a_i} - 1) + k_{a_n} entries; the largest over all wide nodes, at least 1."""
         ext = np.maximum(self.hi - self.lo, 0.0)
         area = ext[:, 0] * ext[:, 1] + ext[:, 1] * ext[:, 2] + ext[:, 2] * ext[:, 0]
         boxes: list[np.ndarray] = []
         childs: list[np.ndarray] = []
-        pending = [(0, -1, 0)]  # (binary node, parent wide node, column)
+        pending = [(0, -1, 0, 0)]  # (binary node, parent wide node, column, sum of (k - 1) over the wide ancestors)
+        stack_size = 1
         while pending:
-            b, parent, col = pending.pop()
+            b, parent, col, above = pending.pop()
             w = len(boxes)
             if parent >= 0:
                 childs[parent][col] = w
@@ -195,18 +281,19 @@ class TriangleBVH:
                 kids.remove(k)
                 kids += [self.left[k], self.left[k] + 1]
             box = np.full((6, WIDTH), np.inf)  # an empty child: every plane at +inf, missed by any ray
-            child = np.full(WIDTH, -1, dtype=np.int64)  # ~0: an empty leaf, never entered (infinite box)
+            child = np.full(WIDTH, encode_leaf(0, 0), dtype=np.int64)  # an empty leaf, never entered (infinite box)
+            stack_size = max(stack_size, above + len(kids))
             for c, k in enumerate(kids):
                 box[:3, c], box[3:, c] = self.lo[k], self.hi[k]
                 if self.count[k] > 0:
-                    if self.count[k] >= 32:
-                        raise ValueError("BVH leaf larger than the wide layout's 31 triangles")
-                    child[c] = ~((int(self.start[k]) << 5) | int(self.count[k]))
+                    if self.count[k] > MAX_LEAF_COUNT:
+                        raise ValueError(f"BVH leaf larger than the wide layout's {MAX_LEAF_COUNT} triangles")
+                    child[c] = encode_leaf(int(self.start[k]), int(self.count[k]))
                 else:
-                    pending.append((k, w, c))
+                    pending.append((k, w, c, above + len(kids) - 1))
             boxes.append(box)
             childs.append(child)
-        return np.ascontiguousarray(np.array(boxes)), np.ascontiguousarray(np.array(childs))
+        return np.ascontiguousarray(np.array(boxes)), np.ascontiguousarray(np.array(childs)), stack_size
 
 
 def _outward_float32(wbox: np.ndarray, pad: float) -> np.ndarray:
@@ -658,7 +745,8 @@ def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) 
 @njit(cache=True, inline="always", error_model="numpy")
 def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
     """Push the children of wide node i in the bit mask ``mask`` (from ``_slab_mask``), the nearest by entry
-    distance ``dist`` on top; new sp."""
+    distance ``dist`` on top; new sp. A stack of the tree's ``RayTree.stack_size`` holds them all; the test
+    against its end only keeps a smaller stack's caller from writing past it."""
     base = sp
     cap = stack.shape[0]
     m = mask
@@ -679,7 +767,8 @@ def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _push_unsorted(wchild, i, mask, stack, sp) -> int:
-    """Push the children of wide node i in the bit mask ``mask`` in column order; new sp."""
+    """Push the children of wide node i in the bit mask ``mask`` in column order; new sp (stack size as
+    ``_push_masked``)."""
     cap = stack.shape[0]
     m = mask
     while m != 0 and sp < cap:
@@ -711,8 +800,8 @@ def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
 @njit(cache=True, _nrt=False, error_model="numpy")
 def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
     """Nearest triangle hit by o + t d with tmin < t < tmax: (triangle or -1, t). ``ray_nodes``: a tree's
-    ``ray_arrays``; ``stack``: int64 scratch of ``STACK_SIZE``, ``dist``: float64 scratch of ``WIDTH``."""
-    wbox, wchild, tblk, tord = ray_nodes
+    ``RayTree``; ``stack``: int64 scratch of at least its ``stack_size``, ``dist``: float64 scratch of ``WIDTH``."""
+    wbox, wchild, tblk, tord = ray_nodes.wbox, ray_nodes.wchild, ray_nodes.tblk, ray_nodes.tord
     ix, iy, iz, nx, ny, nz = _inverse(d)
     ox, oy, oz = o[0], o[1], o[2]
     dx, dy, dz = d[0], d[1], d[2]
@@ -723,9 +812,8 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
         sp -= 1
         i = stack[np.uint64(sp)]
         if i < 0:
-            s = ~i
-            b0 = s >> 5
-            for blk in range(b0, b0 + ((s & 31) + LANES - 1) // LANES):
+            b0, b1 = leaf_blocks(i)
+            for blk in range(b0, b1):
                 hm = _leaf_hits(tblk, blk, ox, oy, oz, dx, dy, dz, tmin, dist)
                 while hm != 0:  # lanes in order: ties go to the first triangle, as one at a time
                     lane = trailing_zeros(hm)
@@ -739,8 +827,8 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
 
 
 # ``first_hit`` compiled into its caller: for the free flights, one call per path vertex, where a call passes every
-# field of the tree's arrays on the stack. Not cached itself (it would share ``first_hit``'s cache file); note that a
-# caller's cache is not invalidated by an edit of this module (delete core/teeth/__pycache__/*.nb? after one)
+# field of the tree's arrays on the stack. Not cached itself (it would share ``first_hit``'s cache file); its cached
+# callers are recompiled after an edit of this module (``numba_kernels``: the cache stamp covers every kernel module)
 first_hit_inlined = njit(cache=False, inline="always", error_model="numpy")(first_hit.py_func)
 
 
@@ -802,8 +890,9 @@ def _box_dist2(lo, hi, i, p) -> float:
 @njit(cache=True, _nrt=False, error_model="numpy")
 def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tuple[int, float]:
     """Triangle of the tree at ``root`` nearest to point p, (triangle, distance), or (-1, max_dist) when
-    none is closer than ``max_dist``. ``stack``, ``bary``: scratch (``STACK_SIZE`` int64, 3 float64)."""
-    lo, hi, left, start, count, order = nodes
+    none is closer than ``max_dist``. ``nodes``: ``BinaryNodes``; ``stack``, ``bary``: scratch (int64 of at least
+    the tree's ``TriangleBVH.stack_size``, 3 float64)."""
+    lo, hi, left, start, count, order = nodes.lo, nodes.hi, nodes.left, nodes.start, nodes.count, nodes.order
     best, best_d = -1, max_dist
     stack[0] = root
     sp = 1
@@ -823,7 +912,7 @@ def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tupl
         da, db = _box_dist2(lo, hi, a, p), _box_dist2(lo, hi, b, p)
         if da > db:
             a, b, da, db = b, a, db, da
-        if sp + 2 <= STACK_SIZE:
+        if sp + 2 <= stack.shape[0]:  # always, with a stack of the tree's stack_size
             stack[sp] = b
             stack[sp + 1] = a
             sp += 2
@@ -840,7 +929,7 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
     path's flight through air, which usually stops at the nearest tooth); else in column order, for shadow
     rays: most reach their light unblocked and visit every box they cross in any order, and sorting cost more
     than the culling it bought."""
-    wbox, wchild, tblk, tord = ray_nodes
+    wbox, wchild, tblk, tord = ray_nodes.wbox, ray_nodes.wchild, ray_nodes.tblk, ray_nodes.tord
     ix, iy, iz, nx, ny, nz = _inverse(d)
     ox, oy, oz = o[0], o[1], o[2]
     dx, dy, dz = d[0], d[1], d[2]
@@ -853,9 +942,8 @@ def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, bu
         sp -= 1
         i = stack[np.uint64(sp)]
         if i < 0:
-            s = ~i
-            b0 = s >> 5
-            for blk in range(b0, b0 + ((s & 31) + LANES - 1) // LANES):
+            b0, b1 = leaf_blocks(i)
+            for blk in range(b0, b1):
                 hm = _leaf_hits(tblk, blk, ox, oy, oz, dx, dy, dz, tmin, dist)
                 while hm != 0:
                     lane = trailing_zeros(hm)
@@ -886,11 +974,11 @@ def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, 
     set in ``mask`` (b < ``PACKET``), in one traversal: the rays share their origin, so each node's box
     planes are offset by o once for the packet and each triangle's o-terms once (the same per-ray
     arithmetic as ``hits_until_stop``, hence the same hits). Ray r's hits go into buf_tri[r], buf_t[r],
-    their number (which may exceed the buffer) into counts[r]. Scratch: pinv (PACKET, 4) float64,
-    pstack (STACK_SIZE, 2) int64, cmask (WIDTH,) int64, pmask (PACKET,) int64, pt (PACKET, LANES) float64. The
-    box and triangle tests run as vector code (``_packet_box_masks``, ``_packet_leaf_hits``; scalar references
+    their number (which may exceed the buffer) into counts[r]. Scratch: pinv (PACKET, 4) float64, pstack (the
+    tree's stack_size, 2) int64, cmask (WIDTH,) int64, pmask (PACKET,) int64, pt (PACKET, LANES) float64. The box
+    and triangle tests run as vector code (``_packet_box_masks``, ``_packet_leaf_hits``; scalar references
     ``packet_box_masks_scalar``, ``leaf_hits_scalar``)."""
-    wbox, wchild, tblk, tord = ray_nodes
+    wbox, wchild, tblk, tord = ray_nodes.wbox, ray_nodes.wchild, ray_nodes.tblk, ray_nodes.tord
     cap = buf_t.shape[1]
     m = mask
     while m != 0:
@@ -917,9 +1005,8 @@ def packet_hits(ray_nodes, stops, o, dirs, tmaxs, r0, mask, tmin, pinv, pstack, 
                     pstack[sp, 0], pstack[sp, 1] = ch, cm
                     sp += 1
                 continue
-            s = ~ch
-            b0 = s >> 5
-            for blk in range(b0, b0 + ((s & 31) + LANES - 1) // LANES):
+            b0, b1 = leaf_blocks(ch)
+            for blk in range(b0, b1):
                 mm = _packet_leaf_hits(tblk, blk, ox, oy, oz, dirs, r0, cm, tmin, pmask, pt)
                 while mm != 0:
                     b = trailing_zeros(mm)

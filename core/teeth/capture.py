@@ -21,9 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import MissingFileError, UserError
 from ..exr_io import read_exr, write_exr
 from ..json_io import save_json
 
+MAX_SIDE = 16384  # pixels a side of a camera image (teeth synth makes at most as many)
 FORMAT = "material_structures.teeth.capture/1"
 
 
@@ -164,35 +166,42 @@ class Capture:
         folder = os.fspath(folder)
         path = os.path.join(folder, "capture.json")
         if not os.path.isfile(path):
-            raise FileNotFoundError(f"no capture.json in {folder!r}")
+            raise MissingFileError(f"no capture.json in {folder!r}", path)
         try:
             with open(path) as f:
                 meta = json.load(f)
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise ValueError(f"{path}: not a JSON file ({e})") from None
+            raise UserError(f"{path}: not a JSON file ({e})") from None
         if not isinstance(meta, dict):
-            raise ValueError(f"{path}: expected a JSON object")
+            raise UserError(f"{path}: expected a JSON object")
         if meta.get("format") != FORMAT:
-            raise ValueError(f"{path}: unknown format {meta.get('format')!r}, expected {FORMAT!r}")
+            raise UserError(f"{path}: unknown format {meta.get('format')!r}, expected {FORMAT!r}")
         for key in ("cameras", "lights"):
             if not isinstance(meta.get(key), list) or not meta[key]:
-                raise ValueError(f"{path}: needs a non-empty list {key!r}")
+                raise UserError(f"{path}: needs a non-empty list {key!r}")
         try:
             cams = [Camera.from_dict(c) for c in meta["cameras"]]
             lights = [PointLight.from_dict(li) for li in meta["lights"]]
         except (KeyError, TypeError, ValueError) as e:
-            raise ValueError(f"{path}: a camera or light is malformed ({type(e).__name__}: {e})") from None
+            raise UserError(f"{path}: a camera or light is malformed ({type(e).__name__}: {e})") from None
         for i, c in enumerate(cams):
             if c.width < 1 or c.height < 1 or not (np.isfinite(c.K).all() and np.isfinite(c.R).all()
                                                     and np.isfinite(c.t).all()):
-                raise ValueError(f"{path}: camera {i} has a non-positive size or non-finite K, R or t")
+                raise UserError(f"{path}: camera {i} has a non-positive size or non-finite K, R or t")
+            if c.width > MAX_SIDE or c.height > MAX_SIDE:
+                raise UserError(f"{path}: camera {i} is {c.width} x {c.height} pixels, more than {MAX_SIDE} a side")
             if (c.width, c.height) != (cams[0].width, cams[0].height):
-                raise ValueError(f"{path}: camera {i} is {c.width} x {c.height}, camera 0 "
-                                 f"{cams[0].width} x {cams[0].height}; all cameras need one image size")
+                raise UserError(f"{path}: camera {i} is {c.width} x {c.height}, camera 0 "
+                                f"{cams[0].width} x {cams[0].height}; all cameras need one image size")
         for i, li in enumerate(lights):
             if not (np.isfinite(li.position).all() and np.isfinite(li.intensity).all()) or (li.intensity < 0).any():
-                raise ValueError(f"{path}: light {i} has a non-finite position or a negative or non-finite intensity")
+                raise UserError(f"{path}: light {i} has a non-finite position or a negative or non-finite intensity")
         h, w = cams[0].height, cams[0].width
+        for key in ("images", "masks"):
+            files = meta.get(key)
+            if files is not None and not (isinstance(files, dict)
+                                          and all(isinstance(v, str) and v for v in files.values())):
+                raise UserError(f"{path}: {key!r} must map keys to file names (an object of strings)")
         images = None
         if meta.get("images"):
             images = np.zeros((len(cams), len(lights), h, w, 3), dtype=np.float32)
@@ -201,20 +210,20 @@ class Capture:
                 try:
                     c, li = (int(v) for v in key.split(","))
                 except ValueError:
-                    raise ValueError(f"{path}: image key {key!r} is not 'camera,light'") from None
+                    raise UserError(f"{path}: image key {key!r} is not 'camera,light'") from None
                 if not (0 <= c < len(cams) and 0 <= li < len(lights)):
-                    raise ValueError(f"{path}: image {key!r} names a camera or light that does not exist")
+                    raise UserError(f"{path}: image {key!r} names a camera or light that does not exist")
                 img = read_exr(os.path.join(folder, rel), channels=["R", "G", "B"])
                 if img.shape[:2] != (h, w):
-                    raise ValueError(f"{rel}: image size {img.shape[:2]} does not match camera {c} ({h}, {w})")
+                    raise UserError(f"{rel}: image size {img.shape[:2]} does not match camera {c} ({h}, {w})")
                 if not np.isfinite(img).all() or (img < 0).any():
-                    raise ValueError(f"{rel}: has non-finite or negative pixels")
+                    raise UserError(f"{rel}: has non-finite or negative pixels")
                 images[c, li] = img
                 seen[c, li] = True
             if not seen.all():
                 missing = [f"{c},{li}" for c, li in zip(*np.nonzero(~seen), strict=True)]
-                raise ValueError(f"{path}: no image for {len(missing)} (camera, light) pairs, e.g. "
-                                 f"{', '.join(missing[:4])}")
+                raise UserError(f"{path}: no image for {len(missing)} (camera, light) pairs, e.g. "
+                                f"{', '.join(missing[:4])}")
         masks = None
         if meta.get("masks"):
             masks = np.zeros((len(cams), h, w), dtype=bool)
@@ -223,14 +232,14 @@ class Capture:
                 try:
                     c = int(key)
                 except ValueError:
-                    raise ValueError(f"{path}: mask key {key!r} is not a camera index") from None
+                    raise UserError(f"{path}: mask key {key!r} is not a camera index") from None
                 if not 0 <= c < len(cams):
-                    raise ValueError(f"{path}: mask {key!r} names a camera that does not exist")
+                    raise UserError(f"{path}: mask {key!r} names a camera that does not exist")
                 m = read_exr(os.path.join(folder, rel))
                 if m.shape[:2] != (h, w):
-                    raise ValueError(f"{rel}: mask size {m.shape[:2]} does not match camera {c} ({h}, {w})")
+                    raise UserError(f"{rel}: mask size {m.shape[:2]} does not match camera {c} ({h}, {w})")
                 masks[c] = m[:, :, 0] > 0.5
                 seen_m[c] = True
             if not seen_m.all():
-                raise ValueError(f"{path}: no mask for cameras {np.flatnonzero(~seen_m).tolist()}")
+                raise UserError(f"{path}: no mask for cameras {np.flatnonzero(~seen_m).tolist()}")
         return cls(cams, lights, images, masks)

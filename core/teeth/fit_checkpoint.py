@@ -10,6 +10,8 @@ import json
 import os
 from dataclasses import dataclass, field, fields
 
+from ..errors import UserError
+
 # in a fit's output folder: the start trials (one folder per start, and the starts they run from) until one wins
 TRIALS_DIR = "start_trials"
 
@@ -36,32 +38,44 @@ class FitState:
     avg_sum: list | None = None
     avg_count: int = 0
     identity: dict | None = None  # what the fit was made for (optimise.fit_identity)
+    settings: dict | None = None  # the FitSettings it runs with (asdict; fit_settings.settings_from_dict)
 
 
 def load_state(path: str) -> FitState:
     """The checkpoint at ``path``; a checkpoint of an earlier version is refused (start the fit again)."""
     try:
-        with open(path) as f:
+        with open(path, encoding="utf-8") as f:
             d = json.load(f)
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{path!r} is not a fit checkpoint ({e})") from None
+    except ValueError as e:  # not JSON (cut short), or not text
+        raise UserError(f"{path!r} is not a fit checkpoint ({e})") from None
     names = {f.name for f in fields(FitState)}
     if not isinstance(d, dict) or set(d) - names or "precond" in d or d.get("identity") is None:
-        raise ValueError(f"{path!r} is a checkpoint of an earlier version of the fit; start the fit again")
+        raise UserError(f"{path!r} is a checkpoint of an earlier version of the fit; start the fit again")
     try:
-        return FitState(**d)
+        state = FitState(**d)
     except TypeError as e:
-        raise ValueError(f"{path!r} is not a complete fit checkpoint ({e})") from None
+        raise UserError(f"{path!r} is not a complete fit checkpoint ({e})") from None
+    kinds = {"phase": str, "iteration": int, "scene": dict, "y": list, "adam_n": int, "best_loss": (int, float),
+             "best_scene": dict, "log": list, "identity": dict, "settings": (dict, type(None))}
+    wrong = [k for k, kind in kinds.items() if not isinstance(getattr(state, k), kind)]
+    if wrong or not all(isinstance(e, dict) for e in state.log):
+        raise UserError(f"{path!r} is a damaged fit checkpoint (fields of the wrong kind: {wrong or ['log']}); "
+                        "start the fit again")
+    return state
 
 
 def check_identity(path: str, saved: dict, now: dict) -> None:
     """Refuse to resume the checkpoint at ``path`` (made for ``saved``) under ``now``, naming what differs."""
-    differ = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k)]
+    # keys a checkpoint of an earlier version lacks: not compared where it lacks them
+    later = ("spp", "image_spp", "lr", "optimiser")
+    differ = [k for k in sorted(set(saved) | set(now)) if saved.get(k) != now.get(k) and (k in saved or k not in later)]
     if differ:
         what = {"capture": "the capture", "teeth": "the teeth", "layout": "the parameter layout",
-                "free": "the free parameters", "seed": "the seed", "held_out_lights": "the held-out lights"}
-        raise ValueError(f"{path!r} was made for another fit ({', '.join(what.get(k, k) for k in differ)} "
-                         "differ); resume with the fit's own capture and settings, or start a new fit")
+                "free": "the free parameters", "seed": "the seed", "held_out_lights": "the held-out lights",
+                "spp": "the samples per pixel", "image_spp": "the image samples per pixel",
+                "lr": "the learning rate", "optimiser": "the optimiser"}
+        raise UserError(f"{path!r} was made for another fit ({', '.join(what.get(k, k) for k in differ)} "
+                        "differ); resume with the fit's own capture and settings, or start a new fit")
 
 
 def stopped_fit(out_dir: str) -> bool:

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+from ..errors import UserError
+
 DEFAULT_FREE = ("*.sigma_t", "*.albedo", "*.g1", "*.g2", "*.beta", "*.a_t", "*.c")
 
 
@@ -63,33 +65,33 @@ class FitSettings:
 
     def __post_init__(self) -> None:
         if self.iterations < 1 or self.textured_iterations < 0 or self.texture_size < 1 or self.start_trials < 0:
-            raise ValueError("iterations must be >= 1, textured_iterations and start_trials >= 0, texture_size >= 1")
+            raise UserError("iterations must be >= 1, textured_iterations and start_trials >= 0, texture_size >= 1")
         if self.spp < 1 or self.image_spp < 0 or self.lights_per_iteration < 1 or self.loss_block < 1:
-            raise ValueError("spp, lights_per_iteration and loss_block must be >= 1, image_spp >= 0 (0 = spp)")
+            raise UserError("spp, lights_per_iteration and loss_block must be >= 1, image_spp >= 0 (0 = spp)")
         if self.max_depth is not None and self.max_depth < 1:
-            raise ValueError(f"max_depth must be None (all bounces) or >= 1, got {self.max_depth}")
+            raise UserError(f"max_depth must be None (all bounces) or >= 1, got {self.max_depth}")
         if self.workers < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers}")
+            raise UserError(f"workers must be >= 1, got {self.workers}")
         if not self.lr > 0 or self.lr_decay < 0:
-            raise ValueError(f"lr must be > 0 and lr_decay >= 0, got {self.lr}, {self.lr_decay}")
+            raise UserError(f"lr must be > 0 and lr_decay >= 0, got {self.lr}, {self.lr_decay}")
         if not 0.0 <= self.average_tail < 1.0:
-            raise ValueError(f"average_tail must be in [0, 1), got {self.average_tail}")
+            raise UserError(f"average_tail must be in [0, 1), got {self.average_tail}")
         if self.held_out_lights < 0 or self.checkpoint_every < 1:
-            raise ValueError("held_out_lights must be >= 0 and checkpoint_every >= 1")
+            raise UserError("held_out_lights must be >= 0 and checkpoint_every >= 1")
         if self.optimiser not in ("adam", "gauss-newton"):
-            raise ValueError(f'optimiser must be "adam" or "gauss-newton", got {self.optimiser!r}')
+            raise UserError(f'optimiser must be "adam" or "gauss-newton", got {self.optimiser!r}')
         if self.optimiser == "gauss-newton":
             if not self.gn_lr > 0:
-                raise ValueError(f"gn_lr must be > 0, got {self.gn_lr}")
+                raise UserError(f"gn_lr must be > 0, got {self.gn_lr}")
             if self.gn_passes < 1 or self.gn_block < 1 or self.gn_every < 1 or self.gn_start < 0:
-                raise ValueError("gn_passes, gn_block and gn_every must be >= 1, gn_start >= 0")
+                raise UserError("gn_passes, gn_block and gn_every must be >= 1, gn_start >= 0")
             if not self.gn_damping > 0:
-                raise ValueError(f"gn_damping must be > 0, got {self.gn_damping}")
+                raise UserError(f"gn_damping must be > 0, got {self.gn_damping}")
             if not self.gn_max_step > 0:
-                raise ValueError(f"gn_max_step must be > 0, got {self.gn_max_step}")
+                raise UserError(f"gn_max_step must be > 0, got {self.gn_max_step}")
             if self.gn_guard_window < 0 or not self.gn_guard_rise > 0:
-                raise ValueError("gn_guard_window must be >= 0 and gn_guard_rise > 0, got "
-                                 f"{self.gn_guard_window}, {self.gn_guard_rise}")
+                raise UserError("gn_guard_window must be >= 0 and gn_guard_rise > 0, got "
+                                f"{self.gn_guard_window}, {self.gn_guard_rise}")
 
 
 def setting_names() -> tuple[str, ...]:
@@ -99,10 +101,17 @@ def setting_names() -> tuple[str, ...]:
 def settings_from_dict(values: dict) -> FitSettings:
     """FitSettings from a saved ``asdict`` (a checkpoint, loss.json): unknown keys (settings of an
     earlier version) are refused with their names."""
+    if not isinstance(values, dict):
+        raise UserError(f"fit settings must be a JSON object, got {type(values).__name__}")
     unknown = sorted(set(values) - set(setting_names()))
     if unknown:
-        raise ValueError(f"unknown fit settings {unknown} (saved by an earlier version?)")
+        raise UserError(f"unknown fit settings {unknown} (saved by an earlier version?)")
     v = dict(values)
-    if "free" in v:
-        v["free"] = tuple(v["free"])
-    return FitSettings(**v)
+    try:
+        if "free" in v:
+            if isinstance(v["free"], str) or not all(isinstance(p, str) for p in v["free"]):
+                raise TypeError(f"free must be a list of name patterns, got {v['free']!r}")
+            v["free"] = tuple(v["free"])
+        return FitSettings(**v)
+    except TypeError as exc:  # a value of the wrong kind (text for a number, ...)
+        raise UserError(f"fit settings of the wrong kind ({exc})") from None

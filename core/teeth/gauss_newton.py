@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import UserError
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .param_vector import ParamLayout, chain_to_optimiser
@@ -76,7 +77,7 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
     if block < 1:
         raise ValueError(f"block must be >= 1, got {block}")
     if capture.masks is None:
-        raise ValueError("the capture needs masks")
+        raise UserError("the capture needs masks")
     cols = np.asarray(cols, dtype=np.int64)
     k = len(cols)
     chain = optimiser_jacobian_map(y, layout, cols)

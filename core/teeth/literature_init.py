@@ -30,6 +30,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..errors import UserError
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .parameterisation import albedo_from_kappa
@@ -162,7 +163,7 @@ def _search(scene, capture, n_sigma, n_albedo, pixel_stride, n_lights, seed, spp
             refine_keep, progress) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
     """The table search and its refinement: (points as (g index, table index), their errors (n, 3), table, gs)."""
     if capture.images is None or capture.masks is None:
-        raise ValueError("the literature search needs capture images and masks")
+        raise UserError("the literature search needs capture images and masks")
     if spp < 1 or tile < 1 or pixel_stride < 1:
         raise ValueError(f"spp, tile and pixel_stride must be >= 1, got {spp}, {tile}, {pixel_stride}")
     if refine_keep < 0:
@@ -172,7 +173,7 @@ def _search(scene, capture, n_sigma, n_albedo, pixel_stride, n_lights, seed, spp
     light_ids = np.sort(rng.choice(len(capture.lights), min(n_lights, len(capture.lights)), replace=False))
     masked = [np.flatnonzero(m.ravel()) for m in capture.masks]
     if sum(len(p) for p in masked) == 0:
-        raise ValueError("the capture's masks select no pixels")
+        raise UserError("the capture's masks select no pixels")
 
     def point_errors(points, ids, stride, n_spp, seed_of) -> np.ndarray:
         """(len(points), 3) paired errors of (g index, table index) points on lights ``ids``."""

@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..errors import UserError
 from .capture import Camera, Capture, PointLight
 from .scene import TeethScene
 
@@ -39,7 +40,7 @@ def import_mitsuba(variant: str | None = None) -> tuple[object, str]:
         import drjit as dr
         import mitsuba as mi
     except ImportError as e:
-        raise RuntimeError(f"rendering with Mitsuba needs Mitsuba 3 (the project .venv has the version uv.lock pins; "
+        raise UserError(f"rendering with Mitsuba needs Mitsuba 3 (the project .venv has the version uv.lock pins; "
                            f"elsewhere: pip install mitsuba) ({e})") from e
     if variant is None:
         variant = LLVM_VARIANT if dr.has_backend(dr.JitBackend.LLVM) else SCALAR_VARIANT
@@ -123,8 +124,8 @@ def _boundary(name: str, part) -> dict:
     if part.eta == 1.0 and np.all(a_t == 1.0):
         return {"type": "null"}
     if not np.all(a_t == a_t[0]):
-        raise ValueError(f"Mitsuba renders one a_t per part; {name} has a_t in "
-                         f"[{float(a_t.min()):g}, {float(a_t.max()):g}]")
+        raise UserError(f"Mitsuba renders one a_t per part; {name} has a_t in "
+                        f"[{float(a_t.min()):g}, {float(a_t.max()):g}]")
     return {"type": THIN_BOUNDARY, "eta": float(part.eta), "a_t": {"type": "rgb", "value": a_t[0].tolist()}}
 
 
@@ -223,7 +224,7 @@ def render_capture_mitsuba(scene: TeethScene, cameras: list[Camera], lights: lis
     from .synthetic import tooth_masks
 
     if spp < 1:
-        raise ValueError("need spp >= 1")
+        raise UserError("need spp >= 1")
     mi, _ = import_mitsuba(variant)
     masks = tooth_masks(scene, cameras)
     n_cam = len(cameras)

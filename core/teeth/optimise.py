@@ -20,6 +20,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from ..errors import MissingFileError, UserError
 from ..folder_lock import FolderLock
 from ..json_io import save_json
 from .adam import Adam
@@ -60,7 +61,8 @@ def held_out_light_ids(n_lights: int, n_held_out: int) -> np.ndarray:
 
 def fit_identity(scene: TeethScene, capture: Capture, layout: ParamLayout, free: np.ndarray, s: FitSettings) -> dict:
     """What a checkpoint was made for: the capture (sizes and a digest of its images and masks), the
-    parameter layout and which of it is free, the held-out lights and the seed. A resume under anything
+    parameter layout and which of it is free, the held-out lights, the seed, the samples per pixel of both
+    passes, the learning rate and the optimiser. A resume under anything
     else is refused (its state would mean something else)."""
     h = hashlib.sha1()
     h.update(np.ascontiguousarray(capture.images, dtype=np.float32).tobytes())
@@ -73,7 +75,8 @@ def fit_identity(scene: TeethScene, capture: Capture, layout: ParamLayout, free:
                         "size": [int(capture.images.shape[2]), int(capture.images.shape[3])], "digest": h.hexdigest()},
             "teeth": [t.name for t in scene.teeth],
             "layout": [[e.name, int(e.size)] for e in layout.entries],
-            "free": np.flatnonzero(free).tolist(), "seed": s.seed, "held_out_lights": s.held_out_lights}
+            "free": np.flatnonzero(free).tolist(), "seed": s.seed, "held_out_lights": s.held_out_lights,
+            "spp": s.spp, "image_spp": s.image_spp, "lr": s.lr, "optimiser": s.optimiser}
 
 
 def free_mask(layout: ParamLayout, patterns) -> np.ndarray:
@@ -154,9 +157,9 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     it is done).
     """
     if capture.images is None or capture.masks is None:
-        raise ValueError("the capture needs images and masks to fit")
+        raise UserError("the capture needs images and masks to fit")
     if not capture.masks.any():
-        raise ValueError("the capture's masks select no pixel: nothing to fit")
+        raise UserError("the capture's masks select no pixel: nothing to fit")
     if out_dir is not None:
         os.makedirs(out_dir, exist_ok=True)
         with FolderLock(out_dir):
@@ -188,7 +191,9 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         os.makedirs(out_dir, exist_ok=True)
     if resume:
         if ckpt is None or not os.path.exists(ckpt):
-            raise FileNotFoundError(f"no checkpoint to resume from in {out_dir!r}")
+            if ckpt is None:
+                raise ValueError("resume=True needs the out_dir of the fit to resume")
+            raise MissingFileError(f"no checkpoint to resume from in {out_dir!r}", ckpt)
         state = load_state(ckpt)
         check_identity(ckpt, state.identity, identity)
     log = [] if state is None else state.log
@@ -199,6 +204,9 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
     avg_count = 0 if state is None else state.avg_count
     n_l = min(s.lights_per_iteration, len(training))
     names = [p for p, _ in phases]
+    if state is not None and state.phase not in names:
+        raise UserError(f"{ckpt!r} stopped in the {state.phase!r} phase, which these settings do not run "
+                        f"(textured_iterations={s.textured_iterations}); resume with the settings the fit started with")
     start_phase = 0 if state is None else names.index(state.phase)
     for pi, (phase, n_it) in enumerate(phases):
         if pi < start_phase:
@@ -246,7 +254,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         # the last phase's iterations from this one on enter the averaged result (average_tail)
         avg_from = tail_start(n_it, s.average_tail) if pi == len(phases) - 1 else n_it
         if not free.any():
-            raise ValueError(f"no parameter matches the free patterns {s.free!r}")
+            raise UserError(f"no parameter matches the free patterns {s.free!r}")
         stop = n_it if until is None or pi > 0 else min(n_it, until)
         for it in range(start_it, stop):
             t0 = time.perf_counter()
@@ -320,7 +328,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                                                  None if gn_opt.m is None else gn_opt.m.tolist(), gn_opt.n,
                                                  None if guard is None else guard.to_dict(),
                                                  None if avg_sum is None else avg_sum.tolist(), avg_count,
-                                                 identity)))
+                                                 identity, asdict(s))))
                 save_json(os.path.join(out_dir, "loss.json"), {"log": log, "settings": asdict(s),
                                                                "held_out_lights": held_out.tolist()})
                 save_json(os.path.join(out_dir, "scene_best.json"), best_scene.to_dict())

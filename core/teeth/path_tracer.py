@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import UserError
 from ..forked_map import forked_map
 from .capture import Camera, PointLight
 from .compiled_scene import (
@@ -459,8 +460,8 @@ def render(scene, cameras: list[Camera], lights: list[PointLight], settings: Ren
         if n_workers > 1:  # every worker fills a full Jacobian, pickles it, and the parent receives it
             need += 3 * n_workers * 8 * n_l * 3 * tr.n_j * n_rows
         if need > JACOBIAN_MAX_BYTES:
-            raise ValueError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
-                             f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
+            raise UserError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
+                            f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
         jac = np.zeros((n_rows, n_l, 3, tr.n_j))
     t0 = time.perf_counter()
     starts = list(range(0, len(pix_of), settings.chunk))
@@ -509,8 +510,8 @@ def _render_compiled(cs: CompiledScene, cameras, lp, li, settings: RenderSetting
         n_j = len(jacobian_cols)
         need = 8 * n_l * 3 * n_j * n_rows
         if need > JACOBIAN_MAX_BYTES:
-            raise ValueError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
-                             f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
+            raise UserError(f"the image Jacobian needs about {need / 2**30:.1f} GiB (limit "
+                            f"{JACOBIAN_MAX_BYTES / 2**30:.0f} GiB): ask for fewer columns, lights or pixels")
         jmap = np.full(cs.layout.size + 1, -1, dtype=np.int64)
         jmap[np.asarray(jacobian_cols, dtype=np.int64)] = np.arange(n_j)
     adj = None

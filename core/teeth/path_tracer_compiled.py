@@ -22,11 +22,20 @@ Compiled with numba's numpy error model: a float division by zero gives inf or N
 a test and a branch to raise ZeroDivisionError at every division (no division here has a zero divisor in
 the scenes the tests trace: the images are bit-identical to the Python error model's). ``trace`` refuses a
 result that is not finite, which is where such a division would show.
+
+The kernels read named tuples (numba compiles a field access to the same load as a tuple index):
+``Geometry``, ``Media`` and ``Textures`` (``pack_scene``), the cameras and settings of one call (``Job``), and
+each thread's scratch arrays (``Scratch``, ``PacketScratch``, ``PathVectors``). What the parallel region reads
+from outside it is flat (numba's parfors take a tuple of arrays and scalars, not a tuple holding a tuple): the
+trees' arrays are fields of ``Geometry``, gathered into ``bvh.RayTree`` / ``bvh.BinaryNodes`` / the reach grid by
+``_ray_tree``, ``_dentin_nodes``, ``_reach_grid`` where a query takes them. The physics is that of ``fresnel``,
+``phase_function`` and ``sigmoid_blend``, whose functions compile into these kernels.
 """
 
 from __future__ import annotations
 
 import hashlib
+from typing import NamedTuple
 
 import numpy as np
 from numba import get_num_threads, njit, prange
@@ -34,8 +43,9 @@ from numba import get_num_threads, njit, prange
 from .bvh import (
     LANES,
     PACKET,
-    STACK_SIZE,
     WIDTH,
+    BinaryNodes,
+    RayTree,
     TriangleBVH,
     closest_point_triangle,
     closest_triangle,
@@ -47,8 +57,11 @@ from .bvh import (
 )
 from .compiled_scene import KIND_DIELECTRIC, KIND_INDEX_MATCHED, KIND_OPAQUE, MED_AIR, MED_DENTIN, CompiledScene
 from .dentin_reach_grid import dentin_reach_grid, may_be_within_reach
+from .fresnel import fresnel_dielectric
 from .path_tracer import MAX_CROSSINGS, MAX_PATH_VERTICES  # the reference's limits, the same estimator
+from .phase_function import direction_from_mu_into, hg, hg_dlog_dg, sample_hg_mu_scalar, two_lobe
 from .ray_queries import RAY_EPS
+from .sigmoid_blend import blend_weight
 from .work_queue import take_next
 
 # l(q) = (1 + tanh(q / 2 s)) / 2 is 1 in float64 from q / s = 38.2 on (tanh rounds to 1 beyond 19.1):
@@ -56,9 +69,201 @@ from .work_queue import take_next
 BLEND_REACH = 40.0
 PACKET_MIN = 4  # lights from which a vertex's shadow rays are traced as packets
 HIT_BUFFER = 32  # hits gathered per traversal (more: one cast per crossing)
-INV_4PI = 1.0 / (4.0 * np.pi)
 SAMPLE_HALVES = 2  # each row's samples traced in 2 halves in parallel (see ``_trace_rows``)
 N_BLOCKS = 64  # row blocks traced in parallel; fixed so that sums do not depend on the thread count
+
+
+class Geometry(NamedTuple):
+    """The scene's triangles and trees (``pack_scene``). T triangles; sampling (s) and evaluation (e) geometry."""
+
+    tris_s: np.ndarray  # (T, 3, 3) float64
+    tris_e: np.ndarray  # (T, 3, 3) float64
+    normal_s: np.ndarray  # (T, 3) unit normals of tris_s
+    kind: np.ndarray  # (T,) int64: KIND_DIELECTRIC, KIND_INDEX_MATCHED or KIND_OPAQUE
+    inside: np.ndarray  # (T,) int64: the medium on the side the normal points away from
+    outside: np.ndarray  # (T,) int64: the medium the normal points into
+    eta: np.ndarray  # (T,) float64: refractive index of a dielectric boundary
+    tex_id: np.ndarray  # (T,) int64: a_t texture of a boundary (``Textures``), -1 where none
+    corner_uv: np.ndarray  # (T, 3, 2) float64
+    dentin_tooth: np.ndarray  # (T,) int64: tooth of a dentin triangle, -1 for the others
+    tri_delta: np.ndarray  # (T, 3 modes, 3 corners, 3) float64: dentin blend-shape offsets d v / d c
+    wbox: np.ndarray  # the scene's tree for ray queries (``bvh.RayTree``, ``_ray_tree``): wide boxes
+    wchild: np.ndarray  # wide children
+    tblk: np.ndarray  # leaf triangle blocks
+    tord: np.ndarray  # their triangle ids
+    dentin_lo: np.ndarray  # every tooth's dentin tree (``bvh.BinaryNodes``, ``_dentin_nodes``): boxes
+    dentin_hi: np.ndarray
+    dentin_left: np.ndarray
+    dentin_start: np.ndarray
+    dentin_count: np.ndarray
+    dentin_order: np.ndarray
+    dentin_roots: np.ndarray  # (teeth,) int64: each tooth's root among the dentin nodes
+    stops_shadow: np.ndarray  # (T,) bool: blocks a shadow ray (opaque)
+    stops_flight: np.ndarray  # (T,) bool: ends a path's flight (every kind but index-matched)
+    same_geometry: bool  # tris_e equals tris_s
+    same_textures: bool  # the evaluation a_t textures equal the sampling ones
+    grid_lo: np.ndarray  # ``dentin_reach_grid``'s grids (``_reach_grid``): lower corners
+    grid_inv: np.ndarray  # inverse cell sizes
+    grid_cells: np.ndarray  # cells per axis
+    grid_offsets: np.ndarray  # each tooth's first flag
+    grid_flags: np.ndarray  # uint8
+    stack_size: int  # entries of a traversal stack that serves the scene tree and the dentin trees
+
+
+class Media(NamedTuple):
+    """Per medium m (``compiled_scene``: 0 air, then enamel and dentin of each tooth, then the gums): the
+    coefficients of the sampling (s) and evaluation (e) scenes, and the parameter columns (``col_*``) their
+    derivatives go to. E / D: a medium's enamel-side and dentin-side material (the blend of eq. 5.15-5.21)."""
+
+    sigma_s: np.ndarray  # (M, 3) sigma_t of the sampling scene
+    sigma_e: np.ndarray  # (M, 3) sigma_t of the evaluation scene
+    kind: np.ndarray  # (M,) int64 MED_*
+    tooth: np.ndarray  # (M,) int64, -1 for air and gums
+    col_sigma: np.ndarray  # (M,) int64
+    enamel_of: np.ndarray  # (M,) int64: the medium whose sigma_t is the enamel side of m's blend
+    dentin_of: np.ndarray  # (M,) int64: ... the dentin side
+    alb_es: np.ndarray  # (M, 3) albedo, enamel side, sampling scene
+    alb_ds: np.ndarray  # (M, 3) dentin side, sampling
+    alb_ee: np.ndarray  # (M, 3) enamel side, evaluation
+    alb_de: np.ndarray  # (M, 3) dentin side, evaluation
+    ph_es: np.ndarray  # (M, 3) phase function (g1, g2, beta), as the albedos
+    ph_ds: np.ndarray
+    ph_ee: np.ndarray
+    ph_de: np.ndarray
+    col_alb_e: np.ndarray  # (M,) int64
+    col_alb_d: np.ndarray  # (M,) int64
+    col_ph_e: np.ndarray  # (M, 3) int64
+    col_ph_d: np.ndarray  # (M, 3) int64
+    c_col: np.ndarray  # (teeth,) int64: first column of each tooth's dentin coefficients c
+    rho_s: np.ndarray  # (3,) oral cavity albedo, sampling (ones where there is no cavity)
+    rho_e: np.ndarray  # (3,) evaluation
+    col_rho: int  # -1 where there is no cavity
+    spread: float  # the blend's spread s (eq. 5.15)
+    ln_sigma_s: np.ndarray  # the logs of sigma_s, sigma_e, the albedos and rho, by the kernels' own log
+    ln_sigma_e: np.ndarray
+    ln_alb_es: np.ndarray
+    ln_alb_ds: np.ndarray
+    ln_alb_ee: np.ndarray
+    ln_alb_de: np.ndarray
+    ln_rho_s: np.ndarray
+    ln_rho_e: np.ndarray
+
+
+class Textures(NamedTuple):
+    """The a_t textures (eq. 5.2), all in one table: texture k's texels are rows offset[k] .. offset[k] +
+    height[k] width[k] of flat_s (sampling) and flat_e (evaluation), row by row."""
+
+    flat_s: np.ndarray  # (texels, 3)
+    flat_e: np.ndarray  # (texels, 3)
+    offset: np.ndarray  # (textures,) int64
+    height: np.ndarray  # (textures,) int64
+    width: np.ndarray  # (textures,) int64
+    col: np.ndarray  # (textures,) int64: first parameter column of each texture
+
+
+class Job(NamedTuple):
+    """What one ``trace`` call asks: rows (camera, flat pixel) x spp paths and what to compute from them."""
+
+    fxy: np.ndarray  # (cameras, 4): focal lengths and principal point fx, fy, cx, cy
+    rot: np.ndarray  # (cameras, 3, 3) the cameras' rotations (rows: image x, y and viewing axes in the world)
+    center: np.ndarray  # (cameras, 3)
+    width: np.ndarray  # (cameras,) int64: pixels per image row
+    cam_of: np.ndarray  # (rows,) int64
+    pix_of: np.ndarray  # (rows,) int64
+    spp: int
+    seed: int
+    depth_cap: int  # path vertices at most
+    roulette: bool  # all bounces with Russian roulette (depth_cap is then ``MAX_PATH_VERTICES``)
+    rr_depth: int  # first vertex the roulette may stop a path at
+    jitter: bool  # sample positions jittered in the pixel (else its centre)
+    lp: np.ndarray  # (L, 3) light positions
+    li: np.ndarray  # (L, 3) light intensities
+    inv_spp: float
+    adj: np.ndarray  # (cameras, L, H W, 3) the adjoint, or (0, 0, 0, 3) without a gradient
+    want_grad: bool
+    jmap: np.ndarray  # parameter column -> Jacobian column (-1: none); (1,) of -1 without a Jacobian
+
+
+class PacketScratch(NamedTuple):
+    """One thread's arrays for ``_light_packets`` (L lights)."""
+
+    ldir: np.ndarray  # (L, 3) unit directions to the lights
+    lr: np.ndarray  # (L,) distances
+    lgeo: np.ndarray  # (L,) phase function or cosine / pi towards each light
+    lmu: np.ndarray  # (L,) cosine to the path direction
+    tri: np.ndarray  # (L, HIT_BUFFER) int64: each shadow ray's hits
+    t: np.ndarray  # (L, HIT_BUFFER)
+    n: np.ndarray  # (L,) int64: each shadow ray's number of hits
+    pinv: np.ndarray  # (PACKET, 4) ``packet_hits``' scratch from here on
+    pstack: np.ndarray  # (stack size, 2) int64
+    cmask: np.ndarray  # (WIDTH,) int64
+    pmask: np.ndarray  # (PACKET,) int64
+    pt: np.ndarray  # (PACKET, LANES)
+
+
+class Scratch(NamedTuple):
+    """One thread's arrays for a path's walks and connections (C = ``MAX_CROSSINGS``)."""
+
+    tri_x: np.ndarray  # (C + 1,) int64: triangles crossed along a ray
+    t_x: np.ndarray  # (C + 1,) their distances
+    meds: np.ndarray  # (C + 2,) int64: the medium of each piece
+    t_e: np.ndarray  # (C + 1,) crossing distances on the evaluation geometry
+    clipped: np.ndarray  # (C + 1,) bool
+    a: np.ndarray  # (3,) a_t at a boundary
+    idx: np.ndarray  # (4,) int64: its texels
+    wts: np.ndarray  # (4,) their bilinear weights
+    wgt: np.ndarray  # (3,) a connection's adjoint weight
+    score: np.ndarray  # (n_j, 3) a connection's forward-mode score
+    no_score: np.ndarray  # (0, 3): the score sink that records nothing
+    no_grad: np.ndarray  # (0,): the gradient sink that records nothing
+    stack: np.ndarray  # (stack size,) int64: traversal stack
+    vec: np.ndarray  # (3, 3): a connection's direction, contribution and transmittance
+    buf_tri: np.ndarray  # (HIT_BUFFER,) int64: hits gathered by one traversal
+    buf_t: np.ndarray  # (HIT_BUFFER,)
+    wdist: np.ndarray  # (WIDTH,) a wide node's entry distances
+    packet: PacketScratch
+
+
+class PathVectors(NamedTuple):
+    """One thread's 3-vectors of a path (``_trace_path``) and its running score."""
+
+    s_run: np.ndarray  # (n_j, 3) the path's running score d log f (forward mode)
+    o: np.ndarray
+    d: np.ndarray
+    x: np.ndarray
+    nd: np.ndarray
+    nrm: np.ndarray
+    logf: np.ndarray
+    logp: np.ndarray
+    logfs: np.ndarray
+    wv: np.ndarray
+    dqdc: np.ndarray
+    mix_e: np.ndarray
+    mix_s: np.ndarray
+    tau_cum: np.ndarray
+    tau_at: np.ndarray
+    sig_k: np.ndarray
+    tmp: np.ndarray
+    ones: np.ndarray
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _ray_tree(geo) -> RayTree:
+    """The scene's ``bvh.RayTree`` from its fields of ``geo``."""
+    return RayTree(geo.wbox, geo.wchild, geo.tblk, geo.tord, geo.stack_size)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _dentin_nodes(geo) -> BinaryNodes:
+    """The dentin trees' ``bvh.BinaryNodes`` from their fields of ``geo``."""
+    return BinaryNodes(geo.dentin_lo, geo.dentin_hi, geo.dentin_left, geo.dentin_start, geo.dentin_count,
+                       geo.dentin_order)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _reach_grid(geo) -> tuple:
+    """``dentin_reach_grid``'s (lo, inverse cell size, cells, offsets, flags) from their fields of ``geo``."""
+    return geo.grid_lo, geo.grid_inv, geo.grid_cells, geo.grid_offsets, geo.grid_flags
 
 
 _TREES: dict = {}  # (sampling geometry, dentin assignment, spread) digest -> BVH arrays; a fit re-packs every iteration
@@ -77,10 +282,11 @@ def _remember(cache: dict, key: str, value, size: int = 8):
 
 
 def _trees(cs: CompiledScene) -> tuple:
-    """(scene BVH arrays, dentin BVH arrays, dentin roots, dentin reach grid) of ``cs``'s sampling geometry,
-    cached by content. The trees' topology is built once per geometry at c = 0 (``cs.tris_rest``) and
-    refitted to the coefficients' dentin (``TriangleBVH.refit``): a fit's every iteration, and its
-    shape gradient's two renders, move the dentin, and a build cost about 0.2 s per tree."""
+    """(scene ray tree, dentin nodes, dentin roots, dentin reach grid, stack size) of ``cs``'s sampling
+    geometry, cached by content; the stack size serves the scene tree and every dentin tree. The trees'
+    topology is built once per geometry at c = 0 (``cs.tris_rest``) and refitted to the coefficients' dentin
+    (``TriangleBVH.refit``): a fit's every iteration, and its shape gradient's two renders, move the dentin,
+    and a build cost about 0.2 s per tree."""
     key = _digest(cs.tris_s, cs.dentin_tooth, np.float64(cs.spread))
     if key in _TREES:
         return _TREES[key]
@@ -92,11 +298,13 @@ def _trees(cs: CompiledScene) -> tuple:
     scene_tree, dentin_trees = _TOPOLOGIES[topo_key]
     dnodes, droots = TriangleBVH.merge([t.refit(cs.tris_s) for t in dentin_trees])
     grid = dentin_reach_grid(cs.tris_s, cs.dentin_tooth, len(cs.dentin), BLEND_REACH * float(cs.spread))
-    return _remember(_TREES, key, (scene_tree.refit(cs.tris_s).ray_arrays(cs.tris_s), dnodes, droots, grid))
+    ray_tree = scene_tree.refit(cs.tris_s).ray_arrays(cs.tris_s)
+    stack_size = max([ray_tree.stack_size] + [t.stack_size for t in dentin_trees])
+    return _remember(_TREES, key, (ray_tree, dnodes, droots, grid, stack_size))
 
 
-def pack_scene(cs: CompiledScene) -> tuple:
-    """The arrays of ``cs`` the kernels read: (geometry, media, textures)."""
+def pack_scene(cs: CompiledScene) -> tuple[Geometry, Media, Textures]:
+    """The arrays of ``cs`` the kernels read."""
     tri_delta = np.zeros((len(cs.tris_s), 3, 3, 3))
     for i, dp in enumerate(cs.dentin):
         ids = np.flatnonzero(cs.dentin_tooth == i)
@@ -111,25 +319,27 @@ def pack_scene(cs: CompiledScene) -> tuple:
         flat_s.append(ts.reshape(-1, 3))
         flat_e.append(te.reshape(-1, 3))
         n += te.shape[0] * te.shape[1]
-    tex = (np.concatenate(flat_s) if flat_s else np.ones((1, 3)), np.concatenate(flat_e) if flat_e else np.ones((1, 3)),
-           np.array(offs, dtype=np.int64), np.array(hs, dtype=np.int64), np.array(ws, dtype=np.int64),
-           np.array(cs.tex_col, dtype=np.int64))
-    nodes, dnodes, droots, grid = _trees(cs)
-    geo = (np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
-           cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id, np.ascontiguousarray(cs.corner_uv, dtype=np.float64),
-           cs.dentin_tooth, tri_delta) + nodes + dnodes + (
-               droots, cs.kind == KIND_OPAQUE, cs.kind != KIND_INDEX_MATCHED,
-               np.array([np.array_equal(cs.tris_s, cs.tris_e), np.array_equal(tex[0], tex[1])])) + grid
+    tex = Textures(np.concatenate(flat_s) if flat_s else np.ones((1, 3)),
+                   np.concatenate(flat_e) if flat_e else np.ones((1, 3)), np.array(offs, dtype=np.int64),
+                   np.array(hs, dtype=np.int64), np.array(ws, dtype=np.int64), np.array(cs.tex_col, dtype=np.int64))
+    ray_tree, dnodes, droots, grid, stack_size = _trees(cs)
+    geo = Geometry(np.ascontiguousarray(cs.tris_s), np.ascontiguousarray(cs.tris_e), np.ascontiguousarray(cs.normal_s),
+                   cs.kind, cs.inside, cs.outside, cs.eta, cs.tex_id,
+                   np.ascontiguousarray(cs.corner_uv, dtype=np.float64), cs.dentin_tooth, tri_delta, ray_tree.wbox,
+                   ray_tree.wchild, ray_tree.tblk, ray_tree.tord, *dnodes, droots, cs.kind == KIND_OPAQUE,
+                   cs.kind != KIND_INDEX_MATCHED, bool(np.array_equal(cs.tris_s, cs.tris_e)),
+                   bool(np.array_equal(tex.flat_s, tex.flat_e)), *grid, int(stack_size))
     has_cavity = bool(cs.has_cavity)
-    med = (cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
-           cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"], cs.ph["De"],
-           cs.col_alb["E"], cs.col_alb["D"], cs.col_ph["E"], cs.col_ph["D"], cs.c_col,
-           cs.rho_s if has_cavity else np.ones(3), cs.rho_e if has_cavity else np.ones(3),
-           int(cs.col_rho) if has_cavity else -1, float(cs.spread))
+    rho_s = cs.rho_s if has_cavity else np.ones(3)
+    rho_e = cs.rho_e if has_cavity else np.ones(3)
     # the logs of the unblended coefficients (most vertices lie where l(q) is 0 or 1 to the last bit), computed by
     # the kernels' own log so that a table entry equals the log the vertex would compute
-    med = med + tuple(_log_table(np.ascontiguousarray(v, dtype=np.float64)) for v in (
-        cs.sigma_s, cs.sigma_e, cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], med[20], med[21]))
+    logs = tuple(_log_table(np.ascontiguousarray(v, dtype=np.float64)) for v in (
+        cs.sigma_s, cs.sigma_e, cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], rho_s, rho_e))
+    med = Media(cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
+                cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"],
+                cs.ph["De"], cs.col_alb["E"], cs.col_alb["D"], cs.col_ph["E"], cs.col_ph["D"], cs.c_col, rho_s, rho_e,
+                int(cs.col_rho) if has_cavity else -1, float(cs.spread), *logs)
     return geo, med, tex
 
 
@@ -170,53 +380,6 @@ def _seed(rs, seed, path) -> None:
 
 # ------------------------------------------------------------------------------------------ small math
 @njit(cache=True, error_model="numpy")
-def _fresnel(cos_i, eta) -> float:
-    """Unpolarised Fresnel reflectance of the thin boundary (eq. 5.1), |cos_i| used."""
-    c = min(abs(cos_i), 1.0)
-    sin_t2 = (1.0 - c * c) / (eta * eta)
-    cos_t = np.sqrt(max(1.0 - sin_t2, 0.0))
-    rs = (c - eta * cos_t) / (c + eta * cos_t)
-    rp = (eta * c - cos_t) / (eta * c + cos_t)
-    return 0.5 * (rs * rs + rp * rp)
-
-
-@njit(cache=True, error_model="numpy")
-def _hg(mu, g) -> float:
-    den = 1.0 + g * g - 2.0 * g * mu
-    return INV_4PI * (1.0 - g * g) / (den * np.sqrt(den))
-
-
-@njit(cache=True, error_model="numpy")
-def _hg_dlog(mu, g) -> float:
-    return -(2.0 * g / (1.0 - g * g) + 3.0 * (g - mu) / (1.0 + g * g - 2.0 * g * mu))
-
-
-@njit(cache=True, error_model="numpy")
-def _sample_hg_mu(g, u) -> float:
-    if abs(g) < 1e-4:
-        return 1.0 - 2.0 * u
-    s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
-    return min(max((1.0 + g * g - s * s) / (2.0 * g), -1.0), 1.0)
-
-
-@njit(cache=True, error_model="numpy")
-def _direction_from_mu(d, mu, phi, out) -> None:
-    """Unit direction at cosine mu to d and azimuth phi (frame of Duff et al. 2017) into out."""
-    sign = 1.0 if d[2] >= 0.0 else -1.0
-    a = -1.0 / (sign + d[2])
-    b = d[0] * d[1] * a
-    t0, t1, t2 = 1.0 + sign * d[0] * d[0] * a, sign * b, -sign * d[0]
-    s0, s1, s2 = b, sign + d[1] * d[1] * a, -d[1]
-    st = np.sqrt(max(1.0 - mu * mu, 0.0))
-    cp, sp = np.cos(phi), np.sin(phi)
-    x = d[0] * mu + (t0 * cp + s0 * sp) * st
-    y = d[1] * mu + (t1 * cp + s1 * sp) * st
-    z = d[2] * mu + (t2 * cp + s2 * sp) * st
-    n = np.sqrt(x * x + y * y + z * z)
-    out[0], out[1], out[2] = x / n, y / n, z / n
-
-
-@njit(cache=True, error_model="numpy")
 def _logmeanexp3(a) -> float:
     m = max(a[0], max(a[1], a[2]))
     return m + np.log((np.exp(a[0] - m) + np.exp(a[1] - m) + np.exp(a[2] - m)) / 3.0)
@@ -224,14 +387,15 @@ def _logmeanexp3(a) -> float:
 
 @njit(cache=True, error_model="numpy")
 def _blend(q, spread) -> float:
-    """l(q) of eq. 5.15. Beyond |q / (2 spread)| = 20, tanh is +-1 to the last bit (1 - tanh(20) < 1e-17): there
-    l is exactly 1 or 0 without the call."""
+    """``sigmoid_blend.blend_weight`` l(q) (eq. 5.15) without its tanh where it is 0 or 1: beyond |q / (2 spread)|
+    = 20, tanh is +-1 to the last bit (1 - tanh(20) < 1e-17), so l is exactly 1 or 0 (pinned by
+    ``test_teeth_numba_kernels``)."""
     z = 0.5 * q / spread
     if z >= 20.0:
         return 1.0
     if z <= -20.0:
         return 0.0
-    return 0.5 * (1.0 + np.tanh(z))
+    return blend_weight(q, spread)
 
 
 # ------------------------------------------------------------------------------------------ score sinks
@@ -292,16 +456,16 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, wdist, buf_tri
     Fills tri_x, t_x (crossings), meds (medium of each piece); returns (k, end_tri, end_t, blocked, casts).
     One traversal gathers the hits up to the first stopping surface; where that cannot decide (buffer
     overflow, a stopping hit within RAY_EPS of a crossing) the walk goes on one ray cast per crossing."""
-    stops = geo[22] if shadow else geo[23]
-    n = hits_until_stop(geo[11:15], stops, o, d, RAY_EPS, tmax, stack, wdist, buf_tri, buf_t, not shadow)
+    stops = geo.stops_shadow if shadow else geo.stops_flight
+    n = hits_until_stop(_ray_tree(geo), stops, o, d, RAY_EPS, tmax, stack, wdist, buf_tri, buf_t, not shadow)
     return _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist):
     """``_walk`` from the n hits gathered by ``hits_until_stop`` (or ``packet_hits``) in buf_tri, buf_t."""
-    normal_s, kind, inside, outside = geo[2], geo[3], geo[4], geo[5]
-    nodes, stops = geo[11:15], (geo[22] if shadow else geo[23])
+    normal_s, kind, inside, outside = geo.normal_s, geo.kind, geo.inside, geo.outside
+    nodes, stops = _ray_tree(geo), (geo.stops_shadow if shadow else geo.stops_flight)
     k = 0
     tcur = 0.0
     meds[0] = med0
@@ -358,8 +522,8 @@ def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, 
     and the surface found are those of ``_walk`` followed by the free-flight search of ``_trace_path``
     (the same numbers up to rounding). Fills tri_x, t_x, meds and tau_cum (optical depth before the last
     piece); returns (k crossings, surface or -1, its distance, scatter, ray casts)."""
-    normal_s, kind, inside, outside = geo[2], geo[3], geo[4], geo[5]
-    nodes = geo[11:15]
+    normal_s, kind, inside, outside = geo.normal_s, geo.kind, geo.inside, geo.outside
+    nodes = _ray_tree(geo)
     k = 0
     tcur = 0.0
     tmin = RAY_EPS
@@ -389,8 +553,8 @@ def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, 
 def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
     """Crossing distances on the evaluation geometry, ordered and within [0, upper]; which were clipped
     (``path_tracer._Tracer.eval_crossings``)."""
-    tris_e, kind = geo[1], geo[3]
-    if geo[24][0]:  # evaluation geometry = sampling geometry: the distances are the sampled ones, and a
+    tris_e, kind = geo.tris_e, geo.kind
+    if geo.same_geometry:  # evaluation geometry = sampling geometry: the distances are the sampled ones, and a
         for j in range(k):  # crossing beyond ``upper`` is never read
             t_e[j] = t_x[j]
             clipped[j] = False
@@ -417,8 +581,8 @@ def _eval_crossings(geo, o, d, k, tri_x, t_x, upper, t_e, clipped) -> None:
 @njit(cache=True, _nrt=False, error_model="numpy")
 def _crossing_record(geo, med, o, d, tri, m_before, m_after, w, g, sx, jmap) -> None:
     """(S_i - S_e) dt/dc of one dentin crossing (eq. 5.29-5.32)."""
-    tris_e, dtooth, tri_delta = geo[1], geo[9], geo[10]
-    sigma_e, c_col = med[1], med[19]
+    tris_e, dtooth, tri_delta = geo.tris_e, geo.dentin_tooth, geo.tri_delta
+    sigma_e, c_col = med.sigma_e, med.c_col
     _, u, v = ray_triangle(tris_e, tri, o, d)
     b0, b1, b2 = 1.0 - u - v, u, v
     a0, a1, a2 = tris_e[tri, 1, 0] - tris_e[tri, 0, 0], tris_e[tri, 1, 1] - tris_e[tri, 0, 1], \
@@ -446,9 +610,9 @@ def _crossing_record(geo, med, o, d, tri, m_before, m_after, w, g, sx, jmap) -> 
 def _a_t(geo, tex, tri, o, d, which_e, a, idx, wts) -> int:
     """Bilinear a_t at the boundary hit of o + t d on tri (eq. 5.2): values into a (3), texel indices and
     weights into idx, wts (4); returns the texture's first parameter column."""
-    tris_s, tex_id, corner_uv = geo[0], geo[7], geo[8]
-    flat = tex[1] if which_e else tex[0]
-    off, hh, ww, tex_col = tex[2], tex[3], tex[4], tex[5]
+    tris_s, tex_id, corner_uv = geo.tris_s, geo.tex_id, geo.corner_uv
+    flat = tex.flat_e if which_e else tex.flat_s
+    off, hh, ww, tex_col = tex.offset, tex.height, tex.width, tex.col
     _, u, v = ray_triangle(tris_s, tri, o, d)
     b0 = 1.0 - u - v
     uu = b0 * corner_uv[tri, 0, 0] + u * corner_uv[tri, 1, 0] + v * corner_uv[tri, 2, 0]
@@ -487,12 +651,13 @@ def _a_t_records(col0, a, idx, wts, w, g, sx, jmap) -> None:
 @njit(cache=True, _nrt=False, error_model="numpy")
 def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
     """d log f_p of the blended two-lobe phase function at one vertex and direction (eq. 5.11-5.19)."""
-    ph_ee, ph_de, col_ph_e, col_ph_d, med_tooth, c_col = med[13], med[14], med[17], med[18], med[3], med[19]
+    ph_ee, ph_de, col_ph_e, col_ph_d, med_tooth, c_col = med.ph_ee, med.ph_de, med.col_ph_e, med.col_ph_d, \
+        med.tooth, med.c_col
     g1, g2, beta = mix[0], mix[1], mix[2]
-    h1, h2 = _hg(mu, g1), _hg(mu, g2)
+    h1, h2 = hg(mu, g1), hg(mu, g2)
     f = beta * h1 + (1.0 - beta) * h2
-    d1 = beta * h1 * _hg_dlog(mu, g1) / f
-    d2 = (1.0 - beta) * h2 * _hg_dlog(mu, g2) / f
+    d1 = beta * h1 * hg_dlog_dg(mu, g1) / f
+    d2 = (1.0 - beta) * h2 * hg_dlog_dg(mu, g2) / f
     db = (h1 - h2) / f
     for i, val in ((0, d1), (1, d2), (2, db)):
         _emit(col_ph_e[mv, i], val * lw, val * lw, val * lw, w, g, sx, jmap)
@@ -511,9 +676,10 @@ def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     """Signed distance to the tooth's dentin on the sampling and evaluation geometry, dq_e/dc into dqdc
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
     0 or 1 to the last bit and dl/dq is 0), returns +-reach for both and dq/dc = 0."""
-    tris_s, tris_e, tri_delta, dnodes, droots = geo[0], geo[1], geo[10], geo[15:21], geo[21]
+    tris_s, tris_e, tri_delta, dnodes, droots = geo.tris_s, geo.tris_e, geo.tri_delta, _dentin_nodes(geo), \
+        geo.dentin_roots
     tri, dist = -1, reach  # where the reach grid rules dentin out, the search would find no triangle either
-    if may_be_within_reach(geo[25:30], tooth, p):
+    if may_be_within_reach(_reach_grid(geo), tooth, p):
         tri, dist = closest_triangle(dnodes, droots[tooth], tris_s, p, stack, bary, reach)
     if tri < 0:
         dqdc[:] = 0.0
@@ -537,7 +703,8 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
     """``_nee``'s shadow rays from x as packets (``bvh.packet_hits``): every light's direction, distance, mu and
     f (phase function or cosine / pi) into pk, and the hits of the rays with f > 0 (a function of its own,
     so that ``_nee``'s one-light code is compiled as before)."""
-    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n, pinv, pstack, cmask, pmask, pt = pk
+    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n = pk.ldir, pk.lr, pk.lgeo, pk.lmu, pk.tri, pk.t, pk.n
+    pinv, pstack, cmask, pmask, pt = pk.pinv, pk.pstack, pk.cmask, pk.pmask, pk.pt
     n_l = lp.shape[0]
     for lt in range(n_l):
         r2 = 0.0
@@ -551,7 +718,7 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
         mu = ldir[lt, 0] * d[0] + ldir[lt, 1] * d[1] + ldir[lt, 2] * d[2]
         lmu[lt] = mu
         if is_phase:
-            lgeo[lt] = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+            lgeo[lt] = two_lobe(mu, mix_e[0], mix_e[1], mix_e[2])
         else:
             lgeo[lt] = max(ldir[lt, 0] * nrm[0] + ldir[lt, 1] * nrm[1] + ldir[lt, 2] * nrm[2], 0.0) / np.pi
     for l0 in range(0, n_l, PACKET):
@@ -560,20 +727,25 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
             if lgeo[l0 + b] > 0.0:
                 mask |= np.int64(1) << b
         if mask != 0:
-            packet_hits(geo[11:15], geo[22], x, ldir, lr, l0, mask, RAY_EPS, pinv, pstack, cmask, pmask, pt, pk_tri,
-                        pk_t, pk_n)
+            packet_hits(_ray_tree(geo), geo.stops_shadow, x, ldir, lr, l0, mask, RAY_EPS, pinv, pstack, cmask, pmask,
+                        pt, pk_tri, pk_t, pk_n)
 
 
 # ------------------------------------------------------------------------------------------ one path
 @njit(cache=True, _nrt=False, inline="always", error_model="numpy")
-def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li, inv_spp, row, cam, pix, b,
-         img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch):
+def _nee(geo, med, tex, job, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, row, cam, pix, b, img_on, gradpass,
+         out_rows, ab, grad, jac, s_run, scratch):
     """Connect vertex x to every light; splat, and the connection's own d log f terms (``path_tracer._nee``).
     Returns (shadow rays, ray casts)."""
-    sigma_e, col_sigma = med[1], med[4]
-    kind, normal_s, eta = geo[3], geo[2], geo[6]
-    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t, wdist, pk = scratch
-    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n = pk[:7]
+    lp, li, inv_spp, adj, jmap = job.lp, job.li, job.inv_spp, job.adj, job.jmap
+    sigma_e, col_sigma = med.sigma_e, med.col_sigma
+    kind, normal_s, eta = geo.kind, geo.normal_s, geo.eta
+    tri_x, t_x, meds, t_e, clipped = scratch.tri_x, scratch.t_x, scratch.meds, scratch.t_e, scratch.clipped
+    a, idx, wts, wgt, score, emp2, emp1 = scratch.a, scratch.idx, scratch.wts, scratch.wgt, scratch.score, \
+        scratch.no_score, scratch.no_grad
+    stack, vec, buf_tri, buf_t, wdist, pk = scratch.stack, scratch.vec, scratch.buf_tri, scratch.buf_t, \
+        scratch.wdist, scratch.packet
+    ldir, lr, lgeo, lmu, pk_tri, pk_t, pk_n = pk.ldir, pk.lr, pk.lgeo, pk.lmu, pk.tri, pk.t, pk.n
     w, contrib, trans = vec[0], vec[1], vec[2]
     n_shadow = 0
     casts = 0
@@ -599,7 +771,7 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
                 w[c] /= r
             mu = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]
             if is_phase:
-                geo_f = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+                geo_f = two_lobe(mu, mix_e[0], mix_e[1], mix_e[2])
             else:
                 geo_f = max(w[0] * nrm[0] + w[1] * nrm[1] + w[2] * nrm[2], 0.0) / np.pi
         if geo_f <= 0.0:
@@ -608,7 +780,8 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
         if packet:
             hb_n, hb_tri, hb_t = pk_n[lt], pk_tri[lt], pk_t[lt]
         else:
-            hb_n = hits_until_stop(geo[11:15], geo[22], x, w, RAY_EPS, r, stack, wdist, buf_tri, buf_t, False)
+            hb_n = hits_until_stop(_ray_tree(geo), geo.stops_shadow, x, w, RAY_EPS, r, stack, wdist, buf_tri, buf_t,
+                                   False)
             hb_tri, hb_t = buf_tri, buf_t
         k, _, _, blocked, nc = _walk_hits(geo, x, w, mv, True, r, hb_n, hb_tri, hb_t, tri_x, t_x, meds, stack, wdist)
         casts += nc
@@ -630,7 +803,7 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
             if kind[tri] == KIND_DIELECTRIC:
                 _a_t(geo, tex, tri, x, w, True, a, idx, wts)
                 cosv = normal_s[tri, 0] * w[0] + normal_s[tri, 1] * w[1] + normal_s[tri, 2] * w[2]
-                tf = 1.0 - _fresnel(cosv, eta[tri])
+                tf = 1.0 - fresnel_dielectric(cosv, eta[tri])
                 for c in range(3):
                     trans[c] *= a[c] * tf
         for c in range(3):
@@ -681,19 +854,28 @@ def _nee(geo, med, tex, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, lp, li
 
 
 @njit(cache=True, _nrt=False, inline="always", error_model="numpy")
-def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_depth, lp, li, inv_spp, row,
-                cam, pix, img_on, gradpass, out_rows, adj, ab, grad, jac, jmap, scratch, path_vecs, rs):
+def _trace_path(geo, med, tex, job, o0, d0, seed_path, row, cam, pix, img_on, gradpass, out_rows, ab, grad, jac,
+                scratch, path_vecs, rs):
     """One camera path (``path_tracer._trace_chunk`` for a single path). Returns (vertices, shadow rays,
     casts, capped, levels used). Allocates nothing (its vectors are the caller's ``path_vecs``), so it runs
     without reference counting."""
-    sigma_s, sigma_e, med_kind, med_tooth, col_sigma, med_e_of, med_d_of = med[:7]
-    alb_es, alb_ds, alb_ee, alb_de, ph_es, ph_ds, ph_ee, ph_de = med[7:15]
-    col_alb_e, col_alb_d, c_col, rho_e, col_rho, spread = med[15], med[16], med[19], med[21], med[22], med[23]
-    ln_sigma_s, ln_sigma_e, ln_alb_es, ln_alb_ds, ln_alb_ee, ln_alb_de, ln_rho_s, ln_rho_e = med[24:32]
-    kind, normal_s, eta = geo[3], geo[2], geo[6]
-    tri_x, t_x, meds, t_e, clipped, a, idx, wts, wgt, score, emp2, emp1, stack, vec, buf_tri, buf_t, wdist, _ = scratch
-    s_run, vecs = path_vecs
-    o, d, x, nd, nrm, logf, logp, logfs, wv, dqdc, mix_e, mix_s, tau_cum, tau_at, sig_k, tmp, ones = vecs
+    seed, depth_cap, roulette, rr_depth, jmap = job.seed, job.depth_cap, job.roulette, job.rr_depth, job.jmap
+    sigma_s, sigma_e, med_kind, med_tooth, col_sigma = med.sigma_s, med.sigma_e, med.kind, med.tooth, med.col_sigma
+    med_e_of, med_d_of = med.enamel_of, med.dentin_of
+    alb_es, alb_ds, alb_ee, alb_de = med.alb_es, med.alb_ds, med.alb_ee, med.alb_de
+    ph_es, ph_ds, ph_ee, ph_de = med.ph_es, med.ph_ds, med.ph_ee, med.ph_de
+    col_alb_e, col_alb_d, c_col, rho_e, col_rho, spread = med.col_alb_e, med.col_alb_d, med.c_col, med.rho_e, \
+        med.col_rho, med.spread
+    ln_sigma_s, ln_sigma_e, ln_alb_es, ln_alb_ds = med.ln_sigma_s, med.ln_sigma_e, med.ln_alb_es, med.ln_alb_ds
+    ln_alb_ee, ln_alb_de, ln_rho_s, ln_rho_e = med.ln_alb_ee, med.ln_alb_de, med.ln_rho_s, med.ln_rho_e
+    kind, normal_s, eta = geo.kind, geo.normal_s, geo.eta
+    tri_x, t_x, meds, t_e, clipped = scratch.tri_x, scratch.t_x, scratch.meds, scratch.t_e, scratch.clipped
+    a, idx, wts, emp2, emp1 = scratch.a, scratch.idx, scratch.wts, scratch.no_score, scratch.no_grad
+    stack, buf_tri, buf_t, wdist = scratch.stack, scratch.buf_tri, scratch.buf_t, scratch.wdist
+    pv = path_vecs
+    s_run, o, d, x, nd, nrm = pv.s_run, pv.o, pv.d, pv.x, pv.nd, pv.nrm
+    logf, logp, logfs, wv, dqdc, mix_e, mix_s = pv.logf, pv.logp, pv.logfs, pv.wv, pv.dqdc, pv.mix_e, pv.mix_s
+    tau_cum, tau_at, sig_k, tmp, ones = pv.tau_cum, pv.tau_at, pv.sig_k, pv.tmp, pv.ones
     s_run[:] = 0.0
     use_g = gradpass == 2
     use_s = jac.shape[0] > 0
@@ -820,11 +1002,11 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                 # ---- thin dielectric boundary (eq. 5.1-5.2)
                 n_vert += 1
                 cosv = normal_s[end_tri, 0] * d[0] + normal_s[end_tri, 1] * d[1] + normal_s[end_tri, 2] * d[2]
-                if u4 < _fresnel(cosv, eta[end_tri]):  # reflected: stays in the medium of the last piece (mk)
+                if u4 < fresnel_dielectric(cosv, eta[end_tri]):  # reflected: stays in the medium of the last piece (mk)
                     for c in range(3):
                         nd[c] = d[c] - 2.0 * cosv * normal_s[end_tri, c]
                 else:
-                    new_m = geo[4][end_tri] if cosv < 0.0 else geo[5][end_tri]
+                    new_m = geo.inside[end_tri] if cosv < 0.0 else geo.outside[end_tri]
                     col0 = _a_t(geo, tex, end_tri, o, d, True, a, idx, wts)
                     la0, la1, la2 = np.log(a[0]), np.log(a[1]), np.log(a[2])
                     logf[0] += la0
@@ -833,7 +1015,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                     if use_g or use_s:
                         _a_t_records(col0, a, idx, wts, ab[b], g_lvl, sx_lvl, jmap)
                     if roulette:
-                        if not geo[24][1]:  # the sampling scene's a_t differs from the evaluation scene's
+                        if not geo.same_textures:  # the sampling scene's a_t differs from the evaluation scene's
                             _a_t(geo, tex, end_tri, o, d, False, a, idx, wts)
                             la0, la1, la2 = np.log(a[0]), np.log(a[1]), np.log(a[2])
                         logfs[0] += la0
@@ -864,20 +1046,20 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
             alive = False
         if connect:
             # ---- next-event estimation from the vertex (one call site: ``_nee`` is inlined here)
-            ns, nc = _nee(geo, med, tex, x, d, nee_m, wv, nrm, scatter, nee_mix, nee_lw, nee_dl, dqdc, lp, li, inv_spp,
-                          row, cam, pix, b, img_on, gradpass, out_rows, adj, ab, grad, jac, s_run, jmap, scratch)
+            ns, nc = _nee(geo, med, tex, job, x, d, nee_m, wv, nrm, scatter, nee_mix, nee_lw, nee_dl, dqdc, row, cam,
+                          pix, b, img_on, gradpass, out_rows, ab, grad, jac, s_run, scratch)
             n_shadow += ns
             casts += nc
             if scatter:
                 # continue: sample the phase function with the sampling parameters
                 gsel = mix_s[0] if u1 < mix_s[2] else mix_s[1]
-                mu = _sample_hg_mu(gsel, u2)
-                _direction_from_mu(d, mu, 2.0 * np.pi * u3, nd)
-                f_e = mix_e[2] * _hg(mu, mix_e[0]) + (1.0 - mix_e[2]) * _hg(mu, mix_e[1])
+                mu = sample_hg_mu_scalar(gsel, u2)
+                direction_from_mu_into(d, mu, 2.0 * np.pi * u3, nd)
+                f_e = two_lobe(mu, mix_e[0], mix_e[1], mix_e[2])
                 if mix_s[0] == mix_e[0] and mix_s[1] == mix_e[1] and mix_s[2] == mix_e[2]:
                     f_s = f_e  # sampling and evaluation phase functions agree (every forward render)
                 else:
-                    f_s = mix_s[2] * _hg(mu, mix_s[0]) + (1.0 - mix_s[2]) * _hg(mu, mix_s[1])
+                    f_s = two_lobe(mu, mix_s[0], mix_s[1], mix_s[2])
                 lf_e = np.log(f_e)
                 lf_s = lf_e if f_s == f_e else np.log(f_s)
                 for c in range(3):
@@ -890,7 +1072,7 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
                     _phase_records(med, mv, mu, mix_e, lw_e, dl, dqdc, ab[b + 1], g_lvl, sx_lvl, jmap)
             else:  # the oral cavity: cosine-weighted about the normal facing the path
                 mu = np.sqrt(1.0 - u4)
-                _direction_from_mu(nrm, mu, 2.0 * np.pi * u5, nd)
+                direction_from_mu_into(nrm, mu, 2.0 * np.pi * u5, nd)
                 new_m = MED_AIR
         # ---- Russian roulette at theta_0 (see ``path_tracer.RenderSettings``)
         if alive and roulette and b + 1 >= rr_depth:
@@ -917,13 +1099,13 @@ def _trace_path(geo, med, tex, o0, d0, seed_path, seed, depth_cap, roulette, rr_
 
 
 @njit(cache=True, _nrt=False, error_model="numpy")
-def _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li, inv_spp,
-                adj, want_grad, jmap, r0, r1, s0, s1, out_rows, g, jac, jac_off, ab, mode, scratch, path_vecs, rs, o, d,
+def _trace_part(geo, med, tex, job, r0, r1, s0, s1, out_rows, g, jac, jac_off, ab, mode, scratch, path_vecs, rs, o, d,
                 counts) -> None:
     """One part of ``_trace_rows``: rows r0..r1, samples s0..s1 of each, counters into ``counts``. Allocates
     nothing (runs without reference counting) and holds the only call of ``_trace_path``, which is inlined
     here: a call would pass every field of every array of the scene's tuples on the stack, per path."""
-    fxy, rot, center, width = cams
+    fxy, rot, center, width = job.fxy, job.rot, job.center, job.width
+    cam_of, pix_of, spp, seed, jitter, want_grad = job.cam_of, job.pix_of, job.spp, job.seed, job.jitter, job.want_grad
     yes, no = mode[0] == 0, mode[0] == 1
     for row in range(r0, r1):
         cam = cam_of[row]
@@ -954,9 +1136,8 @@ def _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
                     gp, img, jj = mode[1], yes, jac
                 else:
                     gp, img, jj = mode[2], no, jac_off
-                nv_, ns_, nc_, cap_, lv_ = _trace_path(geo, med, tex, o, d, path, seed, depth_cap, roulette,
-                                                       rr_depth, lp, li, inv_spp, row, cam, pix, img, gp, out_rows,
-                                                       adj, ab, g, jj, jmap, scratch, path_vecs, rs)
+                nv_, ns_, nc_, cap_, lv_ = _trace_path(geo, med, tex, job, o, d, path, row, cam, pix, img, gp,
+                                                       out_rows, ab, g, jj, scratch, path_vecs, rs)
                 if ps == 0:
                     nv, ns, nc, cap, lv = nv_, ns_, nc_, cap_, lv_
                     if want_grad:
@@ -974,36 +1155,36 @@ def _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp, li,
-                adj, want_grad, jmap, n_j, out_parts, grad_blocks, jac, counters, n_workers):
+def _trace_rows(geo, med, tex, job, n_j, out_parts, grad_blocks, jac, counters, n_workers):
     """Trace every row (traced pixel) x spp in parts traced in parallel: part = (sample half, row block),
     n_halves = out_parts.shape[0] (1 or 2) halves of the samples of each of the row blocks; half h adds
     into out_parts[h]. Each thread takes the next untaken part until none is left (``work_queue``), so a thread
     slowed by other work takes fewer parts; a part's result and where it goes do not depend on which thread
     traced it, so neither do the sums. The halves keep the parts alike where row blocks differ (on the forward
     scene the first half of the rows holds 43 % of the work)."""
-    n_rows = cam_of.shape[0]
-    n_l = lp.shape[0]
-    inv_spp = 1.0 / spp
+    n_rows = job.cam_of.shape[0]
+    n_l = job.lp.shape[0]
+    spp, depth_cap, want_grad, stack_size = job.spp, job.depth_cap, job.want_grad, geo.stack_size
     n_halves = out_parts.shape[0]
     n_blocks = counters.shape[0] // n_halves
     n_parts = counters.shape[0]
     next_part = np.zeros(1, dtype=np.int64)
     for _worker in prange(n_workers):  # one per thread (get_num_threads() here would make this uncacheable)
-        scratch = (np.empty(MAX_CROSSINGS + 1, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
-                   np.empty(MAX_CROSSINGS + 2, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
-                   np.empty(MAX_CROSSINGS + 1, dtype=np.bool_), np.empty(3), np.empty(4, dtype=np.int64),
-                   np.empty(4), np.empty(3), np.empty((n_j, 3)), np.empty((0, 3)), np.empty(0),
-                   np.empty(STACK_SIZE, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
-                   np.empty(HIT_BUFFER), np.empty(WIDTH),
-                   (np.empty((n_l, 3)), np.empty(n_l), np.empty(n_l), np.empty(n_l),
-                    np.empty((n_l, HIT_BUFFER), dtype=np.int64), np.empty((n_l, HIT_BUFFER)),
-                    np.empty(n_l, dtype=np.int64), np.empty((PACKET, 4)), np.empty((STACK_SIZE, 2), dtype=np.int64),
-                    np.empty(WIDTH, dtype=np.int64), np.empty(PACKET, dtype=np.int64), np.empty((PACKET, LANES))))
+        packet = PacketScratch(np.empty((n_l, 3)), np.empty(n_l), np.empty(n_l), np.empty(n_l),
+                               np.empty((n_l, HIT_BUFFER), dtype=np.int64), np.empty((n_l, HIT_BUFFER)),
+                               np.empty(n_l, dtype=np.int64), np.empty((PACKET, 4)),
+                               np.empty((stack_size, 2), dtype=np.int64), np.empty(WIDTH, dtype=np.int64),
+                               np.empty(PACKET, dtype=np.int64), np.empty((PACKET, LANES)))
+        scratch = Scratch(np.empty(MAX_CROSSINGS + 1, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
+                          np.empty(MAX_CROSSINGS + 2, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
+                          np.empty(MAX_CROSSINGS + 1, dtype=np.bool_), np.empty(3), np.empty(4, dtype=np.int64),
+                          np.empty(4), np.empty(3), np.empty((n_j, 3)), np.empty((0, 3)), np.empty(0),
+                          np.empty(stack_size, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
+                          np.empty(HIT_BUFFER), np.empty(WIDTH), packet)
         vecs = np.empty((17, 3))
-        path_vecs = (np.empty((n_j, 3)), (vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5], vecs[6], vecs[7],
-                                          vecs[8], vecs[9], vecs[10], vecs[11], vecs[12], vecs[13], vecs[14],
-                                          vecs[15], vecs[16]))
+        path_vecs = PathVectors(np.empty((n_j, 3)), vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5], vecs[6],
+                                vecs[7], vecs[8], vecs[9], vecs[10], vecs[11], vecs[12], vecs[13], vecs[14], vecs[15],
+                                vecs[16])
         jac_off = np.empty((0, 1, 3, 1))
         # the passes (0 image, 1 image + vertex contributions, 2 replay) as run-time values: literal
         # arguments would compile a copy of _trace_path for each
@@ -1023,9 +1204,8 @@ def _trace_rows(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roule
             s0 = half * spp // n_halves
             s1 = (half + 1) * spp // n_halves
             g = grad_blocks[part] if want_grad else np.empty(0)
-            _trace_part(geo, med, tex, cams, cam_of, pix_of, spp, seed, depth_cap, roulette, rr_depth, jitter, lp,
-                        li, inv_spp, adj, want_grad, jmap, r0, r1, s0, s1, out_parts[half], g, jac, jac_off, ab, mode,
-                        scratch, path_vecs, rs, o, d, counters[part])
+            _trace_part(geo, med, tex, job, r0, r1, s0, s1, out_parts[half], g, jac, jac_off, ab, mode, scratch,
+                        path_vecs, rs, o, d, counters[part])
 
 
 def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, pix_of: np.ndarray, spp: int,
@@ -1034,9 +1214,6 @@ def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, p
     """Trace rows (camera, flat pixel) x spp; (per-row images (n_rows, L, 3), grad or None, per-row
     Jacobian (n_rows, L, 3, n_j) or None, counters (vertices, shadow rays, casts, capped))."""
     geo, med, tex = packed
-    cams = (np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in cameras], dtype=np.float64),
-            np.array([c.R for c in cameras], dtype=np.float64), np.array([c.center for c in cameras], dtype=np.float64),
-            np.array([c.width for c in cameras], dtype=np.int64))
     n_rows, n_l = len(cam_of), len(lp)
     roulette = max_depth is None
     depth_cap = MAX_PATH_VERTICES if roulette else int(max_depth)
@@ -1050,12 +1227,16 @@ def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, p
     jac = np.zeros((n_rows, n_l, 3, n_j)) if jmap is not None else np.zeros((0, n_l, 3, 0))
     counters = np.zeros((n_halves * n_blocks, 4), dtype=np.int64)
     n_threads = get_num_threads()
-    _trace_rows(geo, med, tex, cams, np.asarray(cam_of, dtype=np.int64), np.asarray(pix_of, dtype=np.int64),
-                int(spp), int(seed), depth_cap, roulette, int(rr_depth), bool(jitter),
-                np.ascontiguousarray(lp, dtype=np.float64), np.ascontiguousarray(li, dtype=np.float64),
-                np.zeros((0, 0, 0, 3)) if adj is None else np.ascontiguousarray(adj, dtype=np.float64), want_grad,
-                np.full(1, -1, dtype=np.int64) if jmap is None else jmap, max(n_j, 0), out_parts, grad_blocks, jac,
-                counters, n_threads)
+    fxy = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in cameras], dtype=np.float64)
+    rot = np.array([c.R for c in cameras], dtype=np.float64)
+    center = np.array([c.center for c in cameras], dtype=np.float64)
+    job = Job(fxy, rot, center, np.array([c.width for c in cameras], dtype=np.int64),
+              np.asarray(cam_of, dtype=np.int64), np.asarray(pix_of, dtype=np.int64), int(spp), int(seed),
+              int(depth_cap), bool(roulette), int(rr_depth), bool(jitter), np.ascontiguousarray(lp, dtype=np.float64),
+              np.ascontiguousarray(li, dtype=np.float64), 1.0 / int(spp),
+              np.zeros((0, 0, 0, 3)) if adj is None else np.ascontiguousarray(adj, dtype=np.float64), bool(want_grad),
+              np.full(1, -1, dtype=np.int64) if jmap is None else jmap)
+    _trace_rows(geo, med, tex, job, max(n_j, 0), out_parts, grad_blocks, jac, counters, n_threads)
     out_rows = out_parts[0] if n_halves == 1 else out_parts[0] + out_parts[1]
     grad = grad_blocks.sum(axis=0) if want_grad else None
     if not (np.isfinite(out_rows).all() and (grad is None or np.isfinite(grad).all())

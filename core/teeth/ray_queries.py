@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import UserError
 from .distance_derivatives import ray_triangle_distance
 
 try:  # pragma: no cover - depends on the environment
@@ -27,7 +28,7 @@ class RayCaster:
         if use_embree is None:
             use_embree = _rtcs is not None
         if use_embree and _rtcs is None:
-            raise RuntimeError("embreex is not installed")
+            raise UserError("embreex is not installed")
         self.use_embree = bool(use_embree)
         if self.use_embree:
             self._scene = _rtcs.EmbreeScene()

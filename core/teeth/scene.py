@@ -26,10 +26,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import MissingFileError, UserError
 from .dentin_blend_shapes import DentinBlendShape
 from .fresnel import ETA_ENAMEL, ETA_GUMS
-from .mesh import TriMesh
+from .mesh import TriMesh, check_volume_mesh
 from .sigmoid_blend import DEFAULT_SPREAD_MM
+
+SCENE_FORMAT = "material_structures.teeth.scene/1"
 
 
 def _rgb(x) -> np.ndarray:
@@ -37,7 +40,7 @@ def _rgb(x) -> np.ndarray:
     if a.size == 1:
         a = np.repeat(a, 3)
     if a.shape != (3,):
-        raise ValueError(f"expected an RGB triple, got {x!r}")
+        raise UserError(f"expected an RGB triple, got {x!r}")
     return a
 
 
@@ -55,10 +58,11 @@ class VolumeMaterial:
         self.sigma_t = _rgb(self.sigma_t)
         self.albedo = _rgb(self.albedo)
         self.g1, self.g2, self.beta = float(self.g1), float(self.g2), float(self.beta)
-        if np.any(self.sigma_t <= 0) or np.any((self.albedo < 0) | (self.albedo >= 1)):
-            raise ValueError("need sigma_t > 0 and 0 <= albedo < 1")
+        if not (np.all(self.sigma_t > 0) and np.all(np.isfinite(self.sigma_t))
+                and np.all((self.albedo >= 0) & (self.albedo < 1))):
+            raise UserError("need sigma_t > 0 and 0 <= albedo < 1")
         if not (-1 < self.g1 < 1 and -1 < self.g2 < 1 and 0 <= self.beta <= 1):
-            raise ValueError("need -1 < g1, g2 < 1 and 0 <= beta <= 1")
+            raise UserError("need -1 < g1, g2 < 1 and 0 <= beta <= 1")
 
     def to_dict(self) -> dict:
         return {"sigma_t": self.sigma_t.tolist(), "albedo": self.albedo.tolist(), "g1": self.g1,
@@ -74,7 +78,7 @@ def _texture(a) -> np.ndarray:
     if t.ndim == 1:
         t = _rgb(t).reshape(1, 1, 3)
     if t.ndim != 3 or t.shape[2] != 3:
-        raise ValueError("a_t texture must be (H, W, 3) or an RGB triple")
+        raise UserError("a_t texture must be (H, W, 3) or an RGB triple")
     return t
 
 
@@ -96,7 +100,7 @@ class Tooth:
         self.a_t = _texture(self.a_t)
         self.c = np.asarray(self.c, dtype=np.float64).reshape(3)
         if self.enamel_mesh.corner_uv is None:
-            raise ValueError(f"tooth {self.name!r}: the enamel mesh needs UVs for the a_t texture")
+            raise UserError(f"tooth {self.name!r}: the enamel mesh needs UVs for the a_t texture")
 
     def dentin_vertices(self) -> np.ndarray:
         return self.dentin_shape.vertices(self.c)
@@ -123,7 +127,7 @@ class Gums:
     def __post_init__(self) -> None:
         self.a_t = _texture(self.a_t)
         if self.mesh.corner_uv is None:
-            raise ValueError("the gums mesh needs UVs for the a_t texture")
+            raise UserError("the gums mesh needs UVs for the a_t texture")
 
     def to_dict(self) -> dict:
         return {"mesh": self.mesh.to_dict(), "material": self.material.to_dict(), "a_t": self.a_t.tolist(),
@@ -164,7 +168,7 @@ class TeethScene:
         return copy.deepcopy(self)
 
     def to_dict(self) -> dict:
-        return {"format": "material_structures.teeth.scene/1", "blend_spread_mm": self.blend_spread,
+        return {"format": SCENE_FORMAT, "blend_spread_mm": self.blend_spread,
                 "teeth": [t.to_dict() for t in self.teeth],
                 "gums": None if self.gums is None else self.gums.to_dict(),
                 "cavity": None if self.cavity is None else self.cavity.to_dict()}
@@ -183,7 +187,68 @@ def save_scene(scene: TeethScene, path: str | os.PathLike) -> None:
 
 
 def load_scene(path: str | os.PathLike) -> TeethScene:
+    """The scene of a ``scene.json``; a file that is not one (not JSON, a field missing or of the wrong kind, a
+    mesh that cannot bound a volume) is refused in one line naming the file and the field."""
+    path = os.fspath(path)
     if not os.path.exists(path):
-        raise FileNotFoundError(f"scene file not found: {path}")
-    with open(path) as f:
-        return TeethScene.from_dict(json.load(f))
+        raise MissingFileError(f"scene file not found: {path}", path)
+    if os.path.isdir(path):
+        raise UserError(f"{path}: a folder, not a scene file (scene.json)")
+    try:
+        with open(path, encoding="utf-8") as f:
+            d = json.load(f)
+    except ValueError as exc:  # not JSON, or not text
+        raise UserError(f"{path}: not a JSON file ({exc})") from None
+    return scene_from_dict(d, path)
+
+
+def _part(source: str, where: str, build, d):
+    """``build(d)``, with any complaint about ``d`` said as ``SOURCE: WHERE ...``."""
+    if not isinstance(d, dict):
+        raise UserError(f"{source}: {where} is not a JSON object")
+    try:
+        return build(d)
+    except KeyError as exc:
+        raise UserError(f"{source}: {where} lacks the field {exc.args[0]!r}") from None
+    except UserError as exc:
+        raise UserError(f"{source}: {where}: {exc}") from None
+    except (TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise UserError(f"{source}: {where} holds a field of the wrong kind ({exc})") from None
+
+
+def _finite_tooth(d: dict) -> Tooth:
+    t = Tooth.from_dict(d)
+    t.name, t.eta = str(t.name), float(t.eta)
+    if not (np.isfinite(t.a_t).all() and np.isfinite(t.c).all() and np.isfinite(t.dentin_shape.deltas).all()):
+        raise UserError("holds a_t, c or dentin deltas that are NaN or infinite")
+    if not 1.0 <= t.eta < 4.0:
+        raise UserError(f"eta must be a refractive index in [1, 4), got {t.eta}")
+    return t
+
+
+def scene_from_dict(d, source: str = "scene") -> TeethScene:
+    """``TeethScene.from_dict`` for a scene a user gave (``source`` names it in errors): every field checked,
+    and every mesh that bounds a volume (enamel, dentin, gums) closed, manifold and finite."""
+    if not isinstance(d, dict):
+        raise UserError(f"{source}: expected a JSON object (a teeth scene)")
+    fmt = d.get("format", SCENE_FORMAT)
+    if fmt != SCENE_FORMAT:
+        raise UserError(f"{source}: unknown format {fmt!r}, expected {SCENE_FORMAT!r}")
+    if not isinstance(d.get("teeth"), list):
+        raise UserError(f"{source}: needs a list 'teeth' (each tooth's meshes and materials)")
+    teeth = []
+    for k, t in enumerate(d["teeth"]):
+        tooth = _part(source, f"teeth[{k}]", _finite_tooth, t)
+        check_volume_mesh(tooth.enamel_mesh, f"{source}: teeth[{k}] ({tooth.name}): the enamel mesh")
+        check_volume_mesh(tooth.dentin_shape.base, f"{source}: teeth[{k}] ({tooth.name}): the dentin mesh")
+        teeth.append(tooth)
+    gums = None if d.get("gums") is None else _part(source, "gums", Gums.from_dict, d["gums"])
+    if gums is not None:
+        check_volume_mesh(gums.mesh, f"{source}: the gums mesh")
+    cavity = None if d.get("cavity") is None else _part(source, "cavity", OralCavity.from_dict, d["cavity"])
+    if cavity is not None and not np.isfinite(cavity.mesh.vertices).all():
+        raise UserError(f"{source}: the cavity mesh has vertices that are NaN or infinite")
+    spread = d.get("blend_spread_mm", DEFAULT_SPREAD_MM)
+    if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not np.isfinite(spread) or spread <= 0:
+        raise UserError(f"{source}: blend_spread_mm must be a number > 0, got {spread!r}")
+    return TeethScene(teeth, gums, cavity, float(spread))

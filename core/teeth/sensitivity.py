@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import UserError
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .dentin_shape_gradient import shape_columns, shape_ends
@@ -65,7 +66,7 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     ``capture_spp`` samples, the passes' pooled 1-spp variance / ``capture_spp``. Returns
     ``{"chi2": (K,), "noise_variance": float, "tiles": int}``."""
     if capture.masks is None:
-        raise ValueError("the capture needs masks")
+        raise UserError("the capture needs masks")
     if passes < 2:
         raise ValueError("passes must be >= 2 (the square is estimated from pairs of independent passes)")
     if (noise_variance is None) == (capture_spp is None):

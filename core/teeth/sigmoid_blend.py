@@ -3,22 +3,31 @@
 q > 0 outside the dentin (in enamel), q < 0 inside it. ``l(q) = 1 / (1 + exp(-q / s_l))`` weights the
 enamel parameters, ``1 - l`` the dentin ones. The default spread puts 90 % of the transition within
 +-1 mm of the border ("major influence is 1 mm around the border"): l(1 mm) = 0.95.
+
+``blend_weight`` is the one implementation both tracers use: numpy arrays in the reference tracer, scalars in
+the compiled one (``numba_kernels.numba_callable``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .numba_kernels import numba_callable
+
 DEFAULT_SPREAD_MM = 1.0 / np.log(19.0)
 
 
-def blend_weight(q: np.ndarray, spread: float = DEFAULT_SPREAD_MM) -> np.ndarray:
-    """l(q) of eq. 5.15."""
-    return 0.5 * (1.0 + np.tanh(0.5 * np.asarray(q) / spread))
+@numba_callable
+def blend_weight(q, spread=DEFAULT_SPREAD_MM):
+    """l(q) = 1 / (1 + exp(-q / s)) = (1 + tanh(q / 2s)) / 2 of eq. 5.15, s = ``spread``. Arrays or scalars;
+    callable from numba code."""
+    return 0.5 * (1.0 + np.tanh(0.5 * q / spread))
 
 
-def blend_weight_dq(q: np.ndarray, spread: float = DEFAULT_SPREAD_MM) -> np.ndarray:
-    """dl/dq = e^{q/s} / (s (1 + e^{q/s})^2) = l (1 - l) / s (eq. 5.16)."""
+@numba_callable
+def blend_weight_dq(q, spread=DEFAULT_SPREAD_MM):
+    """dl/dq = e^{q/s} / (s (1 + e^{q/s})^2) = l (1 - l) / s (eq. 5.16). Arrays or scalars; callable from numba
+    code."""
     lw = blend_weight(q, spread)
     return lw * (1.0 - lw) / spread
 

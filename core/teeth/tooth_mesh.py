@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import UserError
 from .dentin_blend_shapes import DentinBlendShape, canonical_modes
 from .mesh import TriMesh
 
@@ -133,9 +134,9 @@ def make_tooth(kind: str = "incisor", resolution: int = 40, enamel_occlusal_mm: 
     sides, thinning to 0.3 mm at the CEJ.
     """
     if kind not in SHAPES:
-        raise ValueError(f"unknown tooth kind {kind!r}; use one of {', '.join(TOOTH_TYPES)}")
+        raise UserError(f"unknown tooth kind {kind!r}; use one of {', '.join(TOOTH_TYPES)}")
     if resolution < 8:
-        raise ValueError("resolution must be >= 8")
+        raise UserError("resolution must be >= 8")
     shape = SHAPES[kind]
     n_v = max(6, int(round(resolution * 0.7)))
     enamel = _sweep(shape, resolution, n_v, 0.0, 0.0, 1.0)

@@ -199,8 +199,12 @@ def use(zip_path: str, data: str, work: str) -> None:
         sums = fabric_map_sums(bpy, mat)
         assert sums != before, f"the {mode} stroke changed no map"
     before_last = before
-    op("fabric_brush_undo")
-    assert fabric_map_sums(bpy, mat) == before_last, "Undo Stroke did not restore the maps"
+    mat_name = mat.name
+    assert bpy.ops.ed.undo() == {"FINISHED"}  # each stroke is one step of Blender's undo
+    mat = bpy.data.materials[mat_name]  # the undo replaced every datablock: look them up again
+    scene = bpy.context.scene
+    fabric = {preset: bpy.data.objects[f"Fabric {preset}"] for preset in fabric}
+    assert fabric_map_sums(bpy, mat) == before_last, "Ctrl+Z did not take the last stroke back"
     op("fabric_brush", stroke=stroke(0.8))  # one more stroke: the saved file keeps it
     expect["fabric_maps"] = {mat.name: fabric_map_sums(bpy, mat)}
     saved = os.path.join(work, "saved_maps")

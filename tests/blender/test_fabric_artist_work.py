@@ -68,9 +68,10 @@ def test_replayed_strokes_and_undo_survive_save_and_reopen(addon_module, tmp_pat
     got = run_fresh(READ_MAPS, blend=str(tmp_path / "painted.blend"))
     np.testing.assert_allclose(np.asarray(got["A"][1]), combed.basis, atol=1e-6)
 
-    # Undo Stroke pressed after the stroke (outside the modal tool): the undo is what gets saved.
+    # Ctrl+Z after a stroke (each stroke is one undo step): the undo is what gets saved.
+    bpy.ops.ed.undo_push(message="Save")
     assert _brush(scene, "RECOLOR", kd=(0.0, 0.9, 0.0), ks=(0.0, 0.9, 0.0)) == {"FINISHED"}
-    assert bpy.ops.material_structures.fabric_brush_undo() == {"FINISHED"}
+    assert bpy.ops.ed.undo() == {"FINISHED"}
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "undone.blend"))
     got = run_fresh(READ_MAPS, blend=str(tmp_path / "undone.blend"))
     np.testing.assert_allclose(np.asarray(got["A"][0]), combed.kd, atol=1e-6)

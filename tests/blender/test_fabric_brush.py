@@ -1,4 +1,5 @@
-"""Brushing in Blender: a replayed stroke changes exactly what core brushing changes; undo restores."""
+"""Brushing in Blender: a replayed stroke changes exactly what core brushing changes; Blender's undo (each stroke
+is one step) restores."""
 
 from __future__ import annotations
 
@@ -38,7 +39,14 @@ def _setup(tmp_path, h=48, w=64, seed=3):
     from material_structures.addon.fabric.brushing import drop_sessions
 
     drop_sessions()
+    bpy.ops.ed.undo_push(message="Set Up")
     return scene, obj, maps
+
+
+def _undo(name="MS Plane"):
+    """Ctrl+Z: the stroke's undo step is taken back; returns the object again (the undo replaced it)."""
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    return bpy.data.objects[name]
 
 
 UVS = [(0.2, 0.3), (0.35, 0.4), (0.5, 0.45), (0.7, 0.4)]
@@ -63,7 +71,7 @@ def test_replayed_comb_stroke_matches_core_and_undo_restores(addon_module, tmp_p
     for key in ("kd", "ks", "sigma"):
         np.testing.assert_array_equal(getattr(after, key), getattr(before, key))
 
-    assert bpy.ops.material_structures.fabric_brush_undo() == {"FINISHED"}
+    obj = _undo()
     np.testing.assert_array_equal(material_maps(obj).basis, before.basis)
 
 
@@ -84,7 +92,7 @@ def test_comb_stroke_refits_the_closures_of_its_texels_and_undo_restores_them(ad
     np.testing.assert_allclose(cm_after.shape[changed], shp, atol=1e-6)
     np.testing.assert_allclose(cm_after.ggx_scale[changed], scl, atol=1e-6)
     np.testing.assert_array_equal(cm_after.weights[~changed], cm_before.weights[~changed])
-    assert bpy.ops.material_structures.fabric_brush_undo() == {"FINISHED"}
+    obj = _undo()
     cm_undone = _closures(obj)
     np.testing.assert_array_equal(cm_undone.weights, cm_before.weights)
     np.testing.assert_array_equal(cm_undone.shape, cm_before.shape)
@@ -109,8 +117,10 @@ def test_world_space_stroke_equals_uv_stroke(addon_module, tmp_path):
     ]  # plane is 2 x 2
     assert bpy.ops.material_structures.fabric_brush(stroke=world, stroke_space="WORLD") == {"FINISHED"}
     via_world = material_maps(obj).basis.copy()
-    bpy.ops.material_structures.fabric_brush_undo()
+    obj = _undo()  # the brush settings were set after the last undo step: the undo took them back too
     np.testing.assert_array_equal(material_maps(obj).basis, before.basis)
+    brush = bpy.context.scene.material_structures.fabric_brush
+    brush.mode, brush.radius, brush.strength = "COMB", 0.05, 1.0
     bpy.ops.material_structures.fabric_brush(**stroke_kwargs(UVS))
     np.testing.assert_allclose(material_maps(obj).basis, via_world, atol=1e-5)
 

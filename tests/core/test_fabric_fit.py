@@ -309,14 +309,14 @@ def test_fit_with_five_percent_noise(tmp_path):
 
 @pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
 def test_fit_resumes_from_tile_checkpoints(tmp_path):
-    maps = synthetic_maps(8, 8, seed=8)
+    maps = synthetic_maps(4, 4, seed=8)  # 4 tiles of 2 x 2 texels: the checkpoints, not the fit, are under test
     wi, wo = light_view_pairs(12, 12)
     save_btf(tmp_path / "btf", render_btf(maps, wi, wo), wi, wo)
-    first, _ = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
+    first, _ = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=2, workers=1, progress=False)
     tiles = sorted(os.listdir(tmp_path / "fit" / ".fit_cache" / "tiles"))
     assert len(tiles) == 4
     os.remove(tmp_path / "fit" / ".fit_cache" / "tiles" / tiles[1])
-    again, stats = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
+    again, stats = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=2, workers=1, progress=False)
     assert stats["tiles_fitted_this_run"] == 1
     for name in ("kd", "ks", "sigma", "basis"):
         assert np.allclose(getattr(first, name), getattr(again, name), atol=1e-6)
@@ -327,12 +327,12 @@ def test_an_image_rewritten_in_place_invalidates_the_cache(tmp_path):
     """The cache is keyed on every file's size and mtime, not the folder: after one image of the BTF is
     rewritten (same name, same size), the next fit recomputes every tile and its result follows the new
     data."""
-    maps = synthetic_maps(8, 8, seed=8)
+    maps = synthetic_maps(4, 4, seed=8)  # 4 tiles of 2 x 2 texels: the cache, not the fit, is under test
     wi, wo = light_view_pairs(12, 12)
     values = render_btf(maps, wi, wo)
     save_btf(tmp_path / "btf", values, wi, wo)
-    fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
-    _, again = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
+    fit_btf(tmp_path / "btf", tmp_path / "fit", tile=2, workers=1, progress=False)
+    _, again = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=2, workers=1, progress=False)
     assert again["tiles_fitted_this_run"] == 0  # unchanged inputs: the cache is used
     images = sorted(f for f in os.listdir(tmp_path / "btf") if f.endswith(".exr"))
     path = tmp_path / "btf" / images[3]
@@ -340,7 +340,7 @@ def test_an_image_rewritten_in_place_invalidates_the_cache(tmp_path):
     write_exr(str(path), values[3] * 0.5)
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))  # same second on coarse clocks
     assert os.stat(path).st_size == st.st_size
-    _, stats = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=4, workers=1, progress=False)
+    _, stats = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=2, workers=1, progress=False)
     assert stats["tiles_fitted_this_run"] == 4
 
 
@@ -359,7 +359,8 @@ def test_cli_fit_eval_score(tmp_path, capsys):
                      "--out", str(tmp_path / f"{d}.npz")]) == 0
     capsys.readouterr()
     assert main(["fabric", "score", str(tmp_path / "gt.npz"), hold]) == 0
-    assert json.loads(capsys.readouterr().out)["psnr_db"] > 60  # ground truth reproduces itself
+    score = json.loads(capsys.readouterr().out)  # ground truth reproduces itself (to the bit: PSNR null)
+    assert score["identical"] or score["psnr_db"] > 60
     assert main(["fabric", "score", str(tmp_path / "fit.npz"), hold]) == 0
     assert json.loads(capsys.readouterr().out)["psnr_db"] >= 30
     assert main(["fabric", "ndf", btf, "--texel", "2", "3", "--resolution", "32",

@@ -1,6 +1,7 @@
 """Bad teeth inputs give a one-line error naming the problem (exit 2 from the CLI) and change nothing:
 malformed or incomplete captures, masks that select nothing, a checkpoint of another fit, a second fit
-into a folder a fit is writing to, an output path that is a file."""
+into a folder a fit is writing to, an output path that is a file, scenes that cannot be rendered (fields
+missing, meshes that are open, not manifold, inside out or not finite), a resume under other settings."""
 
 from __future__ import annotations
 
@@ -177,6 +178,7 @@ def test_render_refuses_to_write_over_its_inputs(capture_dir, tmp_path, capsys):
     (["sensitivity", "C", "--capture-spp", "4", "--block", "0"], "argument --block: must be >= 1, got 0"),
     (["sensitivity", "C", "--capture-spp", "4", "--passes", "1"], "argument --passes: must be >= 2, got 1"),
     (["fit", "C", "--out", "O", "--textured-iterations", "-1"], "argument --textured-iterations: must be >= 0"),
+    (["fit", "C", "--out", "O", "--seed", "-2"], "argument --seed: must be >= 0, got -2"),
 ])
 def test_numeric_flags_are_range_checked_at_the_parser(tmp_path, capsys, argv, said):
     argv = [str(tmp_path / a) if a in ("OUT", "S", "C", "O") else a for a in argv]
@@ -242,3 +244,176 @@ def test_sigterm_stops_a_dask_teeth_fit_with_its_workers_and_it_resumes(capture_
     r = subprocess.run(argv + ["--resume"], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert len(json.loads((out / "loss.json").read_text())["log"]) == n
+
+
+# ---- issue 64: loud failures
+
+def _scene_json(capture_dir, tmp_path, edit) -> str:
+    d = json.loads((capture_dir / "scene.json").read_text())
+    edit(d)
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(d))
+    return str(path)
+
+
+def _drop_face(d):
+    m = d["teeth"][0]["enamel_mesh"]
+    m["faces"].pop()
+    m["corner_uv"].pop()
+
+
+def _third_face_on_an_edge(d):  # a face again, turned over: each of its edges has three triangles
+    m = d["teeth"][0]["enamel_mesh"]
+    m["faces"].append(m["faces"][0][::-1])
+    m["corner_uv"].append(m["corner_uv"][0][::-1])
+
+
+def _drop_a_face_of(mesh):
+    mesh["faces"].pop()
+    if mesh.get("corner_uv") is not None:
+        mesh["corner_uv"].pop()
+
+
+def _inside_out(d):
+    m = d["teeth"][0]["enamel_mesh"]
+    m["faces"] = [f[::-1] for f in m["faces"]]
+    m["corner_uv"] = [c[::-1] for c in m["corner_uv"]]
+
+
+@pytest.mark.parametrize("edit, said", [
+    (lambda d: d.pop("teeth"), "needs a list 'teeth'"),
+    (lambda d: d.update(teeth={"a": 1}), "needs a list 'teeth'"),
+    (lambda d: d["teeth"][0].pop("enamel"), "teeth[0] lacks the field 'enamel'"),
+    (lambda d: d["teeth"][0]["enamel"].update(sigma_t="thick"), "teeth[0] holds a field of the wrong kind"),
+    (lambda d: d["teeth"][0]["enamel"].update(sigma_t=[float("nan")] * 3), "need sigma_t > 0"),
+    (lambda d: d["teeth"][0].update(eta=0.5), "eta must be a refractive index"),
+    (lambda d: d["teeth"][0].update(a_t=[float("inf")] * 3), "NaN or infinite"),
+    (_drop_face, "the enamel mesh is not closed (3 edges belong to one triangle only)"),
+    (_third_face_on_an_edge, "the enamel mesh is not manifold (3 edges are shared by three or more triangles)"),
+    (_inside_out, "the enamel mesh has its faces pointing inwards"),
+    (lambda d: d["teeth"][0]["enamel_mesh"]["vertices"][0].__setitem__(1, float("nan")),
+     "the enamel mesh has 1 vertices that are NaN or infinite"),
+    (lambda d: _drop_a_face_of(d["teeth"][0]["dentin_shape"]["base"]), "the dentin mesh is not closed"),
+    (lambda d: _drop_a_face_of(d["gums"]["mesh"]), "the gums mesh is not closed"),
+    (lambda d: d.update(blend_spread_mm=-1), "blend_spread_mm must be a number > 0"),
+    (lambda d: d.update(format="other/2"), "unknown format"),
+])
+def test_a_scene_that_cannot_be_rendered_is_one_line(capture_dir, tmp_path, capsys, edit, said):
+    """A scene.json without "teeth" was KeyError: 'teeth' (render and fit); a mesh with a hole, an edge of three
+    triangles, faces turned inwards or NaN vertices was rendered without a word."""
+    from material_structures.core.errors import UserError
+
+    d = json.loads((capture_dir / "scene.json").read_text())
+    if "gums" in said and d.get("gums") is None:
+        pytest.skip("the capture has no gums")
+    path = _scene_json(capture_dir, tmp_path, edit)
+    with pytest.raises(UserError, match="scene.json: "):
+        load_scene(path)
+    before, cap_before = _digest(tmp_path), _digest(capture_dir)
+    assert main(["teeth", "render", path, str(capture_dir), "--out", str(tmp_path / "r"), "--spp", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {path}: ") and said in err and err.count("\n") == 1, err
+    assert main(["teeth", "fit", str(capture_dir), "--scene", path, "--out", str(tmp_path / "f"), "--iterations",
+                 "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {path}: ") and said in err and err.count("\n") == 1, err
+    assert _digest(tmp_path) == before and _digest(capture_dir) == cap_before  # nothing written
+
+
+def test_a_capture_whose_scene_json_lacks_teeth_is_one_line(capture_dir, tmp_path, capsys):
+    cap = _copy(capture_dir, tmp_path)
+    d = json.loads((cap / "scene.json").read_text())
+    d.pop("teeth")
+    (cap / "scene.json").write_text(json.dumps(d))
+    before = _digest(cap)
+    assert main(["teeth", "fit", str(cap), "--out", str(tmp_path / "f"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "scene.json: needs a list 'teeth'" in err and err.count("\n") == 1, err
+    assert _digest(cap) == before and not (tmp_path / "f").exists()
+
+
+def test_a_resumed_fit_keeps_its_settings_and_refuses_other_flags(capture_dir, tmp_path, capsys):
+    """--resume goes on with the settings the fit started with (settings_from_dict of its checkpoint): a flag
+    that differs is one line naming both values and changes nothing; --iterations may lengthen the fit; a
+    checkpoint of the textured phase under settings without one was "'textured' is not in list"."""
+    out = tmp_path / "fit"
+    argv = ["teeth", "fit", str(capture_dir), "--out", str(out), "--init", "scene", "--no-progress"]
+    assert main(argv + ["--iterations", "1", "--textured-iterations", "1", "--seed", "3", "--held-out-lights",
+                        "0", "--free", "*.albedo"]) == 0
+    saved = json.loads((out / "checkpoint.json").read_text())
+    assert saved["settings"]["seed"] == 3 and saved["phase"] == "textured"
+    capsys.readouterr()
+    before = _digest(out)
+    for flags, said in ((["--seed", "4"], "--seed 4 (it started with 3)"),
+                        (["--free", "*.g1"], "--free *.g1 (it started with *.albedo)"),
+                        (["--held-out-lights", "2", "--seed", "4"],
+                         "--held-out-lights 2 (it started with 0); --seed 4 (it started with 3)"),
+                        (["--textured-iterations", "0"], "stopped in the 'textured' phase")):
+        assert main(argv + ["--resume", *flags]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
+        assert _digest(out) == before
+    # no flags: its own settings (seed 3, one light-free fit of the albedo), two more textured iterations
+    assert main(argv + ["--resume", "--textured-iterations", "3"]) == 0
+    ran = json.loads((out / "loss.json").read_text())
+    assert ran["settings"]["seed"] == 3 and ran["settings"]["free"] == ["*.albedo"]
+    assert ran["settings"]["textured_iterations"] == 3 and len(ran["log"]) == 4
+    # a damaged settings record in the checkpoint is one line naming the file
+    ckpt = json.loads((out / "checkpoint.json").read_text())
+    ckpt["settings"]["spp"] = "many"
+    (out / "checkpoint.json").write_text(json.dumps(ckpt))
+    assert main(argv + ["--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "checkpoint.json: fit settings of the wrong kind" in err and err.count("\n") == 1, err
+
+
+def test_the_checkpoint_identity_holds_spp_lr_and_the_optimiser(capture_dir, tmp_path):
+    from dataclasses import replace
+
+    scene = load_scene(str(capture_dir / "scene.json"))
+    cap = Capture.load(capture_dir)
+    out = str(tmp_path / "fit")
+    s = FitSettings(iterations=1, spp=1, image_spp=1, lights_per_iteration=1, max_depth=3, start_trials=0)
+    fit(scene, cap, s, out_dir=out)
+    ckpt = os.path.join(out, "checkpoint.json")
+    before = open(ckpt).read()
+    for change, said in (({"spp": 2}, "the samples per pixel"), ({"image_spp": 2}, "the image samples"),
+                         ({"lr": 0.5}, "the learning rate"), ({"optimiser": "adam"}, "the optimiser")):
+        with pytest.raises(ValueError, match=f"another fit .*{said}"):
+            fit(scene, cap, replace(s, iterations=2, **change), out_dir=out, resume=True)
+    assert open(ckpt).read() == before
+    # a checkpoint of the version before, whose identity had none of them, still resumes
+    d = json.loads(before)
+    for k in ("spp", "image_spp", "lr", "optimiser"):
+        d["identity"].pop(k)
+    d.pop("settings")
+    with open(ckpt, "w") as f:
+        json.dump(d, f)
+    _, log = fit(scene, cap, replace(s, iterations=2), out_dir=out, resume=True)
+    assert len(log) == 2
+
+
+def test_a_free_pattern_that_names_no_parameter_is_refused(capture_dir, tmp_path, capsys):
+    """--free with a typo fitted fewer parameters than asked, without a word."""
+    assert main(["teeth", "fit", str(capture_dir), "--out", str(tmp_path / "f"), "--free", "*.albedo,*.albdo",
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --free *.albdo: no parameter of ") and err.count("\n") == 1, err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("content, said", [
+    (b"\xff\xfe\x00garbage", "is not a fit checkpoint"),
+    (json.dumps({"phase": "homogeneous", "iteration": "five", "scene": {}, "y": [], "adam_m": None, "adam_v": None,
+                 "adam_n": 0, "best_loss": 1.0, "best_scene": {}, "log": "none", "identity": {}}).encode(),
+     "a damaged fit checkpoint (fields of the wrong kind: ['iteration', 'log'])"),
+])
+def test_a_damaged_checkpoint_is_one_line(capture_dir, tmp_path, capsys, content, said):
+    out = tmp_path / "fit"
+    out.mkdir()
+    (out / "checkpoint.json").write_bytes(content)
+    before = _digest(out)
+    assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--resume", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "checkpoint.json" in err and said in err and err.count("\n") == 1, err
+    assert _digest(out) == before

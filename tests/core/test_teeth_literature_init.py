@@ -4,6 +4,8 @@ different point per colour channel)."""
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -101,7 +103,10 @@ def _capture_of_table_points(picks, scale: float = 1.0):
     return pts, float(gs[1]), start, cap
 
 
-@pytest.mark.parametrize("picks", [((1, 1), (0, 0), (1, 0)), ((0, 0), (1, 1), (1, 0))])
+# the second assignment of the points to the channels is nightly (`make test-all`; 154 s of 3700 on a loaded
+# 2-core machine); `make test` runs the first, the same search and checks
+@pytest.mark.parametrize("picks", [((1, 1), (0, 0), (1, 0)),
+                                   pytest.param(((0, 0), (1, 1), (1, 0)), marks=pytest.mark.slow)])
 def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
     """Points of the table whose images differ (sigma_t 0.3 or 1.39 / mm, albedo 0.5 or 0.978). Denser or
     brighter neighbours (sigma_t 6.46 vs 30 / mm at albedo 0.5, albedo 0.978 vs 0.999 at sigma_t 0.3) give
@@ -139,7 +144,8 @@ def test_scale_invariant_search_ignores_the_exposure():
     and the absolute search a different one."""
     picks = ((1, 1), (2, 1), (1, 0))
     _, _, start, cap = _capture_of_table_points(picks)
-    _, _, _, bright = _capture_of_table_points(picks, scale=3.0)
+    bright = copy.copy(cap)  # the same render 3x brighter (rendering it again at scale=3.0 gives these values)
+    bright.images = cap.images * np.float32(3.0)
     kw = dict(pixel_stride=1, n_lights=12, spp=1, tile=4)
     a = literature_start(start, cap, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
     b = literature_start(start, bright, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
