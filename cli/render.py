@@ -44,13 +44,31 @@ def save_image(path: str, rgba) -> None:
 
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     if path.lower().endswith(".png"):
-        from PIL import Image
-
         from ..core.imaging import to_display_uint8
 
-        Image.fromarray(to_display_uint8(rgba)).save(path)
+        pixels = to_display_uint8(rgba)
+        try:
+            from PIL import Image
+        except ImportError:  # a desktop Blender has no Pillow, but its bundled OpenImageIO writes PNG
+            _write_png_oiio(path, pixels)
+        else:
+            Image.fromarray(pixels).save(path)
     else:
         write_exr(path, rgba)
+
+
+def _write_png_oiio(path: str, pixels) -> None:
+    import OpenImageIO as oiio
+
+    h, w, c = pixels.shape
+    out = oiio.ImageOutput.create(path)
+    if out is None or not out.open(path, oiio.ImageSpec(w, h, c, "uint8")):
+        raise OSError(f"cannot write {path}: {oiio.geterror()}")
+    try:
+        if not out.write_image(pixels):
+            raise OSError(f"cannot write {path}: {out.geterror()}")
+    finally:
+        out.close()
 
 
 def run(args: argparse.Namespace) -> int:

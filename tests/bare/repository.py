@@ -39,6 +39,8 @@ site = os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib",
                     "python%d.%d" % sys.version_info[:2], "site-packages")
 if site not in sys.path:
     sys.path.append(site)  # a desktop Blender has its bundled modules (OpenImageIO, ...) on the path
+if os.path.isfile(os.path.join({user!r}, "config", "userpref.blend")):
+    bpy.ops.wm.read_userpref()  # a desktop Blender starts with the saved preferences (the bpy module does not)
 prefs = bpy.context.preferences
 prefs.system.use_online_access = True
 repos = prefs.extensions.repos
@@ -86,8 +88,9 @@ assert bpy.ops.extensions.package_upgrade_all() == {{"FINISHED"}}
 import tomllib
 with open(os.path.join(repo.directory, {ext!r}, "blender_manifest.toml"), "rb") as f:
     RESULT["version"] = tomllib.load(f)["version"]
-import addon_utils
 RESULT["enabled"] = any(a.module == "bl_ext.{module}.{ext}" for a in prefs.addons)
+import importlib
+RESULT["loaded_version"] = importlib.import_module("bl_ext.{module}.{ext}").__version__
 bpy.ops.wm.open_mainfile(filepath={blend!r})
 from bl_ext.{module}.{ext}.render.output import render_to_array
 img = render_to_array(bpy.context.scene)
@@ -100,7 +103,9 @@ def _run(code: str) -> dict:
                           capture_output=True, text=True, timeout=1800)
     for line in proc.stdout.splitlines():
         if line.startswith(MARK):
-            return json.loads(line[len(MARK):])
+            result = json.loads(line[len(MARK):])
+            result["log"] = proc.stderr[-4000:]
+            return result
     raise SystemExit(f"Blender step failed (rc {proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
 
 
@@ -143,9 +148,13 @@ def main(argv: list[str]) -> int:
               f"(before {first['mean']:.4f})")
         assert second["version"] != first["version"], "the update check did not upgrade"
         assert second["enabled"], "the upgraded extension is not enabled"
+        assert second["loaded_version"] == second["version"], "Blender runs another version than it installed"
         assert abs(second["mean"] - first["mean"]) <= 1e-6 + 1e-3 * first["mean"], "the saved file renders differently"
     except AssertionError as exc:
         print(f"FAILED: {exc}", file=sys.stderr)
+        for step in ("first", "second"):
+            if step in locals():
+                print(f"--- {step} step's stderr ---\n{locals()[step]['log']}", file=sys.stderr)
         return 1
     finally:
         server.shutdown()
