@@ -39,6 +39,9 @@ DEFAULTS = {
 }
 GROUP_NAMES = tuple(DEFAULTS)
 SURFACE_GROUPS = ("Enamel", "Gingiva")
+BLENDED_GROUPS = ("Enamel", "Dentin")  # blended by a tooth's Blend Volume (blend_volume.py)
+# 1: the material only attenuates (Volume Absorption of sigma_t); its tooth's Blend Volume scatters
+BLEND_ROW = ("Blend Volume", "NodeSocketFloat", 0.0, 0.0, 1.0)
 
 
 def _group_inputs(kind: str) -> list[tuple]:
@@ -55,6 +58,8 @@ def _group_inputs(kind: str) -> list[tuple]:
         rows += [("At", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None),
                  ("Eta", "NodeSocketFloat", d["eta"], 1.0, 3.0)]
     rows.append(("mm per Unit", "NodeSocketFloat", 1000.0, 1e-6, 1e9))
+    if kind in BLENDED_GROUPS:
+        rows.append(BLEND_ROW)
     return rows
 
 
@@ -74,6 +79,22 @@ def _volume_subgraph(group, gin):
     ss.operation = "MULTIPLY"
     links.new(gin.outputs["Albedo"], ss.inputs[0])
     links.new(st.outputs[0], ss.inputs[1])
+    if BLEND_ROW[0] in gin.outputs:  # with its tooth's Blend Volume (which holds the whole medium): none
+        keep = nodes.new("ShaderNodeMath")
+        keep.operation = "SUBTRACT"
+        keep.inputs[0].default_value = 1.0
+        links.new(gin.outputs[BLEND_ROW[0]], keep.inputs[1])
+        for i, name in enumerate(("st", "ss")):
+            own = nodes.new("ShaderNodeVectorMath")
+            own.operation = "SCALE"
+            links.new((st if name == "st" else ss).outputs[0], own.inputs[0])
+            links.new(keep.outputs[0], own.inputs["Scale"])
+            own.location = (-120, -500 - 150 * i)
+            if name == "st":
+                st = own
+            else:
+                ss = own
+        keep.location = (-300, -500)
     sa = nodes.new("ShaderNodeVectorMath")
     sa.operation = "SUBTRACT"
     links.new(st.outputs[0], sa.inputs[0])
@@ -106,6 +127,21 @@ def _volume_subgraph(group, gin):
     lobes[0].location, lobes[1].location, ab.location = (450, -200), (450, -400), (450, -600)
     mix.location, add.location = (650, -300), (850, -300)
     return add.outputs[0]
+
+
+def ensure_blend_input(group) -> None:
+    """Give an Enamel/Dentin group from an older file the ``Blend Volume`` input (its volume rebuilt)."""
+    kind = group.get(MARKER)
+    if kind not in BLENDED_GROUPS or any(s.name == BLEND_ROW[0] for s in group.interface.items_tree
+                                         if s.item_type == "SOCKET" and s.in_out == "INPUT"):
+        return
+    add_group_input(group, *BLEND_ROW)
+    keep = {"GROUP_INPUT", "GROUP_OUTPUT", "SCRIPT", "ATTRIBUTE"}
+    for node in [n for n in group.nodes if n.type not in keep]:
+        group.nodes.remove(node)
+    gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
+    gout = next(n for n in group.nodes if n.type == "GROUP_OUTPUT")
+    group.links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
 
 
 def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
