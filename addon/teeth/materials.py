@@ -129,6 +129,60 @@ def _volume_subgraph(group, gin):
     return add.outputs[0]
 
 
+OSL_SWITCH = "Shader Path"  # Mix Shader: the OSL boundary where the script runs, else the native one
+
+
+def _native_boundary(group, gin, inner_attr):
+    """The boundary of ms_enamel_boundary.osl from Cycles' own nodes, for Cycles without Open Shading Language
+    (its SVM drops script nodes): F(|cos|, Eta) of the view direction (the same F from either side, no total
+    internal reflection) mixing a sharp Glossy (weight F) and a Transparent of colour At (weight 1 - F); the
+    ms_inner faces fully transparent."""
+    nodes, links = group.nodes, group.links
+
+    def op(name, a, b=None):
+        n = nodes.new("ShaderNodeMath")
+        n.operation = name
+        for i, v in enumerate((a, b)):
+            if v is None:
+                continue
+            if isinstance(v, float):
+                n.inputs[i].default_value = v
+            else:
+                links.new(v, n.inputs[i])
+        return n.outputs[0]
+
+    geo = nodes.new("ShaderNodeNewGeometry")
+    dot = nodes.new("ShaderNodeVectorMath")
+    dot.operation = "DOT_PRODUCT"
+    links.new(geo.outputs["Incoming"], dot.inputs[0])
+    links.new(geo.outputs["Normal"], dot.inputs[1])
+    c = op("MINIMUM", op("ABSOLUTE", dot.outputs["Value"]), 1.0)
+    eta = gin.outputs["Eta"]
+    s2 = op("DIVIDE", op("SUBTRACT", 1.0, op("MULTIPLY", c, c)), op("MULTIPLY", eta, eta))
+    ct = op("SQRT", op("MAXIMUM", op("SUBTRACT", 1.0, s2), 0.0))
+    eta_ct, eta_c = op("MULTIPLY", eta, ct), op("MULTIPLY", eta, c)
+    rs = op("DIVIDE", op("SUBTRACT", c, eta_ct), op("ADD", c, eta_ct))
+    rp = op("DIVIDE", op("SUBTRACT", eta_c, ct), op("ADD", eta_c, ct))
+    f = op("MULTIPLY", op("ADD", op("MULTIPLY", rs, rs), op("MULTIPLY", rp, rp)), 0.5)
+    glossy = nodes.new("ShaderNodeBsdfGlossy")
+    glossy.inputs["Roughness"].default_value = 0.0
+    glossy.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    through = nodes.new("ShaderNodeBsdfTransparent")
+    links.new(gin.outputs["At"], through.inputs["Color"])
+    outer = nodes.new("ShaderNodeMixShader")  # (1 - F) At transparent + F mirror
+    links.new(f, outer.inputs["Fac"])
+    links.new(through.outputs[0], outer.inputs[1])
+    links.new(glossy.outputs[0], outer.inputs[2])
+    inner = nodes.new("ShaderNodeBsdfTransparent")
+    pick = nodes.new("ShaderNodeMixShader")
+    links.new(op("GREATER_THAN", inner_attr.outputs["Fac"], 0.5), pick.inputs["Fac"])
+    links.new(outer.outputs[0], pick.inputs[1])
+    links.new(inner.outputs[0], pick.inputs[2])
+    for i, n in enumerate([geo, dot, glossy, through, outer, inner, pick]):
+        n.location = (-100 + 150 * i, 650)
+    return pick.outputs[0]
+
+
 def ensure_blend_input(group) -> None:
     """Give an Enamel/Dentin group from an older file the ``Blend Volume`` input (its volume rebuilt)."""
     kind = group.get(MARKER)
@@ -171,8 +225,16 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
         links.new(gin.outputs["Eta"], script.inputs["Eta"])
         links.new(gin.outputs["At"], script.inputs["At"])
         links.new(attr.outputs["Fac"], script.inputs["Inner"])
-        links.new(script.outputs["BSDF"], gout.inputs["Surface"])
-        script.location, attr.location = (200, 200), (-300, 250)
+        native = _native_boundary(group, gin, attr)
+        switch = nodes.new("ShaderNodeMixShader")  # Fac: the script's OSLActive, 0 where no script runs
+        switch.name = switch.label = OSL_SWITCH
+        switch.inputs["Fac"].default_value = 0.0
+        if "OSLActive" in script.outputs:
+            links.new(script.outputs["OSLActive"], switch.inputs["Fac"])
+        links.new(native, switch.inputs[1])
+        links.new(script.outputs["BSDF"], switch.inputs[2])
+        links.new(switch.outputs[0], gout.inputs["Surface"])
+        script.location, attr.location, switch.location = (200, 200), (-300, 250), (900, 200)
     links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
     return group
 

@@ -23,8 +23,8 @@ C_MIN, C_MAX = RANGES["c"]
 ROLE_ITEMS = [("NONE", "None", ""), ("ENAMEL", "Enamel", "Enamel shell of a tooth"),
               ("DENTIN", "Dentin", "Dentin core of a tooth"), ("GUMS", "Gums", "Gingiva"),
               ("CAVITY", "Oral Cavity", "Stand-in for the oral cavity behind the teeth"),
-              ("BLEND", "Blend Volume", "The enamel/dentin blend of a tooth (eq. 5.15): the grids and scattering "
-               "of its blended medium")]
+              ("BLEND", "Blend Volume", "The gradual change from enamel to dentin inside a tooth: the volume that "
+               "renders it")]
 
 
 def owner(obj):

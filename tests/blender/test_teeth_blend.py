@@ -115,3 +115,58 @@ def test_blend_at_a_narrow_spread_renders_the_sharp_model(addon_module):
         V.configure_teeth_cycles(scene, 64, 0, 64)
         means.append(render_to_array(scene)[:, :, :3].mean(axis=(0, 1)))
     assert means[1] == pytest.approx(means[0], rel=0.05)
+
+
+@pytest.mark.parametrize("osl", [False, True])
+def test_enamel_boundary_renders_with_and_without_osl(addon_module, osl):
+    """The Enamel group's surface under Cycles with Open Shading Language off (Blender's default: the script node
+    is dropped and the group's native boundary runs) and on (the script): a tilted boundary plane seen
+    orthographically, the straight-through ray on a red emitter (pixel R = a_t (1 - F)), the mirror ray on a
+    green one (pixel G = F), eq. 5.1-5.2 with eta 1.631; 16 px x 512 spp, tolerances as the script's own test."""
+    import math
+
+    from material_structures import render as R
+    from material_structures.addon.teeth.materials import ensure_group
+    from material_structures.core.teeth.fresnel import fresnel_dielectric
+
+    from .test_teeth_shader import _emitter
+
+    theta_deg, a_t = 60.0, 0.8
+    scene = R.reset_scene()
+    R.configure_cycles(scene, resolution=(4, 4), samples=512, seed=3, osl=osl)
+    R.dark_world(scene)
+    group = ensure_group("Enamel", scene)
+    mat = R.new_material("Boundary")
+    node = mat.node_tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.inputs["At"].default_value = (a_t, a_t, a_t, 1.0)
+    mat.node_tree.links.new(node.outputs["Surface"], R.scene.material_output(mat).inputs["Surface"])
+    plane = R.add_textured_plane(scene, 1.0, mat, "Boundary")
+    th = math.radians(theta_deg)
+    plane.rotation_euler = (th, 0.0, 0.0)
+    r = np.array([0.0, -math.sin(2 * th), math.cos(2 * th)])
+    _emitter(scene, "Through", (0.0, 0.0, -2.0), (0, 0, 1), (1.0, 0.0, 0.0))
+    _emitter(scene, "Mirror", tuple(2.0 * r), tuple(-r), (0.0, 1.0, 0.0))
+    R.add_orthographic_camera(scene, 0.2)
+    rgb = R.render_to_array(scene)[:, :, :3].reshape(-1, 3).mean(axis=0)
+    F = float(fresnel_dielectric(math.cos(th), 1.631))
+    assert rgb[0] == pytest.approx(a_t * (1.0 - F), rel=0.02)
+    assert rgb[1] == pytest.approx(F, rel=0.06, abs=0.004)
+    assert rgb[2] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_making_teeth_leaves_the_render_engine_alone(addon_module, tmp_path):
+    """Add Tooth, From Mesh and Import Teeth Scene in an EEVEE scene (and in a Cycles scene with OSL off) leave
+    the render engine and the shading system as the artist set them."""
+    _, path = _scene_file(tmp_path, 0.34)
+    for engine in ("BLENDER_EEVEE_NEXT" if bpy.app.version < (5, 0, 0) else "BLENDER_EEVEE", "CYCLES"):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        scene = bpy.context.scene
+        scene.render.engine = engine
+        scene.cycles.shading_system = False
+        assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="MOLAR", resolution=12) \
+            == {"FINISHED"}
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.004, location=(0.02, 0, 0))
+        assert bpy.ops.material_structures.teeth_add_tooth(source="MESH") == {"FINISHED"}
+        assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+        assert (scene.render.engine, scene.cycles.shading_system) == (engine, False)
