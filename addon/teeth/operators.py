@@ -38,7 +38,7 @@ def _mm_per_unit(scene) -> float:
 
 def show_fit_check(fs, out_dir: str) -> None:
     """The fit's held-out check (fit_report.json, check.png) into the panel: its error as text, the image
-    as the Image datablock ``CHECK_IMAGE_NAME`` (reloaded, not packed: the file stays the fit's)."""
+    as the Image datablock ``CHECK_IMAGE_NAME``, packed into the .blend (a new fit's check replaces it)."""
     import json
 
     fs.check_error, fs.check_image = "", ""
@@ -53,13 +53,13 @@ def show_fit_check(fs, out_dir: str) -> None:
     png = os.path.join(out_dir, "check.png")
     if os.path.isfile(png):
         fs.check_image = png
-        img = bpy.data.images.get(CHECK_IMAGE_NAME)
-        if img is None:
-            img = bpy.data.images.load(png)
-            img.name = CHECK_IMAGE_NAME
-        else:
-            img.filepath = png
-            img.reload()
+        old = bpy.data.images.get(CHECK_IMAGE_NAME)
+        if old is not None:
+            bpy.data.images.remove(old)
+        img = bpy.data.images.load(png)
+        img.name = CHECK_IMAGE_NAME
+        img.use_fake_user = True  # no material uses it: without a user it would not be saved at all
+        img.pack()  # kept in the .blend: the picture reopens with the file, wherever the fit folder went
         img.preview_ensure()
 
 
@@ -194,6 +194,15 @@ def apply_fit_file(context, path: str) -> tuple[list[str], list[str]]:
     return [f"{n} -> {targets[n].name}" for n in done], names
 
 
+def _read_error(path: str, exc: Exception, verb: str = "cannot read") -> str:
+    """One line for a scene file that could not be used: the core's own message (it names the file and the
+    field) as it is, else ``verb path: what``; a bare missing key says the file is not a teeth scene."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    if isinstance(exc, KeyError):
+        return f"{verb} {path}: not a teeth scene file (scene.json / scene_fit.json): it has no {text}"
+    return text if path in text else f"{verb} {path}: {text}"
+
+
 class MS_OT_teeth_read_capture_teeth(bpy.types.Operator):
     """Read the capture's teeth (its scene.json) to choose the tooth of this scene each one's fit is applied to
     (teeth of the same name are chosen for you)"""
@@ -232,7 +241,7 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
         try:
             done, names = apply_fit_file(context, self.filepath)
         except (ValueError, KeyError, OSError) as exc:
-            self.report({"ERROR"}, f"cannot apply {self.filepath}: {exc}")
+            self.report({"ERROR"}, _read_error(self.filepath, exc, "cannot apply"))
             return {"CANCELLED"}
         if not done:  # nothing was changed
             self.report({"ERROR"}, no_mapping_message(names))
@@ -394,7 +403,7 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
         try:
             ts = load_scene(self.filepath)
         except (OSError, ValueError, KeyError) as exc:
-            self.report({"ERROR"}, f"cannot read {self.filepath}: {exc}")
+            self.report({"ERROR"}, _read_error(self.filepath, exc))
             return {"CANCELLED"}
         build_teeth_scene(ts, context.collection or context.scene.collection, _mm_per_unit(context.scene),
                           smooth=True)

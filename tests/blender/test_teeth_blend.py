@@ -170,3 +170,56 @@ def test_making_teeth_leaves_the_render_engine_alone(addon_module, tmp_path):
         assert bpy.ops.material_structures.teeth_add_tooth(source="MESH") == {"FINISHED"}
         assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
         assert (scene.render.engine, scene.cycles.shading_system) == (engine, False)
+
+
+@pytest.mark.parametrize("content", ['{"lights": [], "cameras": []}', '{"format": "something/1", "teeth": []}'])
+def test_import_teeth_scene_of_another_json_says_so_in_one_line(addon_module, tmp_path, content):
+    path = os.path.join(str(tmp_path), "capture.json")
+    with open(path, "w") as f:
+        f.write(content)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.material_structures.teeth_import_scene(filepath=path)
+    msg = str(err.value).strip()
+    assert "\n" not in msg and msg.count(path) == 1, msg
+    assert "teeth" in msg or "format" in msg, msg
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.material_structures.teeth_apply_fit_file(filepath=path)
+    msg = str(err.value).strip()
+    assert "\n" not in msg and msg.count(path) == 1, msg
+
+
+def test_fit_check_image_is_saved_in_the_blend(addon_module, tmp_path):
+    """The fit's check picture (check.png in the fit folder) is packed into the .blend: after saving, deleting
+    the fit folder's picture and reopening in a fresh process, the image is there with its pixels."""
+    import json
+
+    from material_structures.addon.teeth.operators import show_fit_check
+    from material_structures.addon.teeth.properties import CHECK_IMAGE_NAME
+
+    from .fresh import run_fresh
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    out = str(tmp_path / "fit")
+    os.makedirs(out)
+    with open(os.path.join(out, "fit_report.json"), "w") as f:
+        json.dump({"held_out": {"lights": [3], "rms_relative": 0.1, "rms_relative_tiles": 0.05}}, f)
+    img = bpy.data.images.new("check", 12, 4)
+    img.pixels.foreach_set(np.tile([0.25, 0.5, 0.75, 1.0], 48).astype(np.float32))
+    img.filepath_raw = os.path.join(out, "check.png")
+    img.file_format = "PNG"
+    img.save()
+    bpy.data.images.remove(img)
+    fs = bpy.context.scene.ms_teeth_fit
+    show_fit_check(fs, out)
+    blend = str(tmp_path / "fitted.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    os.remove(os.path.join(out, "check.png"))
+    r = run_fresh(f"""
+img = bpy.data.images.get({CHECK_IMAGE_NAME!r})
+RESULT = None if img is None else [img.packed_file is not None, list(img.size), list(img.pixels[:4]),
+                                   bpy.context.scene.ms_teeth_fit.check_error]
+""", blend=blend)
+    assert r is not None and r[0] and r[1] == [12, 4], r
+    assert r[2] == pytest.approx([0.25, 0.5, 0.75, 1.0], abs=0.01)  # 8-bit sRGB PNG round trip
+    assert r[3].startswith("Held-out lights: 10.0%")
