@@ -72,9 +72,14 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
         if fs.check_error:
             box.label(text=fs.check_error, icon="CHECKMARK")
         img = bpy.data.images.get(CHECK_IMAGE_NAME) if fs.check_image else None
-        if img is not None:  # packed in the .blend; layout.icon() makes its preview after a reopen too
+        if img is not None and img.preview is None:  # packed in the .blend; its preview is made again on reopen
+            try:
+                img.preview_ensure()
+            except (RuntimeError, AttributeError):
+                pass
+        if img is not None and img.preview is not None:
             box.label(text="Capture | Fit | Difference x4")
-            box.template_icon(icon_value=layout.icon(img), scale=10.0)
+            box.template_icon(icon_value=img.preview.icon_id, scale=10.0)
 
 
 CLASSES: list[type] = [VIEW3D_PT_material_structures_teeth]

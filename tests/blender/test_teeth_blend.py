@@ -223,3 +223,22 @@ RESULT = None if img is None else [img.packed_file is not None, list(img.size), 
     assert r is not None and r[0] and r[1] == [12, 4], r
     assert r[2] == pytest.approx([0.25, 0.5, 0.75, 1.0], abs=0.01)  # 8-bit sRGB PNG round trip
     assert r[3].startswith("Held-out lights: 10.0%")
+
+
+def test_fit_progress_moves_during_the_start_trials(addon_module, tmp_path):
+    """The panel's bar (FitJob.progress) counts the start trials' iterations, reported as the CLI's "init"
+    events, before the fit's own: it was 0 % until the first fit iteration."""
+    from material_structures.addon.teeth.fit_job import FitJob
+
+    (tmp_path / "capture.json").write_text("{}")
+    job = FitJob(str(tmp_path), str(tmp_path / "fit"), iterations=100)
+    job.on_event({"progress": "init", "message": "trying 3 starts, 20 iterations each"})
+    assert job.progress == 0.0
+    job.on_event({"progress": "init", "message": "trying 3 starts: 30 of 60 iterations"})
+    assert job.progress == pytest.approx(30 / 160)
+    job.on_event({"progress": "init", "message": "trying 3 starts: 50 of 50 iterations"})  # one start dropped
+    assert job.progress == pytest.approx(50 / 150)
+    job.on_event({"progress": "fit", "iteration": 20, "iterations": 100, "loss": 1.0})
+    assert job.progress == pytest.approx(70 / 150)
+    job.on_event({"progress": "fit", "iteration": 100, "iterations": 100, "loss": 1.0})
+    assert job.progress == pytest.approx(1.0)
