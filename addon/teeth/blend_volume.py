@@ -40,7 +40,7 @@ import bpy
 from ...core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
 from ...render import material_output, new_material
 from ..common import add_group_input
-from .materials import INNER_ATTRIBUTE, MARKER, group_node
+from .materials import INNER_ATTRIBUTE, MARKER, describe_teeth_sockets, group_node
 
 BLEND_INPUT = "Blend Volume"  # Enamel/Dentin group input: 1 = only attenuate, the Blend Volume scatters
 BLEND_GROUP = "Tooth Blend"
@@ -141,6 +141,7 @@ def field_group(name: str, enamel, dentin, material) -> bpy.types.GeometryNodeTr
     # the grids' band follows the material's spread
     _add_driver(group, 'nodes["Spread"].outputs[0].default_value', -1, material,
                 f'node_tree.nodes["{BLEND_GROUP}"].inputs["{SPREAD}"].default_value')
+    describe_teeth_sockets(group)
     return group
 
 
@@ -242,6 +243,7 @@ def ensure_blend_group() -> bpy.types.ShaderNodeTree:
     links.new(add.outputs[0], gout.inputs["Volume"])
     for i, node in enumerate(n for n in nodes if n.type not in {"GROUP_INPUT", "GROUP_OUTPUT"}):
         node.location = (-1000 + 110 * (i % 16), -200 * (i // 16))
+    describe_teeth_sockets(group)
     return group
 
 

@@ -43,6 +43,38 @@ BLENDED_GROUPS = ("Enamel", "Dentin")  # blended by a tooth's Blend Volume (blen
 # 1: the material only attenuates (Volume Absorption of sigma_t); its tooth's Blend Volume scatters
 BLEND_ROW = ("Blend Volume", "NodeSocketFloat", 0.0, 0.0, 1.0)
 
+# What each socket of the teeth groups means, by name (a medium's name, "Enamel " or "Dentin ", may lead it).
+SOCKET_WORDS = {
+    "Sigma_t": "Extinction coefficient per colour channel (R, G, B) in 1/mm: how quickly light is scattered or "
+               "absorbed inside the tissue",
+    "Albedo": "Single-scattering albedo per colour channel (0-1, no unit): the share of extinction that scatters",
+    "G1": "Mean cosine of the first Henyey-Greenstein lobe (-1 back to 1 forward, no unit)",
+    "G2": "Mean cosine of the second Henyey-Greenstein lobe (-1 back to 1 forward, no unit)",
+    "Beta": "Weight of the first lobe in the two-lobe phase function (0-1, no unit)",
+    "Eta": "Refractive index of the boundary (no unit; enamel 1.631, gums 1.33)",
+    "At": "Transmittance of the thin boundary layer per colour channel (0-1, no unit)",
+    "mm per Unit": "Millimetres per Blender unit (1000: the scene is in metres; 1: a unit is a millimetre)",
+    "Blend Volume": "On (1): the tooth's Blend Volume object carries the medium with the blended enamel/dentin "
+                    "boundary and this mesh only bounds it; off (0): this mesh's homogeneous medium",
+    "Spread (mm)": "Width of the enamel/dentin transition in millimetres (the sigmoid's spread)",
+    "Surface": "The boundary's surface shader (connect to the material output's Surface)",
+    "Volume": "The medium (connect to the material output's Volume)",
+    "Geometry": "The tooth's volume grids for the blended boundary",
+}
+
+
+def describe_teeth_sockets(group) -> None:
+    """Give every socket of a teeth group its words (:data:`SOCKET_WORDS`) where it has none."""
+    for item in group.interface.items_tree:
+        if item.item_type != "SOCKET" or item.description:
+            continue
+        name = item.name
+        for prefix in ("Enamel ", "Dentin ", "Gingiva "):
+            if name.startswith(prefix) and name[len(prefix):] in SOCKET_WORDS:
+                name = name[len(prefix):]
+        if name in SOCKET_WORDS:
+            item.description = SOCKET_WORDS[name]
+
 
 def _group_inputs(kind: str) -> list[tuple]:
     d = DEFAULTS[kind]
@@ -205,6 +237,7 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
     scene = scene or bpy.context.scene
     group = bpy.data.node_groups.get(kind)
     if group is not None and group.get(MARKER):
+        describe_teeth_sockets(group)  # a group from a file made before the sockets had words
         return group
     group = bpy.data.node_groups.new(kind, "ShaderNodeTree")
     group[MARKER] = kind
@@ -236,6 +269,7 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
         links.new(switch.outputs[0], gout.inputs["Surface"])
         script.location, attr.location, switch.location = (200, 200), (-300, 250), (900, 200)
     links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
+    describe_teeth_sockets(group)
     return group
 
 

@@ -73,10 +73,14 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
     source: bpy.props.EnumProperty(name="Source", items=[
         ("TEMPLATE", "Template", "A procedural tooth template"),
         ("MESH", "Active Mesh", "The active closed mesh is the enamel surface (z = tooth axis, crown up)")],
-        default="TEMPLATE")
-    kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="INCISOR")
-    resolution: bpy.props.IntProperty(name="Resolution", default=40, min=8, max=256)
-    smooth: bpy.props.BoolProperty(name="Smooth Shading", default=True)
+        default="TEMPLATE", description="Make the tooth from a template, or around the active mesh as its enamel")
+    kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="INCISOR",
+                                 description="Which tooth template (and its dentin shape modes)")
+    resolution: bpy.props.IntProperty(name="Resolution", default=40, min=8, max=256,
+                                      description="Mesh resolution of the template (segments around; higher: "
+                                                  "smoother, slower renders)")
+    smooth: bpy.props.BoolProperty(name="Smooth Shading", default=True,
+                                   description="Shade the tooth meshes smooth")
 
     def execute(self, context):
         from ...core.teeth.tooth_mesh import make_tooth
@@ -132,7 +136,9 @@ class MS_OT_teeth_set_dentin(bpy.types.Operator):
     bl_label = "Set Dentin Shape"
     bl_options = {"REGISTER", "UNDO"}
 
-    coefficients: bpy.props.FloatVectorProperty(name="c", size=3, default=(0.0, 0.0, 0.0), min=-0.8, max=0.8)
+    coefficients: bpy.props.FloatVectorProperty(name="Dentin Shape", size=3, default=(0.0, 0.0, 0.0), min=-0.8,
+                                                max=0.8, description="Buccal, proximal and occlusal coefficients c "
+                                                "of the dentin shape (no unit; 1 moves it by up to 1 mm)")
 
     def execute(self, context):
         obj = owner(context.active_object)
@@ -150,7 +156,8 @@ class MS_OT_teeth_apply_fitted(bpy.types.Operator):
     bl_label = "Apply Fitted Coefficients"
     bl_options = {"REGISTER", "UNDO"}
 
-    all_teeth: bpy.props.BoolProperty(name="All Teeth", default=False)
+    all_teeth: bpy.props.BoolProperty(name="All Teeth", default=False,
+                                      description="Apply to every tooth of the scene, not only the active one")
 
     def execute(self, context):
         objs = ([o for o in context.scene.objects if o.ms_tooth.role == "ENAMEL"] if self.all_teeth
@@ -231,7 +238,8 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
     bl_label = "Apply Fit Result"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(subtype="FILE_PATH")
+    filepath: bpy.props.StringProperty(name="Fit Result", subtype="FILE_PATH",
+                                       description="A fit's result file, scene_fit.json in the fit's output folder")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
     def execute(self, context):
@@ -394,7 +402,8 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
     bl_label = "Import Teeth Scene"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(subtype="FILE_PATH")
+    filepath: bpy.props.StringProperty(name="Scene File", subtype="FILE_PATH",
+                                       description="A teeth scene.json (or a fit's scene_fit.json): meshes and media")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
     def execute(self, context):
