@@ -72,28 +72,25 @@ float ms_sinc2_antiderivative(float zeta, float kw)
     return 2.0 * ms_si(u) / kw - zeta * sn * sn;
 }
 
-// N(zeta1) - N(zeta0), eq. 4.27 (light_integration.band_limited_integral)
+// N(zeta1) - N(zeta0), eq. 4.27 (light_integration.band_limited_integral). Both ends in one loop: OSL
+// inlines every call, and one copy of ms_si (not two) keeps the shader's per-render compile short.
 float ms_band_integral(float z0, float z1, float w, float lam, float sigma)
 {
     float k = 2.0 * MS_PI / lam;
     float kw = k * w;
-    return MS_SQRT_PI / (sigma * k) * (ms_sinc2_antiderivative(z1, kw) - ms_sinc2_antiderivative(z0, kw));
+    float nz[2];
+    for (int e = 0; e < 2; ++e)
+        nz[e] = ms_sinc2_antiderivative(e == 0 ? z1 : z0, kw);
+    return MS_SQRT_PI / (sigma * k) * (nz[0] - nz[1]);
 }
 
 // xi2 intervals of the line xi1 = 0 inside a sphere light (light_integration.specular_line_intervals_sphere).
-// Returns the number of non-empty intervals (0..2) in za[], zb[] (za < zb).
-int ms_sphere_intervals(float tx, float ty, vector wo, vector center, float radius,
-                        output float za[34], output float zb[34])
+// Per segment: c = -wo . t, s = sqrt(1 - c^2), o2 = wo x t; per lamp (computed once per shading point):
+// the unit direction p to its centre and cos_a of its angular radius. Intervals -> za[base..],
+// zb[base..] (za < zb); returns their number (0..2).
+int ms_sphere_intervals(float tx, float ty, float c, float s, float o2, vector p, float cos_a,
+                        output float za[136], output float zb[136], int base)
 {
-    float c = -(wo[0] * tx + wo[1] * ty);
-    float s = sqrt(max(1.0 - c * c, 0.0));
-    float o2 = -wo[0] * ty + wo[1] * tx;
-    float d = length(center);
-    if (d <= radius || d <= 0.0)
-        return 0;
-    vector p = center / d;
-    float sin_a = clamp(radius / d, 0.0, 1.0);
-    float cos_a = sqrt(1.0 - sin_a * sin_a);
     float pt = p[0] * tx + p[1] * ty;
     float pb = -p[0] * ty + p[1] * tx;
     float rho = hypot(pb, p[2]);
@@ -111,8 +108,8 @@ int ms_sphere_intervals(float tx, float ty, vector wo, vector center, float radi
         float off = k == 0 ? 0.0 : 2.0 * MS_PI;
         float pa = max(lo + off, 0.0), pbb = min(hi + off, MS_PI);
         if (pbb > pa) {
-            zb[n] = s * cos(pa) + o2;
-            za[n] = s * cos(pbb) + o2;
+            zb[base + n] = s * cos(pa) + o2;
+            za[base + n] = s * cos(pbb) + o2;
             n += 1;
         }
     }
@@ -147,13 +144,11 @@ int ms_circle_roots(float A, float B, float C, output float br[34], int nb)
 // xi2 intervals inside a convex polygon light (light_integration.specular_line_intervals_polygon).
 // The polygon is given by its edge great-circle normals ne[base .. base + nv) (cross products of
 // consecutive unit vertex directions, computed once per shading point) and its orientation sign.
-// Intervals -> za[], zb[]; returns their count.
-int ms_polygon_intervals(float tx, float ty, vector wo, vector ne[64], int base, int nv, float orient,
-                         output float za[34], output float zb[34])
+// c, s, o2: the segment's line frame (ms_sphere_intervals). Intervals -> za[zbase..], zb[zbase..];
+// returns their count.
+int ms_polygon_intervals(float tx, float ty, float c, float s, float o2, vector ne[64], int base, int nv,
+                         float orient, output float za[136], output float zb[136], int zbase)
 {
-    float c = -(wo[0] * tx + wo[1] * ty);
-    float s = sqrt(max(1.0 - c * c, 0.0));
-    float o2 = -wo[0] * ty + wo[1] * tx;
     if (s <= 0.0)
         return 0;
     vector t = vector(tx, ty, 0.0), b = vector(-ty, tx, 0.0);
@@ -192,8 +187,8 @@ int ms_polygon_intervals(float tx, float ty, vector wo, vector ne[64], int base,
             }
         }
         if (inside) {
-            zb[n] = s * cos(pa) + o2;
-            za[n] = s * cos(pbb) + o2;
+            zb[zbase + n] = s * cos(pa) + o2;
+            za[zbase + n] = s * cos(pbb) + o2;
             n += 1;
         }
     }
@@ -234,8 +229,9 @@ float ms_weighted_length(float A, float B, float C, float ed, float qe, float ee
             float th = mid + half * node;
             float v = V * sin(th);
             float o = v - v0;
-            acc += ms_chord_length(A, B, C, ed, qe, ee, len, o) * exp(-(o * o) / (s_um * s_um)) * (V * cos(th))
-                   * (half * wgt);
+            float ch = ms_chord_length(A, B, C, ed, qe, ee, len, o);
+            if (ch != 0.0)  // most nodes of a segment at the footprint's rim: no exp, no cos for a zero chord
+                acc += ch * exp(-(o * o) / (s_um * s_um)) * (V * cos(th)) * (half * wgt);
         }
     }
     return acc / (s_um * MS_SQRT_PI);
@@ -247,12 +243,11 @@ float ms_sinc(float y)  // numpy's sinc: sin(pi y) / (pi y)
     return abs(a) < 1e-6 ? 1.0 : sin(a) / a;
 }
 
-// |eta_P|^2 of one segment: footprint rule "chords" blended towards the point sample by alpha_P
+// |eta_P|^2 of one segment from its Gaussian-weighted contained length lw (ms_weighted_length): footprint
+// rule "chords" blended towards the point sample by alpha_P
 // (scratch_footprint.scratch_footprint_phase_sq with scratch_weighted_length)
-float ms_phase_sq(float A, float B, float C, float ed, float qe, float ee, float len, float v0, float V,
-                  float sigma, float alpha, float area, int on_seg)
+float ms_phase_sq(float lw, float v0, float sigma, float alpha, float area, int on_seg)
 {
-    float lw = ms_weighted_length(A, B, C, ed, qe, ee, len, v0, V, sigma);
     float small = on_seg ? 2.0 * MS_PI * sigma * sigma * exp(-(v0 * v0) / (sigma * sigma)) : 0.0;
     return alpha * 2.0 * sigma * sigma * sigma * MS_SQRT_PI * lw * MS_PI / area + (1.0 - alpha) * small;
 }

@@ -7,7 +7,7 @@ The numba warm-up: the compiled teeth tracer's kernels are cached on disk (``cac
 compiles them in every process that needs them first, which under ``pytest -n 2`` is both workers and the
 fits' subprocesses at once. The controlling process (or a run without xdist) therefore starts
 ``tests/warm_numba.py`` in the background when the session starts; tests of the teeth tracer (``teeth`` in
-their file's or their own name, the Dask suite) wait for it before they run, the others run meanwhile. So the kernels
+their file's or their own name, the Dask suite) run after all others and wait for it. So the kernels
 compile once per run, and a warm cache costs the warm-up a second or two.
 """
 
@@ -80,6 +80,13 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     config._ms_numba_warm = subprocess.Popen(  # type: ignore[attr-defined]
         [sys.executable, os.path.join(TESTS_DIR, "warm_numba.py"), done], stdout=log, stderr=subprocess.STDOUT,
     )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """While the warm-up compiles, run everything else: the teeth tracer's tests go last (a stable sort, the
+    same in every xdist worker), so no worker sits waiting while tests it could run are queued behind them."""
+    if os.environ.get(_WARM_ENV):
+        items.sort(key=lambda item: _needs_numba(item.nodeid))
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:

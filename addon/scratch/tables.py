@@ -148,7 +148,8 @@ def content_hash(s: ScratchSet) -> str:
     for arr in scratch_set_tables(s).values():
         h.update(np.ascontiguousarray(arr).tobytes())
     h.update(repr(set_meta(s, "")).encode())
-    h.update(b"cache-layout-3")  # scratch_io tables + cell-major tables; 3: the shader walks tile copies
+    # scratch_io tables + cell-major tables; 3: the shader walks tile copies; 4: cell-major tables uncompressed
+    h.update(b"cache-layout-4")
     return h.hexdigest()[:16]
 
 
@@ -176,12 +177,38 @@ def write_cell_major_tables(folder: str, s: ScratchSet) -> None:
     """Derived tables the shader walks: entry i of ``cell_segments`` with its segment's geometry
     (``cell_geometry.exr`` RGBA = x0, y0, x1, y1) and parameters (``cell_params.exr`` RGBA = width,
     depth, profile, segment index), same 1024-wide layout. One texture lookup per walked entry
-    instead of two (the walk is lookup-bound)."""
-    from ...core.exr_io import write_exr
-
+    instead of two (the walk is lookup-bound). Written uncompressed (:func:`_write_uncompressed`)."""
     cs = np.asarray(s.cell_segments, np.int64)
     geo = np.asarray(s.segments, np.float64)[cs] if cs.size else np.zeros((0, 4))
     par = (np.stack([s.width_um[cs], s.depth_um[cs], s.profile[cs], cs], 1).astype(np.float64)
            if cs.size else np.zeros((0, 4)))
-    write_exr(os.path.join(folder, "cell_geometry.exr"), wrap_table(geo, 0.0), ("R", "G", "B", "A"))
-    write_exr(os.path.join(folder, "cell_params.exr"), wrap_table(par, -1.0), ("R", "G", "B", "A"))
+    _write_uncompressed(os.path.join(folder, "cell_geometry.exr"), wrap_table(geo, 0.0), ("R", "G", "B", "A"))
+    _write_uncompressed(os.path.join(folder, "cell_params.exr"), wrap_table(par, -1.0), ("R", "G", "B", "A"))
+
+
+def _write_uncompressed(path: str, arr: np.ndarray, channels: tuple[str, ...]) -> None:
+    """A float32 EXR without compression. Cycles loads every table whole at the start of each render:
+    the cell-major tables of 10 000 scratches are 2 x 32 MB, whose ZIP decoding was a good part of the
+    scratched metal's fixed cost per render (``bench scratch-render``); uncompressed they load at the
+    speed of a copy. Same values either way; ``core.exr_io.read_exr`` reads both."""
+    from ...core import exr_io
+
+    a = np.ascontiguousarray(arr, dtype=np.float32)
+    if exr_io._backend() == "oiio":  # inside a desktop Blender
+        import OpenImageIO as oiio
+
+        spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.FLOAT)
+        spec.channelnames = channels
+        spec.attribute("compression", "none")
+        out = oiio.ImageOutput.create(path)
+        if out is None or not out.open(path, spec):
+            raise exr_io.ExrError(f"cannot write EXR {path}: {oiio.geterror()}")
+        ok = out.write_image(a)
+        out.close()
+        if not ok:
+            raise exr_io.ExrError(f"cannot write EXR {path}: {oiio.geterror()}")
+        return
+    import OpenEXR
+
+    data = {name: np.ascontiguousarray(a[:, :, i]) for i, name in enumerate(channels)}
+    OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}, data).write(path)

@@ -10,6 +10,7 @@ in the .blend): a file saved while a fit ran reopens with no fit running.
 from __future__ import annotations
 
 import os
+import re
 
 from ...core.teeth.fit_settings import FitSettings
 from .. import background_job
@@ -23,6 +24,8 @@ KIND = "teeth"
 # the fit needs numpy, and numba (the compiled tracer) or scipy (the numpy reference tracer's neighbour search);
 # progress bars, plots and images need nothing else
 NEEDS_COMPILED, NEEDS_REFERENCE = ("numpy", "numba"), ("numpy", "scipy")
+# the CLI's progress during its start trials: {"progress": "init", "message": "trying K starts: D of N iterations"}
+_TRIALS = re.compile(r"trying \d+ starts: (\d+) of (\d+) iterations")
 
 
 def python_executable() -> str:
@@ -72,6 +75,27 @@ class FitJob(BackgroundJob):
             raise FileNotFoundError(f"no capture.json in {capture_dir!r}")
         super().__init__(fit_command(capture_dir, out_dir, iterations, init, extra, workers), out_dir, iterations)
         self.capture_dir = capture_dir
+
+    trial_done = 0
+    trial_total = 0  # iterations of the start trials (0: none reported yet)
+
+    def on_event(self, event: dict) -> None:
+        """Also counts the start trials' iterations, which run before the fit's own (their count is in the
+        "init" events' message)."""
+        super().on_event(event)
+        m = _TRIALS.search(str(event.get("message", ""))) if event.get("progress") == "init" else None
+        if m is not None:
+            self.trial_done, self.trial_total = int(m.group(1)), max(int(m.group(2)), 1)
+
+    @property
+    def progress(self) -> float:
+        """The start trials and the fit as one bar: (trial iterations + fit iterations done) / both totals."""
+        if not self.trial_total:
+            return super().progress
+        if self.done_iterations:
+            self.trial_done = self.trial_total  # the trials are over once the fit reports
+        total = self.trial_total + max(self.iterations, 1)
+        return min(1.0, (min(self.trial_done, self.trial_total) + self.done_iterations) / total)
 
     def ended_text(self) -> str:
         if not (self.settled and self.outcome) and self.state() == "FINISHED":

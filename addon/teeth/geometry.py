@@ -24,6 +24,8 @@ import numpy as np
 from mathutils import Matrix
 
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
+from ...core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
+from .blend_volume import ensure_blend
 from .materials import INNER_ATTRIBUTE
 
 GAP_MM = 2e-4
@@ -101,8 +103,9 @@ def evaluated_vertices(obj, depsgraph=None) -> np.ndarray:
 
 def build_tooth_pair(name: str, enamel_mesh, dentin_shape, c=(0.0, 0.0, 0.0), enamel_mat=None, dentin_mat=None,
                      collection=None, mm_per_unit: float = 1000.0, kind: str = "custom", tooth_name: str = "",
-                     smooth: bool = False):
-    """Enamel shell + dentin core objects from core meshes (``TriMesh`` + ``DentinBlendShape``)."""
+                     smooth: bool = False, spread: float = DEFAULT_SPREAD_MM):
+    """Enamel shell + dentin core objects from core meshes (``TriMesh`` + ``DentinBlendShape``) and, with both
+    materials, the tooth's Blend Volume of enamel/dentin blend ``spread`` (mm; ``blend_volume``)."""
     collection = collection or bpy.context.scene.collection
     ev, ef, euv = enamel_mesh.vertices, enamel_mesh.faces, enamel_mesh.corner_uv
     base = dentin_shape.base
@@ -138,6 +141,8 @@ def build_tooth_pair(name: str, enamel_mesh, dentin_shape, c=(0.0, 0.0, 0.0), en
     enamel.ms_tooth.partner = dentin
     dentin.ms_tooth.partner = enamel
     enamel.ms_tooth.set_coefficients(c)
+    if enamel_mat is not None and dentin_mat is not None:
+        ensure_blend(enamel, spread, collection)
     return enamel, dentin
 
 

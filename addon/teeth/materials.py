@@ -39,6 +39,41 @@ DEFAULTS = {
 }
 GROUP_NAMES = tuple(DEFAULTS)
 SURFACE_GROUPS = ("Enamel", "Gingiva")
+BLENDED_GROUPS = ("Enamel", "Dentin")  # blended by a tooth's Blend Volume (blend_volume.py)
+# 1: the material only attenuates (Volume Absorption of sigma_t); its tooth's Blend Volume scatters
+BLEND_ROW = ("Blend Volume", "NodeSocketFloat", 0.0, 0.0, 1.0)
+
+# What each socket of the teeth groups means, by name (a medium's name, "Enamel " or "Dentin ", may lead it).
+SOCKET_WORDS = {
+    "Sigma_t": "Extinction coefficient per colour channel (R, G, B) in 1/mm: how quickly light is scattered or "
+               "absorbed inside the tissue",
+    "Albedo": "Single-scattering albedo per colour channel (0-1, no unit): the share of extinction that scatters",
+    "G1": "Mean cosine of the first Henyey-Greenstein lobe (-1 back to 1 forward, no unit)",
+    "G2": "Mean cosine of the second Henyey-Greenstein lobe (-1 back to 1 forward, no unit)",
+    "Beta": "Weight of the first lobe in the two-lobe phase function (0-1, no unit)",
+    "Eta": "Refractive index of the boundary (no unit; enamel 1.631, gums 1.33)",
+    "At": "Transmittance of the thin boundary layer per colour channel (0-1, no unit)",
+    "mm per Unit": "Millimetres per Blender unit (1000: the scene is in metres; 1: a unit is a millimetre)",
+    "Blend Volume": "On (1): the tooth's Blend Volume object carries the medium with the blended enamel/dentin "
+                    "boundary and this mesh only bounds it; off (0): this mesh's homogeneous medium",
+    "Spread (mm)": "Width of the enamel/dentin transition in millimetres (the sigmoid's spread)",
+    "Surface": "The boundary's surface shader (connect to the material output's Surface)",
+    "Volume": "The medium (connect to the material output's Volume)",
+    "Geometry": "The tooth's volume grids for the blended boundary",
+}
+
+
+def describe_teeth_sockets(group) -> None:
+    """Give every socket of a teeth group its words (:data:`SOCKET_WORDS`) where it has none."""
+    for item in group.interface.items_tree:
+        if item.item_type != "SOCKET" or item.description:
+            continue
+        name = item.name
+        for prefix in ("Enamel ", "Dentin ", "Gingiva "):
+            if name.startswith(prefix) and name[len(prefix):] in SOCKET_WORDS:
+                name = name[len(prefix):]
+        if name in SOCKET_WORDS:
+            item.description = SOCKET_WORDS[name]
 
 
 def _group_inputs(kind: str) -> list[tuple]:
@@ -55,6 +90,8 @@ def _group_inputs(kind: str) -> list[tuple]:
         rows += [("At", "NodeSocketColor", (1.0, 1.0, 1.0, 1.0), None, None),
                  ("Eta", "NodeSocketFloat", d["eta"], 1.0, 3.0)]
     rows.append(("mm per Unit", "NodeSocketFloat", 1000.0, 1e-6, 1e9))
+    if kind in BLENDED_GROUPS:
+        rows.append(BLEND_ROW)
     return rows
 
 
@@ -74,6 +111,22 @@ def _volume_subgraph(group, gin):
     ss.operation = "MULTIPLY"
     links.new(gin.outputs["Albedo"], ss.inputs[0])
     links.new(st.outputs[0], ss.inputs[1])
+    if BLEND_ROW[0] in gin.outputs:  # with its tooth's Blend Volume (which holds the whole medium): none
+        keep = nodes.new("ShaderNodeMath")
+        keep.operation = "SUBTRACT"
+        keep.inputs[0].default_value = 1.0
+        links.new(gin.outputs[BLEND_ROW[0]], keep.inputs[1])
+        for i, name in enumerate(("st", "ss")):
+            own = nodes.new("ShaderNodeVectorMath")
+            own.operation = "SCALE"
+            links.new((st if name == "st" else ss).outputs[0], own.inputs[0])
+            links.new(keep.outputs[0], own.inputs["Scale"])
+            own.location = (-120, -500 - 150 * i)
+            if name == "st":
+                st = own
+            else:
+                ss = own
+        keep.location = (-300, -500)
     sa = nodes.new("ShaderNodeVectorMath")
     sa.operation = "SUBTRACT"
     links.new(st.outputs[0], sa.inputs[0])
@@ -108,6 +161,75 @@ def _volume_subgraph(group, gin):
     return add.outputs[0]
 
 
+OSL_SWITCH = "Shader Path"  # Mix Shader: the OSL boundary where the script runs, else the native one
+
+
+def _native_boundary(group, gin, inner_attr):
+    """The boundary of ms_enamel_boundary.osl from Cycles' own nodes, for Cycles without Open Shading Language
+    (its SVM drops script nodes): F(|cos|, Eta) of the view direction (the same F from either side, no total
+    internal reflection) mixing a sharp Glossy (weight F) and a Transparent of colour At (weight 1 - F); the
+    ms_inner faces fully transparent."""
+    nodes, links = group.nodes, group.links
+
+    def op(name, a, b=None):
+        n = nodes.new("ShaderNodeMath")
+        n.operation = name
+        for i, v in enumerate((a, b)):
+            if v is None:
+                continue
+            if isinstance(v, float):
+                n.inputs[i].default_value = v
+            else:
+                links.new(v, n.inputs[i])
+        return n.outputs[0]
+
+    geo = nodes.new("ShaderNodeNewGeometry")
+    dot = nodes.new("ShaderNodeVectorMath")
+    dot.operation = "DOT_PRODUCT"
+    links.new(geo.outputs["Incoming"], dot.inputs[0])
+    links.new(geo.outputs["Normal"], dot.inputs[1])
+    c = op("MINIMUM", op("ABSOLUTE", dot.outputs["Value"]), 1.0)
+    eta = gin.outputs["Eta"]
+    s2 = op("DIVIDE", op("SUBTRACT", 1.0, op("MULTIPLY", c, c)), op("MULTIPLY", eta, eta))
+    ct = op("SQRT", op("MAXIMUM", op("SUBTRACT", 1.0, s2), 0.0))
+    eta_ct, eta_c = op("MULTIPLY", eta, ct), op("MULTIPLY", eta, c)
+    rs = op("DIVIDE", op("SUBTRACT", c, eta_ct), op("ADD", c, eta_ct))
+    rp = op("DIVIDE", op("SUBTRACT", eta_c, ct), op("ADD", eta_c, ct))
+    f = op("MULTIPLY", op("ADD", op("MULTIPLY", rs, rs), op("MULTIPLY", rp, rp)), 0.5)
+    glossy = nodes.new("ShaderNodeBsdfGlossy")
+    glossy.inputs["Roughness"].default_value = 0.0
+    glossy.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    through = nodes.new("ShaderNodeBsdfTransparent")
+    links.new(gin.outputs["At"], through.inputs["Color"])
+    outer = nodes.new("ShaderNodeMixShader")  # (1 - F) At transparent + F mirror
+    links.new(f, outer.inputs["Fac"])
+    links.new(through.outputs[0], outer.inputs[1])
+    links.new(glossy.outputs[0], outer.inputs[2])
+    inner = nodes.new("ShaderNodeBsdfTransparent")
+    pick = nodes.new("ShaderNodeMixShader")
+    links.new(op("GREATER_THAN", inner_attr.outputs["Fac"], 0.5), pick.inputs["Fac"])
+    links.new(outer.outputs[0], pick.inputs[1])
+    links.new(inner.outputs[0], pick.inputs[2])
+    for i, n in enumerate([geo, dot, glossy, through, outer, inner, pick]):
+        n.location = (-100 + 150 * i, 650)
+    return pick.outputs[0]
+
+
+def ensure_blend_input(group) -> None:
+    """Give an Enamel/Dentin group from an older file the ``Blend Volume`` input (its volume rebuilt)."""
+    kind = group.get(MARKER)
+    if kind not in BLENDED_GROUPS or any(s.name == BLEND_ROW[0] for s in group.interface.items_tree
+                                         if s.item_type == "SOCKET" and s.in_out == "INPUT"):
+        return
+    add_group_input(group, *BLEND_ROW)
+    keep = {"GROUP_INPUT", "GROUP_OUTPUT", "SCRIPT", "ATTRIBUTE"}
+    for node in [n for n in group.nodes if n.type not in keep]:
+        group.nodes.remove(node)
+    gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
+    gout = next(n for n in group.nodes if n.type == "GROUP_OUTPUT")
+    group.links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
+
+
 def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
     """The shared node group ``kind`` ("Enamel", "Dentin" or "Gingiva"), created once per file."""
     if kind not in DEFAULTS:
@@ -115,6 +237,7 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
     scene = scene or bpy.context.scene
     group = bpy.data.node_groups.get(kind)
     if group is not None and group.get(MARKER):
+        describe_teeth_sockets(group)  # a group from a file made before the sockets had words
         return group
     group = bpy.data.node_groups.new(kind, "ShaderNodeTree")
     group[MARKER] = kind
@@ -135,9 +258,18 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
         links.new(gin.outputs["Eta"], script.inputs["Eta"])
         links.new(gin.outputs["At"], script.inputs["At"])
         links.new(attr.outputs["Fac"], script.inputs["Inner"])
-        links.new(script.outputs["BSDF"], gout.inputs["Surface"])
-        script.location, attr.location = (200, 200), (-300, 250)
+        native = _native_boundary(group, gin, attr)
+        switch = nodes.new("ShaderNodeMixShader")  # Fac: the script's OSLActive, 0 where no script runs
+        switch.name = switch.label = OSL_SWITCH
+        switch.inputs["Fac"].default_value = 0.0
+        if "OSLActive" in script.outputs:
+            links.new(script.outputs["OSLActive"], switch.inputs["Fac"])
+        links.new(native, switch.inputs[1])
+        links.new(script.outputs["BSDF"], switch.inputs[2])
+        links.new(switch.outputs[0], gout.inputs["Surface"])
+        script.location, attr.location, switch.location = (200, 200), (-300, 250), (900, 200)
     links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
+    describe_teeth_sockets(group)
     return group
 
 

@@ -38,7 +38,7 @@ def _mm_per_unit(scene) -> float:
 
 def show_fit_check(fs, out_dir: str) -> None:
     """The fit's held-out check (fit_report.json, check.png) into the panel: its error as text, the image
-    as the Image datablock ``CHECK_IMAGE_NAME`` (reloaded, not packed: the file stays the fit's)."""
+    as the Image datablock ``CHECK_IMAGE_NAME``, packed into the .blend (a new fit's check replaces it)."""
     import json
 
     fs.check_error, fs.check_image = "", ""
@@ -53,13 +53,13 @@ def show_fit_check(fs, out_dir: str) -> None:
     png = os.path.join(out_dir, "check.png")
     if os.path.isfile(png):
         fs.check_image = png
-        img = bpy.data.images.get(CHECK_IMAGE_NAME)
-        if img is None:
-            img = bpy.data.images.load(png)
-            img.name = CHECK_IMAGE_NAME
-        else:
-            img.filepath = png
-            img.reload()
+        old = bpy.data.images.get(CHECK_IMAGE_NAME)
+        if old is not None:
+            bpy.data.images.remove(old)
+        img = bpy.data.images.load(png)
+        img.name = CHECK_IMAGE_NAME
+        img.use_fake_user = True  # no material uses it: without a user it would not be saved at all
+        img.pack()  # kept in the .blend: the picture reopens with the file, wherever the fit folder went
         img.preview_ensure()
 
 
@@ -73,10 +73,14 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
     source: bpy.props.EnumProperty(name="Source", items=[
         ("TEMPLATE", "Template", "A procedural tooth template"),
         ("MESH", "Active Mesh", "The active closed mesh is the enamel surface (z = tooth axis, crown up)")],
-        default="TEMPLATE")
-    kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="INCISOR")
-    resolution: bpy.props.IntProperty(name="Resolution", default=40, min=8, max=256)
-    smooth: bpy.props.BoolProperty(name="Smooth Shading", default=True)
+        default="TEMPLATE", description="Make the tooth from a template, or around the active mesh as its enamel")
+    kind: bpy.props.EnumProperty(name="Type", items=TOOTH_KINDS, default="INCISOR",
+                                 description="Which tooth template (and its dentin shape modes)")
+    resolution: bpy.props.IntProperty(name="Resolution", default=40, min=8, max=256,
+                                      description="Mesh resolution of the template (segments around; higher: "
+                                                  "smoother, slower renders)")
+    smooth: bpy.props.BoolProperty(name="Smooth Shading", default=True,
+                                   description="Shade the tooth meshes smooth")
 
     def execute(self, context):
         from ...core.teeth.tooth_mesh import make_tooth
@@ -132,7 +136,9 @@ class MS_OT_teeth_set_dentin(bpy.types.Operator):
     bl_label = "Set Dentin Shape"
     bl_options = {"REGISTER", "UNDO"}
 
-    coefficients: bpy.props.FloatVectorProperty(name="c", size=3, default=(0.0, 0.0, 0.0), min=-0.8, max=0.8)
+    coefficients: bpy.props.FloatVectorProperty(name="Dentin Shape", size=3, default=(0.0, 0.0, 0.0), min=-0.8,
+                                                max=0.8, description="Buccal, proximal and occlusal coefficients c "
+                                                "of the dentin shape (no unit; 1 moves it by up to 1 mm)")
 
     def execute(self, context):
         obj = owner(context.active_object)
@@ -150,7 +156,8 @@ class MS_OT_teeth_apply_fitted(bpy.types.Operator):
     bl_label = "Apply Fitted Coefficients"
     bl_options = {"REGISTER", "UNDO"}
 
-    all_teeth: bpy.props.BoolProperty(name="All Teeth", default=False)
+    all_teeth: bpy.props.BoolProperty(name="All Teeth", default=False,
+                                      description="Apply to every tooth of the scene, not only the active one")
 
     def execute(self, context):
         objs = ([o for o in context.scene.objects if o.ms_tooth.role == "ENAMEL"] if self.all_teeth
@@ -194,6 +201,15 @@ def apply_fit_file(context, path: str) -> tuple[list[str], list[str]]:
     return [f"{n} -> {targets[n].name}" for n in done], names
 
 
+def _read_error(path: str, exc: Exception, verb: str = "cannot read") -> str:
+    """One line for a scene file that could not be used: the core's own message (it names the file and the
+    field) as it is, else ``verb path: what``; a bare missing key says the file is not a teeth scene."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    if isinstance(exc, KeyError):
+        return f"{verb} {path}: not a teeth scene file (scene.json / scene_fit.json): it has no {text}"
+    return text if path in text else f"{verb} {path}: {text}"
+
+
 class MS_OT_teeth_read_capture_teeth(bpy.types.Operator):
     """Read the capture's teeth (its scene.json) to choose the tooth of this scene each one's fit is applied to
     (teeth of the same name are chosen for you)"""
@@ -222,7 +238,8 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
     bl_label = "Apply Fit Result"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(subtype="FILE_PATH")
+    filepath: bpy.props.StringProperty(name="Fit Result", subtype="FILE_PATH",
+                                       description="A fit's result file, scene_fit.json in the fit's output folder")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
     def execute(self, context):
@@ -232,7 +249,7 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
         try:
             done, names = apply_fit_file(context, self.filepath)
         except (ValueError, KeyError, OSError) as exc:
-            self.report({"ERROR"}, f"cannot apply {self.filepath}: {exc}")
+            self.report({"ERROR"}, _read_error(self.filepath, exc, "cannot apply"))
             return {"CANCELLED"}
         if not done:  # nothing was changed
             self.report({"ERROR"}, no_mapping_message(names))
@@ -385,7 +402,8 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
     bl_label = "Import Teeth Scene"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(subtype="FILE_PATH")
+    filepath: bpy.props.StringProperty(name="Scene File", subtype="FILE_PATH",
+                                       description="A teeth scene.json (or a fit's scene_fit.json): meshes and media")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
     def execute(self, context):
@@ -394,7 +412,7 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
         try:
             ts = load_scene(self.filepath)
         except (OSError, ValueError, KeyError) as exc:
-            self.report({"ERROR"}, f"cannot read {self.filepath}: {exc}")
+            self.report({"ERROR"}, _read_error(self.filepath, exc))
             return {"CANCELLED"}
         build_teeth_scene(ts, context.collection or context.scene.collection, _mm_per_unit(context.scene),
                           smooth=True)

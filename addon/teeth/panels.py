@@ -7,6 +7,7 @@ import bpy
 
 from ...core.teeth.fit_checkpoint import stopped_fit
 from ..common import SidebarPanel
+from ..operators import osl_ready
 from .properties import CHECK_IMAGE_NAME, fit_out_dir, owner
 
 
@@ -20,6 +21,10 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
         row.operator("material_structures.teeth_add_tooth", text="Add Tooth", icon="ADD").source = "TEMPLATE"
         row.operator("material_structures.teeth_add_tooth", text="From Mesh", icon="MESH_DATA").source = "MESH"
         layout.operator("material_structures.teeth_import_scene", icon="IMPORT")
+        if not osl_ready(context.scene):  # nothing switches the engine unasked: the artist may, here
+            row = layout.row()
+            row.label(text="Exact enamel surface:", icon="INFO")
+            row.operator("material_structures.setup_cycles_osl", text="Use Cycles + OSL")
         obj = owner(context.active_object)
         if obj is None:
             layout.label(text="Select a tooth to edit its dentin", icon="INFO")
@@ -67,6 +72,11 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
         if fs.check_error:
             box.label(text=fs.check_error, icon="CHECKMARK")
         img = bpy.data.images.get(CHECK_IMAGE_NAME) if fs.check_image else None
+        if img is not None and img.preview is None:  # packed in the .blend; its preview is made again on reopen
+            try:
+                img.preview_ensure()
+            except (RuntimeError, AttributeError):
+                pass
         if img is not None and img.preview is not None:
             box.label(text="Capture | Fit | Difference x4")
             box.template_icon(icon_value=img.preview.icon_id, scale=10.0)

@@ -22,7 +22,9 @@ from .scene_build import capture_tooth_names, fill_tooth_map
 C_MIN, C_MAX = RANGES["c"]
 ROLE_ITEMS = [("NONE", "None", ""), ("ENAMEL", "Enamel", "Enamel shell of a tooth"),
               ("DENTIN", "Dentin", "Dentin core of a tooth"), ("GUMS", "Gums", "Gingiva"),
-              ("CAVITY", "Oral Cavity", "Stand-in for the oral cavity behind the teeth")]
+              ("CAVITY", "Oral Cavity", "Stand-in for the oral cavity behind the teeth"),
+              ("BLEND", "Blend Volume", "The gradual change from enamel to dentin inside a tooth: the volume that "
+               "renders it")]
 
 
 def owner(obj):
@@ -56,26 +58,35 @@ def _update_coefficients(self, context) -> None:
 
 
 def _coefficient(name: str, desc: str):
+    desc += (" (a dentin shape coefficient: no unit; 1 moves the dentin surface by up to 1 mm, "
+             "0 is the template's shape)")
     return bpy.props.FloatProperty(name=name, description=desc, default=0.0, min=C_MIN, max=C_MAX,
                                    soft_min=C_MIN, soft_max=C_MAX, step=1, precision=3,
                                    update=_update_coefficients)
 
 
 class MS_ToothSettings(bpy.types.PropertyGroup):
-    role: bpy.props.EnumProperty(name="Role", items=ROLE_ITEMS, default="NONE")
-    kind: bpy.props.StringProperty(name="Tooth Type", default="")
+    role: bpy.props.EnumProperty(name="Role", items=ROLE_ITEMS, default="NONE",
+                                 description="Which part of a tooth this object is (set by Add Tooth)")
+    kind: bpy.props.StringProperty(name="Tooth Type", default="",
+                                   description="The tooth template this object was made from (e.g. INCISOR)")
     tooth_name: bpy.props.StringProperty(name="Tooth Name",
                                          description="Name of the tooth in teeth scene files and fits")
     partner: bpy.props.PointerProperty(name="Partner", type=bpy.types.Object,
                                        description="The dentin core of an enamel shell, and vice versa")
-    mm_per_unit: bpy.props.FloatProperty(name="mm per Unit", default=1000.0, min=1e-6)
+    mm_per_unit: bpy.props.FloatProperty(name="mm per Unit", default=1000.0, min=1e-6,
+                                         description="Millimetres per Blender unit (1000: the scene is in metres; "
+                                                     "1: one unit is one millimetre); scales the media's 1/mm "
+                                                     "coefficients")
     buccal: _coefficient("Buccal", "How far the dentin bulges toward the cheek or tongue side")
     proximal: _coefficient("Proximal", "How far the dentin bulges toward the neighbouring teeth")
     occlusal: _coefficient("Occlusal", "How far the dentin reaches toward the biting edge")
     fitted: bpy.props.FloatVectorProperty(name="Fitted c", size=3, default=(0.0, 0.0, 0.0),
                                           description="Dentin shape found by the last fit")
-    has_fit: bpy.props.BoolProperty(name="Has Fit", default=False)
-    fit_source: bpy.props.StringProperty(name="Fit Source", default="", subtype="FILE_PATH")
+    has_fit: bpy.props.BoolProperty(name="Has Fit", default=False,
+                                     description="Whether fitted values from a capture were applied to this tooth")
+    fit_source: bpy.props.StringProperty(name="Fit Source", default="", subtype="FILE_PATH",
+                                         description="The fit result (scene_fit.json) whose values this tooth wears")
 
     def coefficients(self) -> tuple[float, float, float]:
         return (self.buccal, self.proximal, self.occlusal)
@@ -148,7 +159,8 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
     iterations: bpy.props.IntProperty(name="Iterations", default=FIT_DEFAULTS.iterations, min=1, max=100000,
                                       description="Fit iterations (5-20 s each for a 3-camera capture on 2 cores; "
                                                   "fewer: a quicker, rougher fit)")
-    init: bpy.props.EnumProperty(name="Start", default="LITERATURE", items=[
+    init: bpy.props.EnumProperty(name="Start", default="LITERATURE",
+                                 description="Where the fit starts its search", items=[
         ("LITERATURE", "Literature", "Best match among published tooth measurements"),
         ("SCENE", "Scene", "The values in the capture's scene.json"),
         ("PERTURBED", "Perturbed", "The capture's scene.json values, perturbed (for testing the fit)")])

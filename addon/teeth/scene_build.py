@@ -16,6 +16,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ...render import add_lamp, configure_cycles
+from .blend_volume import ensure_blend
 from .geometry import build_tooth_pair, make_mesh
 from .materials import new_cavity_material, new_teeth_material, set_a_t, set_volume
 
@@ -34,7 +35,7 @@ def build_teeth_scene(ts, collection=None, mm_per_unit: float = 1000.0, prefix: 
         em.node_tree.nodes["Enamel"].inputs["Eta"].default_value = float(t.eta)
         dm = new_teeth_material("Dentin", f"Dentin {name}", volume=t.dentin, mm_per_unit=mm_per_unit)
         pair = build_tooth_pair(name, t.enamel_mesh, t.dentin_shape, t.c, em, dm, collection, mm_per_unit,
-                                kind=t.kind, tooth_name=t.name, smooth=smooth)
+                                kind=t.kind, tooth_name=t.name, smooth=smooth, spread=ts.blend_spread)
         out["teeth"].append(pair)
     if ts.gums is not None:
         g = ts.gums
@@ -192,6 +193,7 @@ def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, target
                 o.ms_tooth.fit_source = source
         if set_current:
             st.set_coefficients(t.c)
+        ensure_blend(enamel, ts.blend_spread)  # the fit's enamel/dentin blend (made for a tooth without one)
         done.append(t.name)
     if ts.gums is not None:
         gums = next((o for o in scene.objects if o.ms_tooth.role == "GUMS"), None)

@@ -1,11 +1,11 @@
 """Cross-renderer check: the same teeth scene rendered by Cycles (the Enamel/Dentin/Gingiva materials)
 and by the core forward path tracer (``core.teeth.path_tracer``).
 
-Both estimate the same integral when: the dentin interface is sharp (``blend_spread`` -> 0: the core
-otherwise blends sigma_s within ~1 mm of the dentin, a deliberate smoothing Cycles does not have), the
-camera, point lamp and units match (see ``scene_build``), and path depth limits are high enough that
-truncation is negligible on both sides. Metrics, per tooth region (pixels whose centre and corners see
-that tooth's enamel first):
+Both estimate the same integral when: the blend spread is the same (``check_scene`` makes the interface
+sharp, ``blend_spread`` -> 0, where the meshes' own volumes render it; at a wider spread each tooth's Blend
+Volume renders the core's blend, ``blend_volume``), the camera, point lamp and units match (see
+``scene_build``), and path depth limits are high enough that truncation is negligible on both sides.
+Metrics, per tooth region (pixels whose centre and corners see that tooth's enamel first):
 
 * ``mean_colour_rel_err``: max over teeth and channels of |mean_cycles - mean_core| / mean_core;
 * ``median_px_rel_err``: median over tooth pixels (and channels) of |B c - B k| / B k, B = 8 x 8 box filter.
@@ -29,7 +29,7 @@ def check_scene(n_teeth: int = 2, resolution: int = 20, width: int = 64, height:
     from ...core.teeth.synthetic import make_scene, scene_target
 
     ts = make_scene(n_teeth=n_teeth, resolution=resolution)
-    ts.blend_spread = 1e-6  # sharp enamel/dentin interface, as in Cycles
+    ts.blend_spread = 1e-6  # sharp enamel/dentin interface (the meshes' volumes in Cycles)
     target = scene_target(ts)
     span = 8.6 * n_teeth + 4.0
     dist = 120.0

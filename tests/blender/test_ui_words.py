@@ -16,22 +16,7 @@ import pytest
 # Properties and sockets of the teeth (addon/teeth/, changed elsewhere at the time of writing) still without
 # a description: each one listed here must still lack it (remove it from here when it gets one), and nothing
 # else may.
-TEETH_PENDING = {
-    "MS_ToothSettings.role",
-    "MS_ToothSettings.kind",
-    "MS_ToothSettings.mm_per_unit",
-    "MS_ToothSettings.has_fit",
-    "MS_ToothSettings.fit_source",
-    "MS_TeethFitSettings.init",
-    "MS_OT_teeth_add_tooth.source",
-    "MS_OT_teeth_add_tooth.kind",
-    "MS_OT_teeth_add_tooth.resolution",
-    "MS_OT_teeth_add_tooth.smooth",
-    "MS_OT_teeth_set_dentin.coefficients",
-    "MS_OT_teeth_apply_fitted.all_teeth",
-    "MS_OT_teeth_apply_fit_file.filepath",
-    "MS_OT_teeth_import_scene.filepath",
-}
+TEETH_PENDING: set[str] = set()  # every teeth property has its words now
 
 
 def _rna(cls):
@@ -123,17 +108,14 @@ def test_every_group_socket_has_a_description_and_switches_are_booleans(addon_mo
     names = " ".join(g.name for g in groups)
     assert "SGGX Fabric" in names and "Scratched Metal" in names and len(groups) >= 3, names
     problems = socket_problems(groups)
-    teeth = {k: v for k, v in problems.items() if k.split(":")[0] in _teeth_group_names(addon_module, groups)}
-    others = {k: v for k, v in problems.items() if k not in teeth}
-    assert not others, "group sockets without words:\n" + _report(others)
+    assert _teeth_group_names(addon_module, groups), names  # the teeth groups are checked too
+    assert not problems, "group sockets without words:\n" + _report(problems)
     # The fabric's and the scratches' switches are booleans.
     for group in groups:
         for item in group.interface.items_tree:
             if item.item_type == "SOCKET" and item.name in ("FastPreview", "UseFittedClosures", "ExactWorld",
                                                             "Spectral"):
                 assert item.socket_type == "NodeSocketBool", (group.name, item.name)
-    if teeth:
-        pytest.xfail("teeth group sockets without words (addon/teeth/, pending):\n" + _report(teeth))
 
 
 def _teeth_group_names(addon_module, groups) -> set[str]:

@@ -1,0 +1,369 @@
+"""The enamel/dentin sigmoid blend of the fit's model (eq. 5.15-5.21) as a Cycles volume: a "Blend Volume"
+object per tooth.
+
+The model (``core.teeth.scene``, ``core.teeth.path_tracer``): transmittance uses the sharp sigma_t of the
+enamel and dentin regions; at a scattering point at signed distance q from the dentin surface (q < 0 in the
+dentin) the scattering coefficient is sigma_s = a_mix sigma_t,mix and the phase function is the two-lobe HG
+of the mixed g1, g2, beta, where x_mix = l x_enamel + (1 - l) x_dentin and l = 1 / (1 + exp(-q / s)) (spread
+s, default 1 / ln 19 mm). Near the dentin this sigma_s exceeds the enamel's own sigma_t (dentin's sigma_t is
+the larger): the blended medium scatters more than it attenuates there.
+
+In Cycles:
+
+* the tooth's Enamel and Dentin materials keep their surfaces but give up their volumes (group input
+  ``BLEND_INPUT`` = 1): with a homogeneous mesh volume overlapping the heterogeneous one, Cycles 5.2 renders
+  the sum 6-23 % too dark (measured; 4.5 does not), so the Blend Volume holds the whole medium;
+* a mesh object parented to the enamel shell carries a geometry-nodes modifier (its own ``FIELD_GROUP``) that builds
+  from the *evaluated* dentin core (its shape keys stay live) and the enamel's outer surface a volume with
+  three grids, in the tooth's millimetre frame:
+  ``ms_q`` the signed distance to the dentin surface (Mesh to SDF Grid; its narrow band is
+  max(2.5 mm, 8 s), beyond which l is within 3.4e-4 of 0 or 1), ``ms_o`` the signed distance to the
+  enamel's outer surface, ``ms_m`` the tooth's interior as a fog grid (its active voxels make Cycles'
+  volume bounds cover the whole tooth);
+* that volume's material (node group ``BLEND_GROUP``) is, inside the tooth (ms_o < 0), the scattering
+  sigma_s = a_mix sigma_t,mix through two Volume Scatter (Henyey-Greenstein) lobes with the mixed g1, g2,
+  beta, plus a Volume Absorption of sigma_t - sigma_s with the sharp sigma_t of the region (ms_q < 0:
+  dentin). Where sigma_s > sigma_t that absorption is negative, which Cycles takes as it is when the colour
+  is linked (a colour *value* is clamped to [0, 1]; measured on 4.5 and 5.2);
+* the blend material's parameters are drivers on the tooth's Enamel and Dentin group nodes, so editing those
+  materials or applying a fit changes the blend with them; its spread is ``Spread (mm)`` of its group node.
+
+Approximation: q, the dentin boundary of sigma_t and the tooth's outline are trilinearly interpolated from
+grids of ``VOXEL_MM`` voxels (the enamel surface's reflection and a_t stay the mesh's); below
+``SHARP_SPREAD_MM`` the meshes render the sharp model instead. Measured in ``bench teeth-cycles``.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from ...core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
+from ...render import material_output, new_material
+from ..common import add_group_input
+from .materials import INNER_ATTRIBUTE, MARKER, describe_teeth_sockets, group_node
+
+BLEND_INPUT = "Blend Volume"  # Enamel/Dentin group input: 1 = only attenuate, the Blend Volume scatters
+BLEND_GROUP = "Tooth Blend"
+FIELD_GROUP = "Tooth Blend Field"
+MODIFIER = "Tooth Blend Field"
+SPREAD = "Spread (mm)"
+VOXEL_MM = 0.1
+# Below this spread (a tenth of a voxel) the blend is a step at the dentin surface: the meshes' sharp volumes
+# are that model exactly, so the Blend Volume is left out of renders and the materials hold the whole medium.
+SHARP_SPREAD_MM = 0.01
+Q_BAND_MIN_MM = 2.5
+Q_BAND_SPREADS = 8.0
+GRID_Q, GRID_O, GRID_M = "ms_q", "ms_o", "ms_m"
+MEDIA = ("Enamel", "Dentin")
+PARAMS = (("Sigma_t", 3), ("Albedo", 3), ("G1", 0), ("G2", 0), ("Beta", 0))  # (socket, components or 0)
+
+
+# -- geometry nodes: the grids ----------------------------------------------------------------------------
+def _math(nodes, links, op, a, b=None, loc=(0, 0)):
+    n = nodes.new("ShaderNodeMath")
+    n.operation = op
+    n.location = loc
+    for i, v in enumerate((a, b)):
+        if v is None:
+            continue
+        if isinstance(v, (int, float)):
+            n.inputs[i].default_value = float(v)
+        else:
+            links.new(v, n.inputs[i])
+    return n.outputs[0]
+
+
+def field_group(name: str, enamel, dentin, material) -> bpy.types.GeometryNodeTree:
+    """A tooth's geometry-nodes group: (enamel, dentin) -> a volume with the grids ms_q, ms_o, ms_m and
+    ``material``. The objects and the material sit in its nodes (no group inputs: the modifier's input API
+    differs between 4.5 and 5.x); its "Spread" value node is driven by the material's spread."""
+    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    group[MARKER] = "BlendField"
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    gout = nodes.new("NodeGroupOutput")
+    gout.location = (900, 0)
+    vox = nodes.new("ShaderNodeValue")
+    vox.name = vox.label = "Voxel Size"
+    vox.outputs[0].default_value = VOXEL_MM
+    spread = nodes.new("ShaderNodeValue")
+    spread.name = spread.label = "Spread"
+    spread.outputs[0].default_value = DEFAULT_SPREAD_MM
+    voxel = vox.outputs[0]
+
+    dobj = nodes.new("GeometryNodeObjectInfo")
+    dobj.name = "Dentin"
+    dobj.transform_space = "RELATIVE"
+    dobj.inputs["Object"].default_value = dentin
+    sdf_q = nodes.new("GeometryNodeMeshToSDFGrid")
+    links.new(dobj.outputs["Geometry"], sdf_q.inputs["Mesh"])
+    links.new(voxel, sdf_q.inputs["Voxel Size"])
+    band_mm = _math(nodes, links, "MAXIMUM", _math(nodes, links, "MULTIPLY", spread.outputs[0], Q_BAND_SPREADS),
+                    Q_BAND_MIN_MM)
+    links.new(_math(nodes, links, "CEIL", _math(nodes, links, "DIVIDE", band_mm, voxel)), sdf_q.inputs["Band Width"])
+
+    eobj = nodes.new("GeometryNodeObjectInfo")
+    eobj.name = "Enamel"
+    eobj.transform_space = "RELATIVE"
+    eobj.inputs["Object"].default_value = enamel
+    inner = nodes.new("GeometryNodeInputNamedAttribute")
+    inner.data_type = "FLOAT"
+    inner.inputs["Name"].default_value = INNER_ATTRIBUTE
+    outer = nodes.new("GeometryNodeSeparateGeometry")
+    outer.domain = "FACE"
+    links.new(eobj.outputs["Geometry"], outer.inputs["Geometry"])
+    links.new(_math(nodes, links, "LESS_THAN", inner.outputs["Attribute"], 0.5), outer.inputs["Selection"])
+    sdf_o = nodes.new("GeometryNodeMeshToSDFGrid")
+    links.new(outer.outputs["Selection"], sdf_o.inputs["Mesh"])
+    links.new(voxel, sdf_o.inputs["Voxel Size"])
+    sdf_o.inputs["Band Width"].default_value = 3
+    fog = nodes.new("GeometryNodeMeshToDensityGrid")
+    links.new(outer.outputs["Selection"], fog.inputs["Mesh"])
+    links.new(voxel, fog.inputs["Voxel Size"])
+    fog.inputs["Density"].default_value = 1.0
+
+    volume = None
+    for grid, node in ((GRID_Q, sdf_q), (GRID_O, sdf_o), (GRID_M, fog)):
+        store = nodes.new("GeometryNodeStoreNamedGrid")
+        store.data_type = "FLOAT"
+        store.inputs["Name"].default_value = grid
+        links.new(node.outputs[0], store.inputs["Grid"])
+        if volume is not None:
+            links.new(volume, store.inputs["Volume"])
+        volume = store.outputs["Volume"]
+    setmat = nodes.new("GeometryNodeSetMaterial")
+    setmat.name = "Material"
+    links.new(volume, setmat.inputs["Geometry"])
+    setmat.inputs["Material"].default_value = material
+    links.new(setmat.outputs["Geometry"], gout.inputs["Geometry"])
+    for i, node in enumerate(n for n in nodes if n.type != "GROUP_OUTPUT"):
+        node.location = (-900 + 160 * (i % 10), -220 * (i // 10))
+    # the grids' band follows the material's spread
+    _add_driver(group, 'nodes["Spread"].outputs[0].default_value', -1, material,
+                f'node_tree.nodes["{BLEND_GROUP}"].inputs["{SPREAD}"].default_value')
+    describe_teeth_sockets(group)
+    return group
+
+
+# -- the blend material ------------------------------------------------------------------------------------
+def _vec(nodes, links, op, a, b=None, scale=None):
+    n = nodes.new("ShaderNodeVectorMath")
+    n.operation = op
+    for i, v in enumerate((a, b)):
+        if v is None:
+            continue
+        if isinstance(v, tuple):
+            n.inputs[i].default_value = v
+        else:
+            links.new(v, n.inputs[i])
+    if scale is not None:
+        links.new(scale, n.inputs["Scale"])
+    return n.outputs[0]
+
+
+def ensure_blend_group() -> bpy.types.ShaderNodeTree:
+    """The shader group of the blended medium's scattering (one per file): see the module docstring."""
+    from .materials import DEFAULTS
+
+    group = bpy.data.node_groups.get(BLEND_GROUP)
+    if group is not None and group.get(MARKER):
+        return group
+    group = bpy.data.node_groups.new(BLEND_GROUP, "ShaderNodeTree")
+    group[MARKER] = "Blend"
+    for medium in MEDIA:
+        d = DEFAULTS[medium]
+        add_group_input(group, f"{medium} Sigma_t", "NodeSocketVector", d["sigma_t"], 1e-3, 1e3)
+        add_group_input(group, f"{medium} Albedo", "NodeSocketColor", (*d["albedo"], 1.0))
+        add_group_input(group, f"{medium} G1", "NodeSocketFloat", d["g1"], -0.95, 0.95)
+        add_group_input(group, f"{medium} G2", "NodeSocketFloat", d["g2"], -0.95, 0.95)
+        add_group_input(group, f"{medium} Beta", "NodeSocketFloat", d["beta"], 0.0, 1.0)
+    add_group_input(group, SPREAD, "NodeSocketFloat", DEFAULT_SPREAD_MM, 0.0, 100.0)
+    add_group_input(group, "mm per Unit", "NodeSocketFloat", 1000.0, 1e-6, 1e9)
+    group.interface.new_socket("Volume", in_out="OUTPUT", socket_type="NodeSocketShader")
+    nodes, links = group.nodes, group.links
+    gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    gin.location, gout.location = (-1200, 0), (900, 0)
+    attrs = {}
+    for name in (GRID_Q, GRID_O, GRID_M):
+        a = nodes.new("ShaderNodeAttribute")
+        a.attribute_type = "GEOMETRY"
+        a.attribute_name = name
+        attrs[name] = a.outputs["Fac"]
+    # l = 1 / (1 + exp(-q / s)); q / s clamped to +-60 (l within 1e-26 of 0 or 1) so that exp stays finite
+    s = _math(nodes, links, "MAXIMUM", gin.outputs[SPREAD], 1e-9)
+    x = _math(nodes, links, "DIVIDE", attrs[GRID_Q], s)
+    x = _math(nodes, links, "MINIMUM", _math(nodes, links, "MAXIMUM", x, -60.0), 60.0)
+    e = _math(nodes, links, "EXPONENT", _math(nodes, links, "MULTIPLY", x, -1.0))
+    lw = _math(nodes, links, "DIVIDE", 1.0, _math(nodes, links, "ADD", e, 1.0))
+    inside = _math(nodes, links, "MULTIPLY", _math(nodes, links, "LESS_THAN", attrs[GRID_O], 0.0),
+                   _math(nodes, links, "GREATER_THAN", attrs[GRID_M], 0.0))
+
+    def mixed_vec(name):  # D + l (E - D)
+        diff = _vec(nodes, links, "SUBTRACT", gin.outputs[f"Enamel {name}"], gin.outputs[f"Dentin {name}"])
+        return _vec(nodes, links, "ADD", _vec(nodes, links, "SCALE", diff, scale=lw), gin.outputs[f"Dentin {name}"])
+
+    def mixed(name):
+        diff = _math(nodes, links, "SUBTRACT", gin.outputs[f"Enamel {name}"], gin.outputs[f"Dentin {name}"])
+        n = nodes.new("ShaderNodeMath")
+        n.operation = "MULTIPLY_ADD"
+        links.new(diff, n.inputs[0])
+        links.new(lw, n.inputs[1])
+        links.new(gin.outputs[f"Dentin {name}"], n.inputs[2])
+        return n.outputs[0]
+
+    scale = _math(nodes, links, "MULTIPLY", gin.outputs["mm per Unit"], inside)
+    sigma_s = _vec(nodes, links, "MULTIPLY", mixed_vec("Albedo"), mixed_vec("Sigma_t"))
+    sigma_s = _vec(nodes, links, "SCALE", sigma_s, scale=scale)
+    # the sharp sigma_t of the region the point is in (q >= 0: enamel)
+    in_enamel = _math(nodes, links, "SUBTRACT", 1.0, _math(nodes, links, "LESS_THAN", attrs[GRID_Q], 0.0))
+    diff = _vec(nodes, links, "SUBTRACT", gin.outputs["Enamel Sigma_t"], gin.outputs["Dentin Sigma_t"])
+    sigma_t = _vec(nodes, links, "ADD", _vec(nodes, links, "SCALE", diff, scale=in_enamel),
+                   gin.outputs["Dentin Sigma_t"])
+    sigma_t = _vec(nodes, links, "SCALE", sigma_t, scale=scale)
+    lobes = []
+    for gname in ("G1", "G2"):
+        sc = nodes.new("ShaderNodeVolumeScatter")
+        if hasattr(sc, "phase"):
+            sc.phase = "HENYEY_GREENSTEIN"
+        links.new(sigma_s, sc.inputs["Color"])
+        sc.inputs["Density"].default_value = 1.0
+        links.new(mixed(gname), sc.inputs["Anisotropy"])
+        lobes.append(sc)
+    mix = nodes.new("ShaderNodeMixShader")  # beta HG(g1) + (1 - beta) HG(g2)
+    links.new(mixed("Beta"), mix.inputs["Fac"])
+    links.new(lobes[1].outputs[0], mix.inputs[1])
+    links.new(lobes[0].outputs[0], mix.inputs[2])
+    ab = nodes.new("ShaderNodeVolumeAbsorption")  # weight (1 - Color) Density = sigma_t - sigma_s
+    links.new(_vec(nodes, links, "ADD", _vec(nodes, links, "SUBTRACT", sigma_s, sigma_t), (1.0, 1.0, 1.0)),
+              ab.inputs["Color"])
+    ab.inputs["Density"].default_value = 1.0
+    add = nodes.new("ShaderNodeAddShader")
+    links.new(mix.outputs[0], add.inputs[0])
+    links.new(ab.outputs[0], add.inputs[1])
+    links.new(add.outputs[0], gout.inputs["Volume"])
+    for i, node in enumerate(n for n in nodes if n.type not in {"GROUP_INPUT", "GROUP_OUTPUT"}):
+        node.location = (-1000 + 110 * (i % 16), -200 * (i // 16))
+    describe_teeth_sockets(group)
+    return group
+
+
+def _add_driver(owner, dst_path: str, index: int, src_mat, src_path: str) -> None:
+    """``owner``'s property ``dst_path[index]`` follows ``src_mat``'s ``src_path`` (a plain driver: evaluated
+    without Python, saved with the file)."""
+    owner.driver_remove(dst_path, index)
+    fc = owner.driver_add(dst_path, index)
+    drv = fc.driver
+    drv.type = "AVERAGE"
+    for v in list(drv.variables):
+        drv.variables.remove(v)
+    var = drv.variables.new()
+    var.name = "v"
+    var.type = "SINGLE_PROP"
+    var.targets[0].id_type = "MATERIAL"
+    var.targets[0].id = src_mat
+    var.targets[0].data_path = src_path
+
+
+def _input_index(node, name: str) -> int:
+    return next(i for i, s in enumerate(node.inputs) if s.name == name)
+
+
+def link_materials(blend_mat, enamel_mat, dentin_mat) -> None:
+    """Drive the blend material's parameters from the tooth's Enamel and Dentin materials."""
+    bnode = group_node(blend_mat)
+    for medium, src in (("Enamel", enamel_mat), ("Dentin", dentin_mat)):
+        snode = group_node(src)
+        if snode is None:
+            continue
+        for sock, n in PARAMS:
+            di = _input_index(bnode, f"{medium} {sock}")
+            si = _input_index(snode, sock)
+            dst = f'nodes["{bnode.name}"].inputs[{di}].default_value'
+            srcp = f'node_tree.nodes["{snode.name}"].inputs[{si}].default_value'
+            bnode.inputs[di].default_value = snode.inputs[si].default_value
+            for k in range(n) if n else (-1,):
+                _add_driver(blend_mat.node_tree, dst, k, src, srcp if k < 0 else f"{srcp}[{k}]")
+    enode = group_node(enamel_mat)
+    if enode is not None:
+        bnode.inputs["mm per Unit"].default_value = enode.inputs["mm per Unit"].default_value
+
+
+def new_blend_material(name: str, spread: float) -> bpy.types.Material:
+    group = ensure_blend_group()
+    mat = new_material(name)
+    mat[MARKER] = "Blend"
+    tree = mat.node_tree
+    node = tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.name = node.label = BLEND_GROUP
+    out = material_output(mat)
+    out.target = "CYCLES"  # EEVEE: the Enamel/Dentin materials' own stand-ins
+    tree.links.new(node.outputs["Volume"], out.inputs["Volume"])
+    node.inputs[SPREAD].default_value = float(spread)
+    mat.diffuse_color = (1.0, 1.0, 1.0, 0.0)
+    return mat
+
+
+# -- per tooth -----------------------------------------------------------------------------------------------
+def blend_object(enamel):
+    """The Blend Volume object of a tooth's enamel shell (None if it has none)."""
+    return next((o for o in enamel.children if getattr(o, "ms_tooth", None) is not None
+                 and o.ms_tooth.role == "BLEND"), None)
+
+
+def set_blending(mat, on: bool) -> None:
+    """An Enamel/Dentin material attenuates only (``on``: its tooth's Blend Volume scatters) or is whole."""
+    node = group_node(mat)
+    if node is not None and BLEND_INPUT in node.inputs:
+        node.inputs[BLEND_INPUT].default_value = 1.0 if on else 0.0
+
+
+def set_spread(enamel, spread: float) -> None:
+    """The blend spread s (mm) of a tooth: its Blend Volume material (the grids' band follows by a driver)."""
+    obj = blend_object(enamel)
+    node = group_node(obj.active_material) if obj is not None else None
+    if node is not None:
+        node.inputs[SPREAD].default_value = float(spread)
+
+
+def ensure_blend(enamel, spread: float | None = None, collection=None):
+    """Give the tooth of ``enamel`` its Blend Volume (made once; its materials linked again each call) and,
+    unless ``spread`` is None, set the spread. Returns the Blend Volume object (None without a dentin)."""
+    dentin = enamel.ms_tooth.partner
+    em = enamel.active_material
+    dm = dentin.active_material if dentin is not None else None
+    if dentin is None or group_node(em) is None or group_node(dm) is None:
+        return None
+    from .materials import ensure_blend_input
+
+    for m in (em, dm):
+        ensure_blend_input(group_node(m).node_tree)
+    obj = blend_object(enamel)
+    name = enamel.ms_tooth.tooth_name or enamel.name
+    if obj is None:
+        mat = new_blend_material(f"Blend {name}", DEFAULT_SPREAD_MM if spread is None else spread)
+        me = bpy.data.meshes.new(f"{name} Blend Volume")
+        me.materials.append(mat)
+        obj = bpy.data.objects.new(f"{name} Blend Volume", me)
+        colls = [collection] if collection is not None else list(enamel.users_collection)
+        for c in colls:
+            c.objects.link(obj)
+        obj.parent = enamel  # identity: the grids are in the enamel's millimetre frame
+        obj.ms_tooth.role = "BLEND"
+        obj.ms_tooth.tooth_name = enamel.ms_tooth.tooth_name
+        obj.ms_tooth.partner = enamel
+        obj.ms_tooth.mm_per_unit = enamel.ms_tooth.mm_per_unit
+        obj.display_type = "BOUNDS"
+        obj.hide_select = True
+        mod = obj.modifiers.new(MODIFIER, "NODES")
+        mod.node_group = field_group(f"{FIELD_GROUP} {name}", enamel, dentin, mat)
+    mat = obj.active_material
+    link_materials(mat, em, dm)
+    if spread is not None:
+        set_spread(enamel, spread)
+    node = group_node(mat)
+    on = node is not None and node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
+    set_blending(em, on)
+    set_blending(dm, on)
+    obj.hide_render = not on
+    return obj

@@ -1,0 +1,244 @@
+"""Teeth: the enamel/dentin sigmoid blend of the fit's model (eq. 5.15) in Cycles, through each tooth's Blend
+Volume (addon/teeth/blend_volume.py), made by Add Tooth, From Mesh, Import Teeth Scene and Apply Fit Result,
+with the dentin shape keys live."""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+import pytest
+
+
+def _blend_setup(enamel):
+    from material_structures.addon.teeth.blend_volume import BLEND_INPUT, blend_object
+    from material_structures.addon.teeth.materials import group_node
+
+    obj = blend_object(enamel)
+    assert obj is not None, f"{enamel.name} has no Blend Volume"
+    dentin = enamel.ms_tooth.partner
+    flags = [group_node(o.active_material).inputs[BLEND_INPUT].default_value for o in (enamel, dentin)]
+    return obj, flags
+
+
+def _evaluated_grids(obj):
+    dg = bpy.context.evaluated_depsgraph_get()
+    dg.update()
+    for inst in dg.object_instances:
+        if inst.object.type == "VOLUME" and inst.object.original.name == obj.name:
+            return sorted(g.name for g in inst.object.data.grids), np.array(inst.object.bound_box)
+    return [], None
+
+
+def _scene_file(tmp_path, spread):
+    from material_structures.core.teeth.scene import save_scene
+    from material_structures.core.teeth.synthetic import make_scene
+
+    ts = make_scene(n_teeth=1, resolution=16)
+    ts.blend_spread = spread
+    path = os.path.join(str(tmp_path), "scene.json")
+    save_scene(ts, path)
+    return ts, path
+
+
+def test_every_way_of_making_a_tooth_gives_it_a_blend_volume(addon_module, tmp_path):
+    bpy.ops.wm.read_homefile(use_empty=True)
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.004, location=(0.02, 0, 0))
+    assert bpy.ops.material_structures.teeth_add_tooth(source="MESH") == {"FINISHED"}
+    _, path = _scene_file(tmp_path, 0.34)
+    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+    teeth = [o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL"]
+    assert len(teeth) == 3
+    for enamel in teeth:
+        obj, flags = _blend_setup(enamel)
+        assert flags == [1.0, 1.0]  # the materials give their volumes to the Blend Volume
+        grids, _ = _evaluated_grids(obj)
+        assert grids == ["ms_m", "ms_o", "ms_q"]
+
+
+def test_apply_fit_result_drives_the_blend_and_shape_keys_move_it(addon_module, tmp_path):
+    """Apply Fit Result writes the fit into the Enamel/Dentin materials; the Blend Volume's material follows by
+    drivers (exact to float32), takes the file's spread, and its grids follow the dentin's shape keys."""
+    from material_structures.addon.teeth.blend_volume import SPREAD, blend_object
+    from material_structures.addon.teeth.materials import group_node
+    from material_structures.core.teeth.scene import save_scene
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    ts, path = _scene_file(tmp_path, 0.34)
+    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+    fit = ts.copy()
+    t = fit.teeth[0]
+    t.enamel.sigma_t = np.array([0.7, 0.8, 1.9])
+    t.enamel.g1 = 0.31
+    t.dentin.albedo = np.array([0.81, 0.72, 0.63])
+    t.dentin.beta = 0.55
+    t.c = np.array([0.0, 0.0, 0.6])
+    fit.blend_spread = 0.5
+    fit_path = os.path.join(str(tmp_path), "scene_fit.json")
+    save_scene(fit, fit_path)
+    assert bpy.ops.material_structures.teeth_apply_fit_file(filepath=fit_path) == {"FINISHED"}
+    enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
+    obj = blend_object(enamel)
+    _, box_fit = _evaluated_grids(obj)
+    node = group_node(obj.active_material)
+    assert tuple(node.inputs["Enamel Sigma_t"].default_value) == pytest.approx((0.7, 0.8, 1.9), abs=1e-6)
+    assert node.inputs["Enamel G1"].default_value == pytest.approx(0.31, abs=1e-6)
+    assert tuple(node.inputs["Dentin Albedo"].default_value)[:3] == pytest.approx((0.81, 0.72, 0.63), abs=1e-6)
+    assert node.inputs["Dentin Beta"].default_value == pytest.approx(0.55, abs=1e-6)
+    assert node.inputs[SPREAD].default_value == pytest.approx(0.5, abs=1e-6)
+    # the dentin's shape keys are live: the grids (their bounds, in the tooth's mm) follow the occlusal slider
+    # (c from 0.6 to -0.6 moves the dentin's occlusal end by about 1.2 mm; the bounds step by whole voxels)
+    enamel.ms_tooth.set_coefficients((0.0, 0.0, -0.6))
+    _, box_moved = _evaluated_grids(obj)
+    assert np.abs(box_moved - box_fit).max() > 0.5
+
+
+def test_blend_at_a_narrow_spread_renders_the_sharp_model(addon_module):
+    """A spread of 0.02 mm (the Blend Volume on) renders the two-tooth check scene as the sharp meshes do: image
+    means within 5 % per channel (32 x 20 px, 64 spp; measured -2.2 %, -2.2 %, -0.3 % at 32 spp on 5.2)."""
+    from material_structures.addon.teeth import verify as V
+    from material_structures.addon.teeth.blend_volume import blend_object
+    from material_structures.render import render_to_array
+
+    means = []
+    for spread in (1e-6, 0.02):
+        ts, cam, light = V.check_scene(2, 16, 32, 20)
+        ts.blend_spread = spread
+        scene = V.reset_scene()
+        V.dark_world(scene)
+        out = V.build_teeth_scene(ts, scene.collection, mm_per_unit=1.0)
+        assert all(blend_object(e).hide_render == (spread < 0.01) for e, _ in out["teeth"])
+        V.add_camera(scene, cam, mm_per_unit=1.0)
+        V.add_point_light(scene, light, mm_per_unit=1.0)
+        V.configure_teeth_cycles(scene, 64, 0, 64)
+        means.append(render_to_array(scene)[:, :, :3].mean(axis=(0, 1)))
+    assert means[1] == pytest.approx(means[0], rel=0.05)
+
+
+@pytest.mark.parametrize("osl", [False, True])
+def test_enamel_boundary_renders_with_and_without_osl(addon_module, osl):
+    """The Enamel group's surface under Cycles with Open Shading Language off (Blender's default: the script node
+    is dropped and the group's native boundary runs) and on (the script): a tilted boundary plane seen
+    orthographically, the straight-through ray on a red emitter (pixel R = a_t (1 - F)), the mirror ray on a
+    green one (pixel G = F), eq. 5.1-5.2 with eta 1.631; 16 px x 512 spp, tolerances as the script's own test."""
+    import math
+
+    from material_structures import render as R
+    from material_structures.addon.teeth.materials import ensure_group
+    from material_structures.core.teeth.fresnel import fresnel_dielectric
+
+    from .test_teeth_shader import _emitter
+
+    theta_deg, a_t = 60.0, 0.8
+    scene = R.reset_scene()
+    R.configure_cycles(scene, resolution=(4, 4), samples=512, seed=3, osl=osl)
+    R.dark_world(scene)
+    group = ensure_group("Enamel", scene)
+    mat = R.new_material("Boundary")
+    node = mat.node_tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.inputs["At"].default_value = (a_t, a_t, a_t, 1.0)
+    mat.node_tree.links.new(node.outputs["Surface"], R.scene.material_output(mat).inputs["Surface"])
+    plane = R.add_textured_plane(scene, 1.0, mat, "Boundary")
+    th = math.radians(theta_deg)
+    plane.rotation_euler = (th, 0.0, 0.0)
+    r = np.array([0.0, -math.sin(2 * th), math.cos(2 * th)])
+    _emitter(scene, "Through", (0.0, 0.0, -2.0), (0, 0, 1), (1.0, 0.0, 0.0))
+    _emitter(scene, "Mirror", tuple(2.0 * r), tuple(-r), (0.0, 1.0, 0.0))
+    R.add_orthographic_camera(scene, 0.2)
+    rgb = R.render_to_array(scene)[:, :, :3].reshape(-1, 3).mean(axis=0)
+    F = float(fresnel_dielectric(math.cos(th), 1.631))
+    assert rgb[0] == pytest.approx(a_t * (1.0 - F), rel=0.02)
+    assert rgb[1] == pytest.approx(F, rel=0.06, abs=0.004)
+    assert rgb[2] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_making_teeth_leaves_the_render_engine_alone(addon_module, tmp_path):
+    """Add Tooth, From Mesh and Import Teeth Scene in an EEVEE scene (and in a Cycles scene with OSL off) leave
+    the render engine and the shading system as the artist set them."""
+    _, path = _scene_file(tmp_path, 0.34)
+    for engine in ("BLENDER_EEVEE_NEXT" if bpy.app.version < (5, 0, 0) else "BLENDER_EEVEE", "CYCLES"):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        scene = bpy.context.scene
+        scene.render.engine = engine
+        scene.cycles.shading_system = False
+        assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="MOLAR", resolution=12) \
+            == {"FINISHED"}
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.004, location=(0.02, 0, 0))
+        assert bpy.ops.material_structures.teeth_add_tooth(source="MESH") == {"FINISHED"}
+        assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+        assert (scene.render.engine, scene.cycles.shading_system) == (engine, False)
+
+
+@pytest.mark.parametrize("content", ['{"lights": [], "cameras": []}', '{"format": "something/1", "teeth": []}'])
+def test_import_teeth_scene_of_another_json_says_so_in_one_line(addon_module, tmp_path, content):
+    path = os.path.join(str(tmp_path), "capture.json")
+    with open(path, "w") as f:
+        f.write(content)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.material_structures.teeth_import_scene(filepath=path)
+    msg = str(err.value).strip()
+    assert "\n" not in msg and msg.count(path) == 1, msg
+    assert "teeth" in msg or "format" in msg, msg
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.material_structures.teeth_apply_fit_file(filepath=path)
+    msg = str(err.value).strip()
+    assert "\n" not in msg and msg.count(path) == 1, msg
+
+
+def test_fit_check_image_is_saved_in_the_blend(addon_module, tmp_path):
+    """The fit's check picture (check.png in the fit folder) is packed into the .blend: after saving, deleting
+    the fit folder's picture and reopening in a fresh process, the image is there with its pixels."""
+    import json
+
+    from material_structures.addon.teeth.operators import show_fit_check
+    from material_structures.addon.teeth.properties import CHECK_IMAGE_NAME
+
+    from .fresh import run_fresh
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    out = str(tmp_path / "fit")
+    os.makedirs(out)
+    with open(os.path.join(out, "fit_report.json"), "w") as f:
+        json.dump({"held_out": {"lights": [3], "rms_relative": 0.1, "rms_relative_tiles": 0.05}}, f)
+    img = bpy.data.images.new("check", 12, 4)
+    img.pixels.foreach_set(np.tile([0.25, 0.5, 0.75, 1.0], 48).astype(np.float32))
+    img.filepath_raw = os.path.join(out, "check.png")
+    img.file_format = "PNG"
+    img.save()
+    bpy.data.images.remove(img)
+    fs = bpy.context.scene.ms_teeth_fit
+    show_fit_check(fs, out)
+    blend = str(tmp_path / "fitted.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    os.remove(os.path.join(out, "check.png"))
+    r = run_fresh(f"""
+img = bpy.data.images.get({CHECK_IMAGE_NAME!r})
+RESULT = None if img is None else [img.packed_file is not None, list(img.size), list(img.pixels[:4]),
+                                   bpy.context.scene.ms_teeth_fit.check_error]
+""", blend=blend)
+    assert r is not None and r[0] and r[1] == [12, 4], r
+    assert r[2] == pytest.approx([0.25, 0.5, 0.75, 1.0], abs=0.01)  # 8-bit sRGB PNG round trip
+    assert r[3].startswith("Held-out lights: 10.0%")
+
+
+def test_fit_progress_moves_during_the_start_trials(addon_module, tmp_path):
+    """The panel's bar (FitJob.progress) counts the start trials' iterations, reported as the CLI's "init"
+    events, before the fit's own: it was 0 % until the first fit iteration."""
+    from material_structures.addon.teeth.fit_job import FitJob
+
+    (tmp_path / "capture.json").write_text("{}")
+    job = FitJob(str(tmp_path), str(tmp_path / "fit"), iterations=100)
+    job.on_event({"progress": "init", "message": "trying 3 starts, 20 iterations each"})
+    assert job.progress == 0.0
+    job.on_event({"progress": "init", "message": "trying 3 starts: 30 of 60 iterations"})
+    assert job.progress == pytest.approx(30 / 160)
+    job.on_event({"progress": "init", "message": "trying 3 starts: 50 of 50 iterations"})  # one start dropped
+    assert job.progress == pytest.approx(50 / 150)
+    job.on_event({"progress": "fit", "iteration": 20, "iterations": 100, "loss": 1.0})
+    assert job.progress == pytest.approx(70 / 150)
+    job.on_event({"progress": "fit", "iteration": 100, "iterations": 100, "loss": 1.0})
+    assert job.progress == pytest.approx(1.0)
