@@ -86,3 +86,14 @@ def test_fit_btf_from_the_file_browser_ends_in_a_timer(addon_module, btf_dir, tm
     job.wait()
     assert tick() is None and job.settled and job.outcome.startswith("done: Fabric fit")
     assert obj.active_material is not None and obj.active_material.get("material_structures_fabric")
+
+
+def test_a_fit_that_has_not_reported_its_tiles_says_starting(addon_module, btf_dir, tmp_path):
+    """Issue 63, item 9: the panel first showed "tile 0/1" (a count nobody reported); until the fit says how
+    many tiles it has, the status says it is starting, then counts the reported tiles."""
+    from material_structures.addon.fabric import fit_job
+
+    job = fit_job.FabricFitJob(btf_dir, str(tmp_path / "fit"), workers=1)  # not started
+    assert job.status_text().startswith("Fabric fit: starting") and "0/1" not in job.status_text()
+    job.on_event({"progress": "fit", "iteration": 0, "iterations": 4})
+    assert "tile 0/4" in job.status_text()
