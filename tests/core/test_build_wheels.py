@@ -10,6 +10,7 @@ import tomllib
 import pytest
 
 from material_structures.cli import build
+from material_structures.core.errors import UserError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -60,6 +61,6 @@ def test_staged_manifest_lists_wheels_platforms_and_range():
 def test_checkout_manifest_leaves_wheels_to_the_build():
     with open(os.path.join(ROOT, "blender_manifest.toml")) as f:
         text = f.read()
-    with pytest.raises(RuntimeError, match="written by the build"):
+    with pytest.raises(UserError, match="written by the build"):
         listed = text.replace("[permissions]", 'wheels = ["./wheels/x.whl"]\n\n[permissions]')
         build._staged_manifest(listed, "3.13", [], ["linux-x64"])
