@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import bpy
 
-from ...core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
+from ...core.teeth.blend_spread import DEFAULT_SPREAD_MM
 from ...render import material_output, new_material
 from ..common import add_group_input
 from .materials import INNER_ATTRIBUTE, MARKER, describe_teeth_sockets, group_node

@@ -23,8 +23,8 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
+from ...core.teeth.blend_spread import DEFAULT_SPREAD_MM
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
-from ...core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
 from .blend_volume import ensure_blend
 from .materials import INNER_ATTRIBUTE
 

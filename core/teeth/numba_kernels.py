@@ -36,8 +36,8 @@ except ImportError:  # pragma: no cover - numba is optional (the numpy tracer ru
 # the modules whose code or constants the compiled tracer is built from: its numba functions, the
 # functions they call or inline, the constants they read (``test_teeth_numba_kernels`` checks that every
 # module that imports numba, and every teeth module one of those imports from, is listed)
-KERNEL_MODULES = ("bvh", "compiled_scene", "dentin_reach_grid", "fresnel", "numba_kernels", "path_tracer",
-                  "path_tracer_compiled", "phase_function", "ray_queries", "sigmoid_blend", "work_queue")
+KERNEL_MODULES = ("blend_spread", "bvh", "compiled_scene", "dentin_reach_grid", "fresnel", "numba_kernels",
+                  "path_tracer", "path_tracer_compiled", "phase_function", "ray_queries", "sigmoid_blend", "work_queue")
 _HERE = os.path.dirname(os.path.abspath(__file__))
 
 

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .blend_spread import DEFAULT_SPREAD_MM
 from .numba_kernels import numba_callable
 
-DEFAULT_SPREAD_MM = 1.0 / np.log(19.0)
+__all__ = ["DEFAULT_SPREAD_MM", "blend_weight", "blend_weight_dq"]
 
 
 @numba_callable
