@@ -49,7 +49,10 @@ from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
 
+from . import numba_kernels as _numba_kernels  # noqa: E402
 from .numba_kernels import numba_callable
+
+_numba_kernels.activate()  # before any cached njit: the kernel cache locator, then numba_callable's overloads
 
 LEAF_SIZE = 4  # at most, for the median fallback; the SAH decides below
 SAH_BINS = 16

@@ -22,7 +22,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import numba_kernels as _numba_kernels
 from .bvh import closest_point_triangle
+
+_numba_kernels.activate()  # before any cached njit: the kernel cache locator, then numba_callable's overloads
 
 CELLS_LONGEST_AXIS = 96  # cells along the longest axis of a tooth's dentin box
 MAX_REACH_CELLS = 2.0  # no grid where the reach spans more cells than this: nearly every cell would be marked

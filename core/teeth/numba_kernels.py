@@ -24,14 +24,11 @@ import functools
 import hashlib
 import inspect
 import os
+import sys
 from collections.abc import Callable
 
-try:
-    from numba.core import caching
-    from numba.extending import overload
-except ImportError:  # pragma: no cover - numba is optional (the numpy tracer runs without it)
-    caching = None
-    overload = None
+_PENDING: list[tuple[Callable, str]] = []  # numba_callable functions not yet registered with numba
+_ACTIVE = False
 
 # the modules whose code or constants the compiled tracer is built from: its numba functions, the
 # functions they call or inline, the constants they read (``test_teeth_numba_kernels`` checks that every
@@ -48,13 +45,34 @@ def numba_callable(fn: Callable | None = None, *, inline: str = "never") -> Call
     traversal loops). Where numba is not installed this does nothing."""
     if fn is None:
         return functools.partial(numba_callable, inline=inline)
-    if overload is not None:
-        def typer(*args, **kwargs):
-            return fn
+    _PENDING.append((fn, inline))
+    if _ACTIVE or "numba" in sys.modules:
+        activate()
+    return fn
+
+
+def activate() -> bool:
+    """Register the pending :func:`numba_callable` functions with numba and install the kernel cache locator.
+    Numba is imported here, not when this module is (the add-on imports the physics modules, and enabling the
+    extension must not import numba): each module that compiles with numba calls this right after importing
+    it. Returns whether numba is available."""
+    global _ACTIVE
+    try:
+        from numba.extending import overload
+    except ImportError:  # numba is optional (the numpy tracer runs without it)
+        return False
+    if not _ACTIVE:
+        _install_locator()
+        _ACTIVE = True
+    while _PENDING:
+        fn, inline = _PENDING.pop(0)
+
+        def typer(*args, _fn=fn, **kwargs):
+            return _fn
 
         typer.__signature__ = inspect.signature(fn)  # numba checks that the implementation's signature matches
         overload(fn, jit_options={"error_model": "numpy"}, inline=inline)(typer)
-    return fn
+    return True
 
 
 def kernel_files(folder: str = _HERE) -> list[str]:
@@ -89,10 +107,15 @@ def kernel_sources_digest(folder: str = _HERE) -> str:
     return _digest(tuple(stats))
 
 
-# numba's list of cache locators (``CacheImpl``, ``_CacheImpl`` before numba 0.61); None where numba is missing
-_IMPL = None if caching is None else getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+def _install_locator() -> None:
+    """Put :class:`KernelSourcesLocator` first in numba's list of cache locators (once per process)."""
+    from numba.core import caching
 
-if _IMPL is not None:
+    # numba's list of cache locators (``CacheImpl``, ``_CacheImpl`` before numba 0.61)
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    if impl is None:
+        return
+
     class KernelSourcesLocator(caching._CacheLocator):
         """numba cache locator for the functions of ``KERNEL_MODULES``: where and under which name numba's own
         locator would cache them, with the source stamp ``(numba's stamp of the function's file,
@@ -121,7 +144,7 @@ if _IMPL is not None:
             if os.path.splitext(name)[0] not in KERNEL_MODULES or not os.path.exists(
                     os.path.join(folder, "numba_kernels.py")):
                 return None
-            for other in _IMPL._locator_classes:
+            for other in impl._locator_classes:
                 if other is cls or getattr(other, "__name__", "") == cls.__name__:
                     continue
                 inner = other.from_function(py_func, py_file)
@@ -130,5 +153,5 @@ if _IMPL is not None:
             return None
 
     # first in line, and once per process (a copy of this package imported beside it finds its own class there)
-    if not any(getattr(c, "__name__", "") == "KernelSourcesLocator" for c in _IMPL._locator_classes):
-        _IMPL._locator_classes.insert(0, KernelSourcesLocator)
+    if not any(getattr(c, "__name__", "") == "KernelSourcesLocator" for c in impl._locator_classes):
+        impl._locator_classes.insert(0, KernelSourcesLocator)

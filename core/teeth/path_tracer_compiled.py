@@ -40,6 +40,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import get_num_threads, njit, prange
 
+from . import numba_kernels as _numba_kernels
 from .bvh import (
     LANES,
     PACKET,
@@ -63,6 +64,8 @@ from .phase_function import direction_from_mu_into, hg, hg_dlog_dg, sample_hg_mu
 from .ray_queries import RAY_EPS
 from .sigmoid_blend import blend_weight
 from .work_queue import take_next
+
+_numba_kernels.activate()  # before any cached njit: the kernel cache locator, then numba_callable's overloads
 
 # l(q) = (1 + tanh(q / 2 s)) / 2 is 1 in float64 from q / s = 38.2 on (tanh rounds to 1 beyond 19.1):
 # the dentin distance is searched only this many spreads far

@@ -15,6 +15,10 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from . import numba_kernels as _numba_kernels
+
+_numba_kernels.activate()  # before any cached njit: the kernel cache locator, then numba_callable's overloads
+
 
 @intrinsic
 def take_next(typingctx, counter):
