@@ -330,7 +330,10 @@ def use(zip_path: str, data: str, work: str) -> None:
     renders = {"fabric": [fabric["VELVET"], fitted], "scratches": [metal], "teeth": [target]}
     for name, objs in renders.items():
         partners = [o.ms_tooth.partner for o in objs if o.ms_tooth.partner is not None]
-        mean = render_only(bpy, objs + partners, os.path.join(work, f"render_{name}.exr"))
+        # a tooth's Blend Volume (its medium with the blended enamel/dentin boundary) renders with it
+        blends = [o for o in bpy.context.scene.objects if getattr(o, "ms_tooth", None) is not None
+                  and o.ms_tooth.role == "BLEND" and o.ms_tooth.partner in objs + partners]
+        mean = render_only(bpy, objs + partners + blends, os.path.join(work, f"render_{name}.exr"))
         log(f"render {name}: mean {mean:.4g}")
     TIMES["renders (3 x 32 x 32, 4 spp)"] = time.perf_counter() - t
 
