@@ -47,3 +47,17 @@ def slab_fit_problem(size: int, capture_spp: int, start_enamel: VolumeMaterial, 
     start = truth.copy()
     start.teeth[0].enamel = start_enamel
     return start, cap
+
+
+def brute_force_hits(tris, origin, direction):
+    """Every triangle's ray parameter t along ``origin + t direction`` (Moller-Trumbore, no tree) and the mask of
+    the triangles the ray hits at t > 0: the reference the BVH traversal tests compare with."""
+    e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    p = np.cross(direction, e2)
+    det = np.einsum("tk,tk->t", e1, p)
+    s = origin - tris[:, 0]
+    u = np.einsum("tk,tk->t", s, p) / det
+    q = np.cross(s, e1)
+    v = q @ direction / det
+    t = np.einsum("tk,tk->t", e2, q) / det
+    return t, (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)

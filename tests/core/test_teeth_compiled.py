@@ -14,6 +14,8 @@ from material_structures.core.teeth.gradient_check import fd_test_scene
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.synthetic import make_scene
 
+from ._teeth_scenes import brute_force_hits
+
 pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 
 numba = pytest.importorskip("numba")
@@ -43,15 +45,7 @@ def test_bvh_first_hit_and_gathered_hits_match_brute_force():
         tri, t = first_hit(nodes, o[i], d[i], 0.0, np.inf, stack, dist)
         assert tri == ref_tri[i]
         # brute force: all hits along the ray, sorted
-        e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
-        p = np.cross(d[i], e2)
-        det = np.einsum("tk,tk->t", e1, p)
-        s = o[i] - tris[:, 0]
-        u = np.einsum("tk,tk->t", s, p) / det
-        q = np.cross(s, e1)
-        v = q @ d[i] / det
-        tt = np.einsum("tk,tk->t", e2, q) / det
-        ok = (u >= 0) & (v >= 0) & (u + v <= 1) & (tt > 0)
+        tt, ok = brute_force_hits(tris, o[i], d[i])
         order = np.flatnonzero(ok)[np.argsort(tt[ok])]
         if tri >= 0:
             assert abs(t - tt[order[0]]) < 1e-9

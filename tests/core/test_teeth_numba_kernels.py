@@ -48,6 +48,8 @@ from material_structures.core.teeth.phase_function import (  # noqa: E402
 )
 from material_structures.core.teeth.sigmoid_blend import blend_weight, blend_weight_dq  # noqa: E402
 
+from ._teeth_scenes import brute_force_hits  # noqa: E402
+
 TEETH = Path(numba_kernels.__file__).parent
 
 
@@ -205,18 +207,10 @@ def test_stack_sizes_are_the_traversals_worst_case_and_suffice():
     d = target - o
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     stack, dist = np.empty(rt.stack_size, dtype=np.int64), np.empty(WIDTH)
-    e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
     n_hit = 0
     for i in range(len(o)):
         tri, t = first_hit(rt, o[i], d[i], 0.0, np.inf, stack, dist)
-        p = np.cross(d[i], e2)
-        det = np.einsum("tk,tk->t", e1, p)
-        s = o[i] - tris[:, 0]
-        u = np.einsum("tk,tk->t", s, p) / det
-        q = np.cross(s, e1)
-        v = q @ d[i] / det
-        tt = np.einsum("tk,tk->t", e2, q) / det
-        ok = (u >= 0) & (v >= 0) & (u + v <= 1) & (tt > 0)
+        tt, ok = brute_force_hits(tris, o[i], d[i])
         assert tri == (np.flatnonzero(ok)[np.argmin(tt[ok])] if ok.any() else -1), i
         n_hit += tri >= 0
     assert n_hit >= 100
