@@ -80,16 +80,17 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
     # over the first half only: a resumed trial may have run past it before the interruption
     first = [trial_score(log[:half]) for log in logs]
     lead = int(np.argmin(first))
+    # a ratio of scores means something only where they are positive (the paired loss estimate of a
+    # tiny, noisy capture can be below 0)
+    goes_on = [half < n and (k == lead or first[lead] <= 0 or first[k] < DROP_RATIO * first[lead])
+               for k in range(len(starts))]
+    # every drop is known before the second halves run: the progress total is right from here on
     for k in range(len(starts)):
-        if half == n:
-            break
-        # a ratio of scores means something only where they are positive (the paired loss estimate of a
-        # tiny, noisy capture can be below 0)
-        if k != lead and first[lead] > 0 and first[k] >= DROP_RATIO * first[lead]:
-            if dropped is not None:
-                dropped(n - half)
-            continue
-        logs[k] = run(k, n)
+        if half < n and not goes_on[k] and dropped is not None:
+            dropped(n - half)
+    for k in range(len(starts)):
+        if goes_on[k]:
+            logs[k] = run(k, n)
     runs = [len(log) for log in logs]
     scores = [trial_score(log) for log in logs]
     chosen = min((k for k in range(len(starts)) if runs[k] == n), key=lambda k: scores[k])

@@ -100,3 +100,24 @@ def test_one_start_or_no_trials_runs_no_trial():
         best_start([], None, s, "unused")
     with pytest.raises(ValueError, match="start_trials"):
         FitSettings(start_trials=-1)
+
+
+def test_every_drop_is_announced_before_the_second_halves_run(monkeypatch, tmp_path):
+    """The progress total shrinks before any second half runs, so the last progress event reads
+    "done of done" even where the last start is the one dropped (a fake fit: start k's loss is given)."""
+    from material_structures.core.teeth import start_trials
+
+    loss = {0: 1.0, 1: 1.1, 2: 5.0}  # start 2 is over DROP_RATIO times start 0's: dropped at the half
+    events = []
+
+    def fake_fit(scene, capture, settings, out_dir, resume, progress, until):
+        k = int(out_dir[-1])
+        events.append(("run", k, until))
+        return scene, [{"loss": loss[k]} for _ in range(until)]
+
+    monkeypatch.setattr(start_trials, "fit", fake_fit)
+    settings = replace(FitSettings(), start_trials=10, iterations=40)
+    out = start_trials.best_start([0, 1, 2], None, settings, str(tmp_path),
+                                  dropped=lambda n: events.append(("dropped", n)))
+    assert events == [("run", 0, 5), ("run", 1, 5), ("run", 2, 5), ("dropped", 5), ("run", 0, 10), ("run", 1, 10)]
+    assert out.chosen == 0 and out.iterations == [10, 10, 5]
