@@ -105,8 +105,9 @@ def run_generate(args: argparse.Namespace) -> int:
                 curves = json.load(f)
             except json.JSONDecodeError as exc:
                 raise UserError(f"{args.curves}: not valid JSON ({exc})") from exc
-        if not isinstance(curves, list) or not curves:
-            raise UserError(f"{args.curves}: expected a non-empty list of curves")
+        from ..core.json_schema import check as check_schema
+
+        check_schema(curves, "scratch-curves", args.curves)  # core/schemas/scratch-curves.schema.json
         s = sc.from_curves([_curve(args.curves, k, c) for k, c in enumerate(curves)], patch, uv=True, **kw)
     elif args.kind == "wear":
         s = sc.uniform_wear(args.count, patch, **kw)

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
+from ..json_schema import check as check_schema
 
 UNIT_TOL = 1e-3
 
@@ -125,30 +126,13 @@ def read_btf_header(path: str | os.PathLike) -> BtfHeader:
             desc = json.load(f)
     except ValueError as exc:  # not JSON, or not text
         raise UserError(f"{jpath}: not valid JSON ({exc})") from None
-    if not isinstance(desc, dict):
-        raise UserError(f"{jpath}: expected an object with width, height, samples")
-    for key in ("width", "height", "samples"):
-        if key not in desc:
-            raise UserError(f"{jpath}: missing key {key!r}")
-    width, height = desc["width"], desc["height"]
-    if not (isinstance(width, int) and isinstance(height, int) and not isinstance(width, bool)
-            and not isinstance(height, bool) and 0 < width <= MAX_SIDE and 0 < height <= MAX_SIDE):
-        raise UserError(f"{jpath}: width/height must be integers from 1 to {MAX_SIDE}, got {width!r}, {height!r}")
-    samples = desc["samples"]
-    if not isinstance(samples, list) or not samples:
-        raise UserError(f"{jpath}: samples must be a non-empty list")
+    check_schema(desc, "btf", jpath)  # core/schemas/btf.schema.json: the fields, their kinds and ranges
+    width, height = int(desc["width"]), int(desc["height"])
     wi, wo, images = [], [], []
-    for k, s in enumerate(samples):
-        if not isinstance(s, dict) or not all(key in s for key in ("wi", "wo", "image")):
-            raise UserError(f"{jpath}: samples[{k}] needs keys wi, wo, image")
-        try:
-            wi.append([float(v) for v in s["wi"]])
-            wo.append([float(v) for v in s["wo"]])
-        except (TypeError, ValueError) as exc:
-            raise UserError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers") from exc
-        if len(wi[-1]) != 3 or len(wo[-1]) != 3:
-            raise UserError(f"{jpath}: samples[{k}] wi/wo must be 3 numbers")
-        img = os.path.join(folder, str(s["image"]))
+    for k, s in enumerate(desc["samples"]):
+        wi.append([float(v) for v in s["wi"]])
+        wo.append([float(v) for v in s["wo"]])
+        img = os.path.join(folder, s["image"])
         if not os.path.isfile(img):
             raise MissingFileError(f"{jpath}: samples[{k}] image not found: {img}", img)
         images.append(img)
@@ -299,9 +283,7 @@ def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             desc = json.load(f)
     except ValueError as exc:
         raise UserError(f"{jpath}: not valid JSON ({exc})") from None
-    try:
-        wi = np.array([s["wi"] for s in desc["samples"]], dtype=np.float64)
-        wo = np.array([s["wo"] for s in desc["samples"]], dtype=np.float64)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise UserError(f"{jpath}: samples must each hold wi and wo") from exc
+    check_schema(desc, "btf", jpath)
+    wi = np.array([s["wi"] for s in desc["samples"]], dtype=np.float64)
+    wo = np.array([s["wo"] for s in desc["samples"]], dtype=np.float64)
     return validate_directions(wi, wo, jpath)

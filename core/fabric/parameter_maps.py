@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
+from ..json_schema import check as check_schema
 from .quaternion import quat_normalize
 
 MAP_FILES = {"kd": ("kd.exr", 3), "ks": ("ks.exr", 3), "sigma": ("sigma.exr", 2), "basis": ("basis.exr", 4)}
@@ -110,17 +111,12 @@ def load_params(params_dir: str | os.PathLike) -> FabricMaps:
             desc = json.load(f)
     except ValueError as exc:  # not JSON, or not text
         raise UserError(f"{jpath}: not valid JSON ({exc})") from None
-    if not isinstance(desc, dict) or not isinstance(desc.get("maps", {}), dict):
-        raise UserError(f"{jpath}: expected an object with a 'maps' object")
+    check_schema(desc, "fabric-params", jpath)  # core/schemas/fabric-params.schema.json
     arrays = {}
     for name, (default_file, c) in MAP_FILES.items():
         entry = desc.get("maps", {}).get(name, {})
-        if not isinstance(entry, dict):
-            raise UserError(f"{jpath}: maps.{name} must be an object with 'file' and 'channels'")
         file, chans = entry.get("file", default_file), entry.get("channels", ("R", "G", "B", "A")[:c])
-        if not isinstance(file, str) or not file:
-            raise UserError(f"{jpath}: maps.{name}.file must be a file name, got {file!r}")
-        if not (isinstance(chans, (list, tuple)) and len(chans) == c and all(isinstance(x, str) for x in chans)):
+        if len(chans) != c:
             raise UserError(f"{jpath}: maps.{name}.channels must name {c} channels, got {chans!r}")
         path, chans = os.path.join(params_dir, file), tuple(chans)
         try:

@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import MissingFileError, UserError
 from ..exr_io import read_exr, write_exr
 from ..json_io import save_json
+from ..json_schema import check as check_schema
 
 MAX_SIDE = 16384  # pixels a side of a camera image (teeth synth makes at most as many)
 FORMAT = "material_structures.teeth.capture/1"
@@ -172,24 +173,13 @@ class Capture:
                 meta = json.load(f)
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise UserError(f"{path}: not a JSON file ({e})") from None
-        if not isinstance(meta, dict):
-            raise UserError(f"{path}: expected a JSON object")
-        if meta.get("format") != FORMAT:
-            raise UserError(f"{path}: unknown format {meta.get('format')!r}, expected {FORMAT!r}")
-        for key in ("cameras", "lights"):
-            if not isinstance(meta.get(key), list) or not meta[key]:
-                raise UserError(f"{path}: needs a non-empty list {key!r}")
-        try:
-            cams = [Camera.from_dict(c) for c in meta["cameras"]]
-            lights = [PointLight.from_dict(li) for li in meta["lights"]]
-        except (KeyError, TypeError, ValueError) as e:
-            raise UserError(f"{path}: a camera or light is malformed ({type(e).__name__}: {e})") from None
+        # core/schemas/capture.schema.json: the fields, their kinds, sizes and ranges; below what it cannot say
+        check_schema(meta, "capture", path)
+        cams = [Camera.from_dict(c) for c in meta["cameras"]]
+        lights = [PointLight.from_dict(li) for li in meta["lights"]]
         for i, c in enumerate(cams):
-            if c.width < 1 or c.height < 1 or not (np.isfinite(c.K).all() and np.isfinite(c.R).all()
-                                                    and np.isfinite(c.t).all()):
-                raise UserError(f"{path}: camera {i} has a non-positive size or non-finite K, R or t")
-            if c.width > MAX_SIDE or c.height > MAX_SIDE:
-                raise UserError(f"{path}: camera {i} is {c.width} x {c.height} pixels, more than {MAX_SIDE} a side")
+            if not (np.isfinite(c.K).all() and np.isfinite(c.R).all() and np.isfinite(c.t).all()):
+                raise UserError(f"{path}: camera {i} has a non-finite K, R or t")
             if (c.width, c.height) != (cams[0].width, cams[0].height):
                 raise UserError(f"{path}: camera {i} is {c.width} x {c.height}, camera 0 "
                                 f"{cams[0].width} x {cams[0].height}; all cameras need one image size")
@@ -197,11 +187,6 @@ class Capture:
             if not (np.isfinite(li.position).all() and np.isfinite(li.intensity).all()) or (li.intensity < 0).any():
                 raise UserError(f"{path}: light {i} has a non-finite position or a negative or non-finite intensity")
         h, w = cams[0].height, cams[0].width
-        for key in ("images", "masks"):
-            files = meta.get(key)
-            if files is not None and not (isinstance(files, dict)
-                                          and all(isinstance(v, str) and v for v in files.values())):
-                raise UserError(f"{path}: {key!r} must map keys to file names (an object of strings)")
         images = None
         if meta.get("images"):
             images = np.zeros((len(cams), len(lights), h, w, 3), dtype=np.float32)

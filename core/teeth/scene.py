@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import MissingFileError, UserError
+from ..json_schema import check as check_schema
 from .dentin_blend_shapes import DentinBlendShape
 from .fresnel import ETA_ENAMEL, ETA_GUMS
 from .mesh import TriMesh, check_volume_mesh
@@ -229,13 +230,8 @@ def _finite_tooth(d: dict) -> Tooth:
 def scene_from_dict(d, source: str = "scene") -> TeethScene:
     """``TeethScene.from_dict`` for a scene a user gave (``source`` names it in errors): every field checked,
     and every mesh that bounds a volume (enamel, dentin, gums) closed, manifold and finite."""
-    if not isinstance(d, dict):
-        raise UserError(f"{source}: expected a JSON object (a teeth scene)")
-    fmt = d.get("format", SCENE_FORMAT)
-    if fmt != SCENE_FORMAT:
-        raise UserError(f"{source}: unknown format {fmt!r}, expected {SCENE_FORMAT!r}")
-    if not isinstance(d.get("teeth"), list):
-        raise UserError(f"{source}: needs a list 'teeth' (each tooth's meshes and materials)")
+    # core/schemas/teeth-scene.schema.json: the fields, their kinds, sizes and ranges; below what it cannot say
+    check_schema(d, "teeth-scene", source)
     teeth = []
     for k, t in enumerate(d["teeth"]):
         tooth = _part(source, f"teeth[{k}]", _finite_tooth, t)

@@ -55,8 +55,16 @@ def slugify(title: str) -> str:
 
 
 def _page_text(name: str) -> str:
-    """The page as MkDocs renders it: cli.md with its generated reference where the parsers import."""
+    """The page as MkDocs renders it: cli.md with its generated reference where the parsers import, formats.md with
+    the field tables of the JSON schemas."""
     text = _read(name)
+    if name == "formats.md":
+        sys.path.insert(0, DOCS)
+        try:
+            import gen_formats
+            text = gen_formats.expand(text)
+        finally:
+            sys.path.remove(DOCS)
     if name == "cli.md":
         sys.path.insert(0, DOCS)
         try:
@@ -124,7 +132,7 @@ def test_relative_links_and_anchors_resolve(name):
 def test_table_rows_keep_their_columns(name):
     """A stray | inside a cell (write abs(x), or \\| ) splits the row and shifts every cell after it."""
     width = None
-    for i, line in _prose_lines(_read(name)):
+    for i, line in _prose_lines(_page_text(name)):
         if not line.startswith("|"):
             width = None
             continue

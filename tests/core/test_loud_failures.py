@@ -210,10 +210,13 @@ def test_whole_number_floats_still_load_as_integers(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("curves, said", [
-    ('[["a", "b"]]', "curve 0 is not a list of [u, v] points of numbers"),
-    ('[[[0, 0], [1, 1]], [[0, 0, 0], [1, 1, 1]]]', "curve 1 is not a list of [u, v] points"),
-    ('[[[0, 0], [1]]]', "curve 0 is not a list of [u, v] points"),
-    ('["ab"]', "curve 0 is not a list of [u, v] points"),
+    # the schema's words (core/schemas/scratch-curves.schema.json): [curve][point]
+    ('[["a", "b"]]', 'c.json: [0][0]: expected 2 numbers, got "a"'),
+    ('[[[0, 0], [1, 1]], [[0, 0, 0], [1, 1, 1]]]', "c.json: [1][0]: expected 2 numbers, got 3"),
+    ('[[[0, 0], [1]]]', "c.json: [0][1]: expected 2 numbers, got 1"),
+    ('["ab"]', 'c.json: [0]: expected a curve (a list of [u, v] points), got "ab"'),
+    ("[]", "c.json: expected a non-empty list, got 0"),
+    ('[[[0, 1e999]]]', "c.json: curve 0 holds non-finite coordinates"),
 ])
 def test_curves_files_of_the_wrong_shape_are_one_line(tmp_path, capsys, curves, said):
     (tmp_path / "c.json").write_text(curves)

@@ -56,18 +56,19 @@ def _edit_json(folder, fn) -> None:
 
 
 @pytest.mark.parametrize("edit, said", [
-    (lambda m: m.pop("lights"), "non-empty list 'lights'"),
-    (lambda m: m.update(lights=[]), "non-empty list 'lights'"),
+    # the schema's words (core/schemas/capture.schema.json), then the loader's own checks
+    (lambda m: m.pop("lights"), "capture.json: lacks the field 'lights'"),
+    (lambda m: m.update(lights=[]), "capture.json: lights: expected a non-empty list, got 0"),
     (lambda m: m["lights"].append(m["lights"][0]), "no image for 1 (camera, light) pairs"),
     (lambda m: m["images"].pop("0,2"), "no image for 1 (camera, light) pairs"),
     (lambda m: m["images"].update({"0,9": m["images"]["0,0"]}), "does not exist"),
-    (lambda m: m["images"].update({"zero": m["images"]["0,0"]}), "not 'camera,light'"),
+    (lambda m: m["images"].update({"zero": m["images"]["0,0"]}), 'images: key "zero" is not a "camera,light" pair'),
     (lambda m: m["masks"].clear() or m["masks"].update({"3": "masks/cam0.exr"}), "does not exist"),
-    (lambda m: m["cameras"][0].pop("K"), "malformed"),
-    (lambda m: m["cameras"][0].update(width=0), "non-positive size"),
-    (lambda m: m["lights"][1].update(intensity=[-1, 1, 1]), "light 1"),
-    (lambda m: m["lights"][1].update(position=[float("nan"), 0, 0]), "light 1"),
-    (lambda m: m.update(format="other/1"), "unknown format"),
+    (lambda m: m["cameras"][0].pop("K"), "cameras[0]: lacks the field 'K'"),
+    (lambda m: m["cameras"][0].update(width=0), "cameras[0].width: must be >= 1, got 0"),
+    (lambda m: m["lights"][1].update(intensity=[-1, 1, 1]), "lights[1].intensity[0]: must be >= 0, got -1"),
+    (lambda m: m["lights"][1].update(position=[float("nan"), 0, 0]), "light 1 has a non-finite position"),
+    (lambda m: m.update(format="other/1"), 'format: expected "material_structures.teeth.capture/1", got "other/1"'),
 ])
 def test_malformed_capture_is_refused_by_name(capture_dir, tmp_path, capsys, edit, said):
     cap = _copy(capture_dir, tmp_path)
@@ -281,12 +282,14 @@ def _inside_out(d):
 
 
 @pytest.mark.parametrize("edit, said", [
-    (lambda d: d.pop("teeth"), "needs a list 'teeth'"),
-    (lambda d: d.update(teeth={"a": 1}), "needs a list 'teeth'"),
-    (lambda d: d["teeth"][0].pop("enamel"), "teeth[0] lacks the field 'enamel'"),
-    (lambda d: d["teeth"][0]["enamel"].update(sigma_t="thick"), "teeth[0] holds a field of the wrong kind"),
+    # the schema's words (core/schemas/teeth-scene.schema.json), then the loader's own checks
+    (lambda d: d.pop("teeth"), "lacks the field 'teeth'"),
+    (lambda d: d.update(teeth={"a": 1}), "teeth: expected a list, got an object"),
+    (lambda d: d["teeth"][0].pop("enamel"), "teeth[0]: lacks the field 'enamel'"),
+    (lambda d: d["teeth"][0]["enamel"].update(sigma_t="thick"),
+     'teeth[0].enamel.sigma_t: expected 3 numbers, got "thick"'),
     (lambda d: d["teeth"][0]["enamel"].update(sigma_t=[float("nan")] * 3), "need sigma_t > 0"),
-    (lambda d: d["teeth"][0].update(eta=0.5), "eta must be a refractive index"),
+    (lambda d: d["teeth"][0].update(eta=0.5), "teeth[0].eta: must be >= 1, got 0.5"),
     (lambda d: d["teeth"][0].update(a_t=[float("inf")] * 3), "NaN or infinite"),
     (_drop_face, "the enamel mesh is not closed (3 edges belong to one triangle only)"),
     (_third_face_on_an_edge, "the enamel mesh is not manifold (3 edges are shared by three or more triangles)"),
@@ -295,8 +298,9 @@ def _inside_out(d):
      "the enamel mesh has 1 vertices that are NaN or infinite"),
     (lambda d: _drop_a_face_of(d["teeth"][0]["dentin_shape"]["base"]), "the dentin mesh is not closed"),
     (lambda d: _drop_a_face_of(d["gums"]["mesh"]), "the gums mesh is not closed"),
-    (lambda d: d.update(blend_spread_mm=-1), "blend_spread_mm must be a number > 0"),
-    (lambda d: d.update(format="other/2"), "unknown format"),
+    (lambda d: d.update(blend_spread_mm=-1), "blend_spread_mm: must be > 0, got -1"),
+    (lambda d: d.update(blend_spread_mm=float("nan")), "blend_spread_mm must be a number > 0"),
+    (lambda d: d.update(format="other/2"), 'format: expected "material_structures.teeth.scene/1", got "other/2"'),
 ])
 def test_a_scene_that_cannot_be_rendered_is_one_line(capture_dir, tmp_path, capsys, edit, said):
     """A scene.json without "teeth" was KeyError: 'teeth' (render and fit); a mesh with a hole, an edge of three
@@ -328,7 +332,7 @@ def test_a_capture_whose_scene_json_lacks_teeth_is_one_line(capture_dir, tmp_pat
     before = _digest(cap)
     assert main(["teeth", "fit", str(cap), "--out", str(tmp_path / "f"), "--no-progress"]) == 2
     err = capsys.readouterr().err
-    assert "scene.json: needs a list 'teeth'" in err and err.count("\n") == 1, err
+    assert "scene.json: lacks the field 'teeth'" in err and err.count("\n") == 1, err
     assert _digest(cap) == before and not (tmp_path / "f").exists()
 
 

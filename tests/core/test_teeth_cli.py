@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from material_structures.cli import main
+from material_structures.core import json_schema
 from material_structures.core.teeth.capture import Capture
 from material_structures.core.teeth.fit_settings import FitSettings
 from material_structures.core.teeth.path_tracer import RenderSettings, render
@@ -123,6 +124,7 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     assert trials["chosen"] == int(np.argmin(trials["trial_loss"]))
     report = json.loads((fit_dir / "fit_report.json").read_text())
     assert report["start_trials"] == trials and trials["iterations"] == [1, 1, 1] and report["iterations"] == 1
+    assert json_schema.errors(report, "teeth-fit-report") is None  # core/schemas/teeth-fit-report.schema.json
     assert not (fit_dir / "start_trials").exists() and (fit_dir / "checkpoint.json").is_file()
     fitted = load_scene(fit_dir / "scene_fit.json")  # only c is free: the materials are the chosen start's
     expected = literature_starts(load_scene(cap_dir / "scene.json"), cap)[trials["chosen"]]
