@@ -2,7 +2,10 @@
 
 Each subcommand lives in ``cli/<name>.py`` and exposes ``add_parser(subparsers)``, which registers
 its parser and sets ``func(args) -> int``. Heavy imports (bpy, scipy) happen inside ``func`` so
-``--help`` stays fast. The same entry point runs under ``blender -b --python scripts/ms.py -- ARGS``.
+``--help`` stays fast. The same entry point runs under ``blender -b --python scripts/ms.py -- ARGS`` and as the
+``material-structures`` console command. Exit status: 2 for a usage error (the parser's, or a
+:class:`checks.UsageError`), 1 for a runtime error (``UserError``, a bad file, a full disk) or a bug
+(``EXIT_STATUS``).
 """
 
 from __future__ import annotations
@@ -10,28 +13,62 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import signal
 import sys
 import traceback
 
+from .. import __version__
 from ..core.errors import MissingFileError, UserError
+from .checks import UsageError
 
 SUBCOMMANDS = ("render", "build", "release", "bench", "demo", "library", "fabric", "scratch", "teeth")
 
 
+PROG = "python -m material_structures"
+USAGE_ERROR, RUNTIME_ERROR = 2, 1  # exit statuses (EXIT_STATUS below says them to the user)
+EXIT_STATUS = ("Exit status: 0 done; 2 a usage error (an option missing, misspelt or out of range: one line "
+               "'error: ...', nothing done); 1 a runtime error: a file that is missing or not what it should be, "
+               "a full disk, too little memory (one line 'error: ...'; --debug shows its traceback), or a bug (its "
+               "traceback); 130 interrupted (Ctrl-C, SIGTERM), after its cleanup.")
+
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Shows every option's default at the end of its help, unless the help says it already ("default") or
+    there is none to show (an unset option, a flag)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (default is None or default is False or default is argparse.SUPPRESS or "default" in text
+                or not action.option_strings or isinstance(action, argparse._VersionAction)):
+            return text
+        shown = " ".join(map(str, default)) if isinstance(default, list | tuple) else str(default)
+        return f"{text} (default: {shown.replace('%', '%%')})"
+
+
 class OneLineParser(argparse.ArgumentParser):
     """A bad command line is one line on stderr, ``error: PROG: PROBLEM`` (exit 2), without the usage
-    (``--help`` has it). Subcommand parsers are of this class too."""
+    (``--help`` has it). Subcommand parsers are of this class too; their help shows every option's default."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
-        self.exit(2, f"error: {self.prog}: {message}\n")
+        self.exit(USAGE_ERROR, f"error: {self.prog}: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     parser = OneLineParser(
-        prog="python -m material_structures",
-        description="Material Structures: pile fabric, scratched metal and teeth for Blender/Cycles.",
+        prog=prog,
+        description="Material Structures: pile fabric, scratched metal and teeth for Blender/Cycles. Every "
+                    "subcommand speaks one vocabulary: --out for what it writes, --samples for samples per pixel, "
+                    "angles in degrees (options ending in -deg), --workers for processes on this machine.",
+        epilog=EXIT_STATUS,
     )
+    parser.add_argument("--version", action="version", version=f"material-structures {__version__}",
+                        help="print the version and exit")
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in SUBCOMMANDS:
@@ -85,10 +122,11 @@ def main(argv: list[str] | None = None) -> int:
         argv = sys.argv[1:]
         if "--" in sys.argv:  # blender -b --python script.py -- ARGS
             argv = sys.argv[sys.argv.index("--") + 1 :]
-    parser = build_parser()
+    name = os.path.basename(sys.argv[0]) if sys.argv else ""
+    parser = build_parser("material-structures" if name == "material-structures" else PROG)
     try:
         args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help (0) or a bad command line (2, said on stderr)
+    except SystemExit as exc:  # --help, --version (0) or a bad command line (2, said on stderr)
         return int(exc.code or 0)
     previous = _interrupt_on_sigterm()
     try:
@@ -97,20 +135,21 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader went away (`... | head`): not an error, and nothing more to say
-        import os
-
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when stdout flushes
         return 0
     except MemoryError as exc:  # a size the machine cannot hold: the allocation failed, nothing was written
         if getattr(args, "debug", False):
             raise
         print(f"error: not enough memory for this size ({exc}); choose a smaller one", file=sys.stderr)
-        return 2
+        return RUNTIME_ERROR
+    except UsageError as exc:  # a command line that cannot work, found after parsing: as the parser's errors
+        print(f"error: {_one_line(str(exc))}", file=sys.stderr)
+        return USAGE_ERROR
     except (UserError, MissingFileError) as exc:  # bad input: the message says what and where (--debug: where)
         if getattr(args, "debug", False):
             raise
         print(f"error: {_one_line(str(exc))}", file=sys.stderr)
-        return 2
+        return RUNTIME_ERROR
     except OSError as exc:
         # a path the user gave that is missing, a directory, a file, read-only, or a disk that is full: one
         # line. Any other OSError (and one without a file name) is a bug: its traceback, below
@@ -119,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         if not _user_os_error(exc):
             return _bug(exc)
         print(f"error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
+        return RUNTIME_ERROR
     except Exception as exc:  # a bug, not the user's mistake: its traceback, exit 1
         return _bug(exc)
     finally:

@@ -7,7 +7,7 @@ import json
 import os
 import sys
 
-from ..core.errors import UserError
+from .checks import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -15,7 +15,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("name", nargs="?", help="benchmark name (see --list)")
     p.add_argument("--list", action="store_true", help="list benchmark names")
     p.add_argument("--all", action="store_true", help="run every benchmark")
-    p.add_argument("--out", default=None, help="with --all: folder for NAME.json (bench/results)")
+    p.add_argument("--out", default=None, help="with --all: folder for NAME.json (default: bench/results)")
     p.set_defaults(func=run)
 
 
@@ -42,8 +42,8 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps({name: result}))
         return 1 if failed else 0
     if not args.name:
-        raise UserError("give a benchmark NAME, --list or --all")
+        raise UsageError("give a benchmark NAME, --list or --all")
     if args.name not in names:
-        raise UserError(f"unknown benchmark {args.name!r}; available: {', '.join(sorted(names))}")
+        raise UsageError(f"unknown benchmark {args.name!r}; available: {', '.join(sorted(names))}")
     print(json.dumps(run_benchmark(args.name)))
     return 0

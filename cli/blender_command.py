@@ -2,8 +2,9 @@
 
 Blender 4.2+ lets an extension add a command to ``blender --command`` (``-c``) with
 ``bpy.utils.register_cli_command``. Ours runs the same parser as ``python -m material_structures``
-(``cli.main``): the same subcommands, options and exit codes (0 done, 2 a user error in one line, 1 a bug
-with its traceback), with nothing but an installed extension: no checkout, no virtual environment.
+(``cli.main``): the same subcommands, options and exit codes (0 done, 2 a usage error in one line, 1 a runtime
+error in one line or a bug with its traceback), with nothing but an installed extension: no checkout, no virtual
+environment.
 ``blender -b -c material_structures render test-card --out card.png``. In the ``bpy`` module (no
 ``blender`` executable, no command line) the registered function is :func:`run`, called with the arguments.
 """

@@ -22,6 +22,7 @@ import sys
 import tomllib
 
 from ..core.errors import UserError
+from .checks import UsageError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -238,7 +239,7 @@ def build_platforms(out_dir: str = "dist", source_dir: str = ROOT, platforms: li
 def _check_version(version: str) -> None:
     parts = version.split(".")
     if len(parts) != 3 or not all(p.isdigit() for p in parts):
-        raise UserError(f"--set-version must be a version like 1.2.3, got {version!r}")
+        raise UsageError(f"--set-version must be a version like 1.2.3, got {version!r}")
 
 
 def _build_platforms(out_dir: str, source_dir: str, manifest: dict, platforms: list[str], pythons: list[str],

@@ -1,5 +1,7 @@
-"""Argument checks shared by the subcommands: numeric ranges at the parser, outputs that would overwrite
-inputs. A failed check is a one-line ``error: ...`` and exit status 2 (``cli.OneLineParser``)."""
+"""Argument checks shared by the subcommands: numeric ranges at the parser, old spellings of renamed options,
+outputs that would overwrite inputs. A bad command line (a parser check, :class:`UsageError`) is a one-line
+``error: ...`` and exit status 2 (``cli.OneLineParser``); a check of the files (``refuse_*``) is a
+``UserError``: one line and exit status 1."""
 
 from __future__ import annotations
 
@@ -8,6 +10,61 @@ import math
 import os
 
 from ..core.errors import UserError
+
+
+class UsageError(UserError):
+    """A command line that cannot work, found after parsing (options that exclude each other, a required one
+    left out): one line and exit status 2, as the parser's own errors."""
+
+
+OLD_SPELLING_NOTE = "note: {old} is an old spelling and goes in the next release: use {new}"
+
+
+class _OldSpelling(argparse.Action):
+    """An old spelling of a renamed option: it stores into the new option's ``dest`` (through ``convert``,
+    where the unit changed) and prints a one-line note on stderr."""
+
+    def __init__(self, option_strings, dest, new: str = "", convert=None, **kwargs):
+        super().__init__(option_strings, dest, **kwargs)
+        self.new, self.convert = new, convert
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        import sys
+
+        print(OLD_SPELLING_NOTE.format(old=option_string, new=self.new), file=sys.stderr)
+        if self.convert is not None:
+            values = [self.convert(v) for v in values] if isinstance(values, list) else self.convert(values)
+        setattr(namespace, self.dest, values)
+
+
+def old_spelling(container, old: str, new: str, convert=None, unit: str = "", type=None) -> None:
+    """Accept ``old`` for the option ``new`` of ``container`` (a parser or a group of it) for one more
+    release: the same type and range check (or ``type``), a note on stderr when it is used. ``convert`` maps an
+    old value to the new option's (``unit``: the old one's unit, said in its help)."""
+    action = container._option_string_actions[new]
+    container.add_argument(old, dest=action.dest, type=type or action.type, nargs=action.nargs,
+                           metavar=action.metavar, default=argparse.SUPPRESS, action=_OldSpelling,
+                           new=f"{new} (degrees)" if convert is not None and new.endswith("-deg") else new,
+                           convert=convert,
+                           help=f"old spelling of {new}{f' in {unit}' if unit else ''}, accepted until the next "
+                                "release (with a note)")
+
+
+def resolution(text: str) -> tuple[int, int]:
+    """An argparse ``type`` for an image size ``WxH`` in pixels, each side in [1, 16384]."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must look like 320x240 (width x height in pixels), got {text!r}") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1x1, got {text}")
+    if w > MAX_SIDE or h > MAX_SIDE:
+        raise argparse.ArgumentTypeError(f"{w}x{h} is larger than {MAX_SIDE} pixels a side")
+    return w, h
+
+
+resolution.__name__ = "WxH"
+MAX_SIDE = 16384  # pixels a side of a rendered image (Cycles' own limit is far above what fits in memory here)
 
 
 def at_least(low: float, kind: type = int):

@@ -6,20 +6,26 @@
     python -m material_structures fabric score PRED_BTF REF_BTF
     python -m material_structures fabric ndf BTF --texel X Y --out ndf.exr
     python -m material_structures fabric material PARAMS_DIR [--out fabric.blend] [--render preview.png]
+
+Angles are in degrees (options ending in -deg). Old spellings, accepted until the next release with a note on
+stderr: ``fabric synth --theta-max`` / ``--max-tilt`` (``--theta-max-deg`` / ``--max-tilt-deg``), ``fabric synth
+--rotation`` in radians (``--rotation-deg``), ``fabric ndf --resolution`` (``--size``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 
 from ..core.errors import UserError
 from .checks import (
+    UsageError,
     at_least,
     between,
     check_memory,
-    finite_float,
+    old_spelling,
     refuse_output_over_inputs,
     refuse_unwritable_folder,
     seed,
@@ -34,8 +40,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("btf", help="BTF folder (btf.json + EXRs), btf.json, or .npz")
     f.add_argument("--out", required=True,
                    help="parameter folder to write (kd/ks/sigma/basis.exr, params.json)")
-    f.add_argument("--tile", type=at_least(1), default=20, help="tile edge in texels (default 20)")
-    f.add_argument("--workers", type=at_least(1), default=None, help="parallel processes (default: CPU count)")
+    f.add_argument("--tile", type=between(1, 4096, int), default=20, help="tile edge in texels (default 20)")
+    f.add_argument("--workers", type=between(1, 1024, int), default=None,
+                   help="processes on this machine that share the tiles: the local process pool or local Dask "
+                        "cluster (default: CPU count)")
     f.add_argument("--weighting", choices=("radiance", "brdf"), default="radiance",
                    help="residuals in f_r cos(theta_i) (default) or in f_r (eq. 3.17 as printed)")
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -54,25 +62,34 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     s = fsub.add_parser("synth", help="synthetic BTF of a known spatially varying model")
     s.add_argument("--out", required=True, help="BTF folder, or a path ending in .npz")
-    s.add_argument("--width", type=between(1, 16384, int), default=32)
-    s.add_argument("--height", type=between(1, 16384, int), default=32)
-    s.add_argument("--lights", type=between(1, 1024, int), default=16)
-    s.add_argument("--views", type=between(1, 1024, int), default=16)
-    s.add_argument("--theta-max", type=between(1.0, 89.0), default=75.0, help="largest light/view zenith angle (deg)")
-    s.add_argument("--rotation", type=finite_float, default=0.0, help="azimuth offset of the direction sets (rad)")
+    s.add_argument("--width", type=between(1, 16384, int), default=32, help="BTF width in texels")
+    s.add_argument("--height", type=between(1, 16384, int), default=32, help="BTF height in texels")
+    s.add_argument("--lights", type=between(1, 1024, int), default=16, help="number of light directions")
+    s.add_argument("--views", type=between(1, 1024, int), default=16, help="number of view directions")
+    s.add_argument("--theta-max-deg", type=between(1.0, 89.0), default=75.0,
+                   help="largest light/view zenith angle in degrees")
+    s.add_argument("--rotation-deg", type=between(-360.0, 360.0), default=0.0,
+                   help="azimuth offset of the direction sets in degrees")
     s.add_argument("--noise", type=between(0.0, 1.0), default=0.0, help="Gaussian noise level (0.05 = 5 %%)")
     s.add_argument("--noise-kind", choices=("relative", "peak"), default="relative",
                    help="multiplicative noise, or additive noise scaled by each texel's peak value")
-    s.add_argument("--max-tilt", type=between(0.0, 89.0), default=30.0, help="largest fibre tilt (deg)")
-    s.add_argument("--seed", type=seed, default=0)
+    s.add_argument("--max-tilt-deg", type=between(0.0, 89.0), default=30.0, help="largest fibre tilt in degrees")
+    s.add_argument("--seed", type=seed, default=0, help="random seed of the maps (and, plus 1, of the noise)")
     s.add_argument("--gt-out", default=None, help="also write the ground-truth parameter folder here")
+    old_spelling(s, "--theta-max", "--theta-max-deg")
+    old_spelling(s, "--max-tilt", "--max-tilt-deg")
+    old_spelling(s, "--rotation", "--rotation-deg", convert=math.degrees, unit="radians",
+                 type=between(-2 * math.pi, 2 * math.pi))
     s.set_defaults(func=run_synth)
 
     n = fsub.add_parser("ndf", help="write one texel's extracted NDF (eq. 3.11) as a parabolic map EXR (eq. 3.12)")
     n.add_argument("btf", help="BTF folder, btf.json or .npz")
-    n.add_argument("--texel", type=int, nargs=2, metavar=("X", "Y"), default=(0, 0))
-    n.add_argument("--resolution", type=between(4, 4096, int), default=64)
+    n.add_argument("--texel", type=at_least(0), nargs=2, metavar=("X", "Y"), default=(0, 0),
+                   help="the texel's column and row (from 0)")
+    n.add_argument("--size", type=between(4, 4096, int), default=64,
+                   help="image width = height of the parabolic map in pixels")
     n.add_argument("--out", required=True, help="output .exr")
+    old_spelling(n, "--resolution", "--size")
     n.set_defaults(func=run_ndf)
 
     from .fabric_material import add_material_parser
@@ -80,8 +97,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_material_parser(fsub)
 
     c = fsub.add_parser("score", help="PSNR of a predicted BTF against a reference BTF")
-    c.add_argument("pred")
-    c.add_argument("ref")
+    c.add_argument("pred", help="the predicted BTF (folder, btf.json or .npz), e.g. from 'fabric eval'")
+    c.add_argument("ref", help="the reference BTF with the same directions")
     c.set_defaults(func=run_score)
 
 
@@ -96,12 +113,10 @@ def run_fit(args: argparse.Namespace) -> int:
     from ..core.fabric.btf_fitter import check_btf, fit_btf
     from ..core.fabric.tile_fit import FitOptions
 
-    if args.tile < 1:
-        raise UserError("--tile must be >= 1")
+    if args.no_dask and args.scheduler:
+        raise UsageError("--no-dask and --scheduler exclude each other")
     refuse_output_over_inputs(args.out, [args.btf])
     options = FitOptions(weighting=args.weighting)
-    if args.no_dask and args.scheduler:
-        raise UserError("--no-dask and --scheduler exclude each other")
     if args.scheduler and os.environ.get(PROGRESS_ENV) != "json":
         from ..scaleout.cluster import check_scheduler
 
@@ -155,8 +170,8 @@ def run_synth(args: argparse.Namespace) -> int:
     # the BTF is rendered in memory (float64 while rendering) before it is written
     check_memory(args.width * args.height * args.lights * args.views * 3 * 8 * 2,
                  f"a {args.width} x {args.height} BTF of {args.lights * args.views} light/view pairs")
-    maps = synthetic_maps(args.height, args.width, seed=args.seed, max_tilt_deg=args.max_tilt)
-    wi, wo = light_view_pairs(args.lights, args.views, args.theta_max, args.rotation)
+    maps = synthetic_maps(args.height, args.width, seed=args.seed, max_tilt_deg=args.max_tilt_deg)
+    wi, wo = light_view_pairs(args.lights, args.views, args.theta_max_deg, math.radians(args.rotation_deg))
     save_btf(args.out, render_btf(maps, wi, wo, noise=args.noise, seed=args.seed + 1,
                                         noise_kind=args.noise_kind), wi, wo)
     if args.gt_out:
@@ -174,13 +189,13 @@ def run_ndf(args: argparse.Namespace) -> int:
 
     refuse_output_over_inputs(args.out, [args.btf])
     if not args.out.lower().endswith(".exr"):
-        raise UserError(f"--out {args.out!r}: the NDF map is written as OpenEXR: give a .exr file name")
+        raise UsageError(f"--out {args.out!r}: the NDF map is written as OpenEXR: give a .exr file name")
     hdr = read_btf_header(args.btf)
     x, y = args.texel
     if not (0 <= x < hdr.width and 0 <= y < hdr.height):
         raise UserError(f"texel ({x}, {y}) is outside the {hdr.width}x{hdr.height} BTF")
     f = np.concatenate([vals[:, y, x].mean(axis=1) for _, vals in iter_btf_blocks(args.btf)])
-    op = ndf_operator(hdr.wi, hdr.wo, resolution=args.resolution)
+    op = ndf_operator(hdr.wi, hdr.wo, resolution=args.size)
     write_exr(args.out, op.to_image(op.apply(f / hdr.wi[:, 2])[:, 0]).astype(np.float32))
     print(args.out)
     return 0

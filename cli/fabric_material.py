@@ -14,7 +14,8 @@ def add_material_parser(fsub) -> None:
     m.add_argument("params_dir", help="fit output folder (params.json + kd/ks/sigma/basis EXR maps)")
     m.add_argument("--out", default=None, help="output .blend (default: PARAMS_DIR/fabric.blend)")
     m.add_argument("--render", default=None, help="also render a shader-ball preview to this .png/.exr")
-    m.add_argument("--samples", type=between(1, 1 << 24, int), default=16)
+    m.add_argument("--samples", type=between(1, 1 << 24, int), default=16,
+                   help="Cycles samples per pixel of the --render preview")
     m.set_defaults(func=run_material)
 
 

@@ -15,8 +15,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("library", help="build the material asset library (samples/library)")
     p.add_argument("action", choices=["build", "list"], help="build the .blend + catalogs + previews, or list")
     p.add_argument("--out", default=DEFAULT_DIR, help="library folder (default: samples/library)")
-    p.add_argument("--preview-size", type=between(8, 4096, int), default=128)
-    p.add_argument("--samples", type=between(1, 1 << 24, int), default=16)
+    p.add_argument("--preview-size", type=between(8, 4096, int), default=128,
+                   help="asset preview width = height in pixels")
+    p.add_argument("--samples", type=between(1, 1 << 24, int), default=16,
+                   help="Cycles samples per pixel of the previews")
     p.set_defaults(func=run)
 
 

@@ -6,7 +6,7 @@ import argparse
 import os
 
 from ..core.errors import MissingFileError, UserError
-from .checks import between, refuse_output_over_inputs, seed
+from .checks import UsageError, between, refuse_output_over_inputs, resolution, seed
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -15,27 +15,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--list", action="store_true", help="list the library scenes")
     p.add_argument("--blend", help="render this .blend file's scene instead of a library scene")
     p.add_argument("--out", default="out/render.exr", help="output .exr (linear) or .png (sRGB)")
-    p.add_argument("--samples", type=between(1, 1 << 24, int), default=None, help="Cycles samples (scene default)")
-    p.add_argument("--resolution", default=None, help="WxH, e.g. 320x240 (scene default)")
-    p.add_argument("--seed", type=seed, default=0)
+    p.add_argument("--samples", type=between(1, 1 << 24, int), default=None,
+                   help="Cycles samples per pixel (default: the scene's)")
+    p.add_argument("--resolution", type=resolution, default=None,
+                   help="image size WxH in pixels, e.g. 320x240 (default: the scene's)")
+    p.add_argument("--seed", type=seed, default=0, help="Cycles' random seed")
     p.set_defaults(func=run)
-
-
-MAX_SIDE = 16384  # pixels a side (Cycles' own limit is far above what fits in memory here)
-
-
-def parse_resolution(text: str | None) -> tuple[int, int] | None:
-    if not text:
-        return None
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise UserError(f"--resolution must look like 320x240, got {text!r}") from None
-    if w < 1 or h < 1:
-        raise UserError("--resolution must be positive")
-    if w > MAX_SIDE or h > MAX_SIDE:
-        raise UserError(f"--resolution {w}x{h} is larger than {MAX_SIDE} pixels a side")
-    return w, h
 
 
 def save_image(path: str, rgba) -> None:
@@ -72,11 +57,12 @@ def _write_png_oiio(path: str, pixels) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    resolution = parse_resolution(args.resolution)
     if args.blend:
         refuse_output_over_inputs(args.out, [args.blend])
     if not args.out.lower().endswith((".exr", ".png")):
-        raise UserError(f"--out {args.out!r}: give a .exr (linear) or .png (sRGB) file name")
+        raise UsageError(f"--out {args.out!r}: give a .exr (linear) or .png (sRGB) file name")
+    if not (args.list or args.blend or args.scene):
+        raise UsageError("give a scene name, --blend FILE or --list")
     from ..render.session import prepare_user_resources
 
     prepare_user_resources()
@@ -87,12 +73,13 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:20s} {library.SCENES[name].label}")
         return 0
     if args.blend:
-        rgba = render_blend(args.blend, resolution, args.samples, args.seed)
-    elif args.scene:
-        workdir = os.path.join(os.path.dirname(os.path.abspath(args.out)), "work")
-        rgba = library.render_library_scene(args.scene, workdir, resolution, args.samples)
+        rgba = render_blend(args.blend, args.resolution, args.samples, args.seed)
     else:
-        raise UserError("give a scene name, --blend FILE or --list")
+        import tempfile
+
+        # the scene's textures and tables are written here while it renders; nothing is left beside --out
+        with tempfile.TemporaryDirectory(prefix="material-structures-render-") as workdir:
+            rgba = library.render_library_scene(args.scene, workdir, args.resolution, args.samples)
     save_image(args.out, rgba)
     print(args.out)
     return 0

@@ -17,11 +17,12 @@ import json
 import os
 
 from ..core.errors import MissingFileError, UserError
-from .checks import at_least, between, check_memory, finite_float, refuse_output_over_inputs, seed
+from .checks import UsageError, between, check_memory, finite_float, refuse_output_over_inputs, seed
 
 MAX_SCRATCHES = 2**24  # the grid index addresses at most 2^24 entries, each scratch has at least one
 SCRATCH_BYTES = 4096  # memory per scratch while a set is generated and indexed (2.4 KB measured, rounded up)
 PIXEL_BYTES = 256  # memory per pixel of ``scratch eval`` (about 120 bytes measured, rounded up)
+COUNT = 500  # scratches of ``generate --count``: the Generate Scratches operator's default
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -29,42 +30,48 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ss = p.add_subparsers(dest="scratch_command", metavar="ACTION", required=True)
 
     g = ss.add_parser("generate", help="generate a scratch set (.npz or EXR-table folder)")
-    g.add_argument("--kind", choices=("wear", "polish", "hairline", "curves"), default="wear")
-    g.add_argument("--count", type=between(1, MAX_SCRATCHES, int), default=1000,
+    g.add_argument("--kind", choices=("wear", "polish", "hairline", "curves"), default="wear",
+                   help="uniform wear, polishing circles, hairline brushing, or your own curves (--curves)")
+    g.add_argument("--count", type=between(1, MAX_SCRATCHES, int), default=COUNT,
                    help="number of scratches (not for curves)")
     g.add_argument("--patch-mm", type=between(1e-3, 1e4), nargs="+", default=[20.0],
                    help="patch size in mm (1 or 2 values)")
     g.add_argument("--curves", default=None, help="JSON file: list of curves, each a list of [u, v] points")
-    g.add_argument("--angle-deg", type=finite_float, default=0.0, help="hairline brushing direction")
+    g.add_argument("--angle-deg", type=between(-360.0, 360.0), default=0.0,
+                   help="hairline brushing direction in degrees")
     g.add_argument("--sigma-um", type=between(0.1, 1e4), default=60.0, help="coherence radius the index is built for")
     g.add_argument("--max-footprint-um", type=between(0.1, 1e5), default=500.0,
                    help="largest pixel footprint to index for")
-    g.add_argument("--seed", type=seed, default=0)
+    g.add_argument("--seed", type=seed, default=0, help="random seed of the scratches")
     g.add_argument("--out", required=True, help="output .npz file or EXR-table folder")
     g.set_defaults(func=run_generate)
 
     i = ss.add_parser("info", help="summarise a scratch set file or folder as JSON")
-    i.add_argument("path")
+    i.add_argument("path", help="scratch set: .npz file or EXR-table folder")
     i.set_defaults(func=run_info)
 
     e = ss.add_parser("eval", help="evaluate the scratch radiance over the patch into an EXR image")
-    e.add_argument("path")
+    e.add_argument("path", help="scratch set: .npz file or EXR-table folder")
     e.add_argument("--size", type=between(1, 16384, int), default=256, help="image width = height in pixels")
     e.add_argument("--view-deg", type=between(0.0, 89.9), default=30.0,
-                   help="viewing angle from the normal (in x-z plane)")
+                   help="viewing angle from the normal in degrees (in the x-z plane)")
     e.add_argument("--light", type=finite_float, nargs=4, default=[-0.5, 0.2, 1.0, 0.05], metavar=("X", "Y", "Z", "R"),
                    help="sphere light centre (relative, local frame) and radius, same unit")
     e.add_argument("--spectral", choices=("rgb", "16"), default="rgb", help="3 wavelengths or 16 bands")
-    e.add_argument("--si", choices=("series", "thesis", "exact"), default="series")
-    e.add_argument("--footprint-rule", choices=("chords", "thesis"), default="chords")
-    e.add_argument("--workers", type=at_least(1), default=1)
+    e.add_argument("--si", choices=("series", "thesis", "exact"), default="series",
+                   help="how the sine integral Si(x) is evaluated: a series (|error| < 2e-6), the thesis' eq. 4.29, "
+                        "or exactly")
+    e.add_argument("--footprint-rule", choices=("chords", "thesis"), default="chords",
+                   help="a scratch's length in the pixel footprint: 12 chords across it, or the thesis' eq. 4.14-4.15")
+    e.add_argument("--workers", type=between(1, 1024, int), default=1,
+                   help="processes on this machine that share the pixels")
     e.add_argument("--out", required=True, help="output EXR (channels R, G, B, A = rho_P)")
     e.set_defaults(func=run_eval)
 
 
 def _patch(values: list[float]) -> tuple[float, float]:
     if len(values) not in (1, 2) or min(values) <= 0:
-        raise UserError("--patch-mm takes one or two positive sizes")
+        raise UsageError("--patch-mm takes one or two positive sizes")
     v = [x * 1000.0 for x in values]
     return (v[0], v[-1])
 
@@ -97,7 +104,7 @@ def run_generate(args: argparse.Namespace) -> int:
     kw = dict(seed=args.seed, sigma_um=args.sigma_um, max_footprint_um=args.max_footprint_um)
     if args.kind == "curves":
         if not args.curves:
-            raise UserError("--kind curves needs --curves FILE.json")
+            raise UsageError("--kind curves needs --curves FILE.json")
         if not os.path.isfile(args.curves):
             raise MissingFileError(f"curves file not found: {args.curves}", args.curves)
         with open(args.curves) as f:
@@ -150,15 +157,15 @@ def run_eval(args: argparse.Namespace) -> int:
 
     refuse_output_over_inputs(args.out, [args.path])
     if not args.out.lower().endswith(".exr"):
-        raise UserError(f"--out {args.out!r}: the image is written as OpenEXR: give a .exr file name")
+        raise UsageError(f"--out {args.out!r}: the image is written as OpenEXR: give a .exr file name")
+    if args.light[3] <= 0.0:
+        raise UsageError(f"--light: the radius R must be > 0, got {args.light[3]:g}")
+    if args.light[2] <= args.light[3]:
+        raise UsageError(f"--light: the light must lie above the surface (Z > R), got Z {args.light[2]:g}, "
+                         f"R {args.light[3]:g}")
     s = load_scratch_set(args.path)
     n = int(args.size)
     check_memory(n * n * PIXEL_BYTES, f"a {n} x {n} image")
-    if args.light[3] <= 0.0:
-        raise UserError(f"--light: the radius R must be > 0, got {args.light[3]:g}")
-    if args.light[2] <= args.light[3]:
-        raise UserError(f"--light: the light must lie above the surface (Z > R), got Z {args.light[2]:g}, "
-                        f"R {args.light[3]:g}")
     px = s.patch_size_um / n
     u = (np.arange(n) + 0.5) * px[0]
     v = (np.arange(n) + 0.5) * px[1]

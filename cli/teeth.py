@@ -1,9 +1,13 @@
 """``teeth``: synthetic captures, appearance fitting and rendering of the teeth model (chapter 5).
 
-    python -m material_structures teeth synth OUT [--teeth 2] [--width 96 --height 64] [--spp 16] [--renderer mitsuba]
+    python -m material_structures teeth synth --out DIR [--teeth 2] [--width 96 --height 64] [--samples 16]
     python -m material_structures teeth fit CAPTURE_DIR --out FIT_DIR [--iterations 300] [--resume]
-    python -m material_structures teeth render SCENE_JSON CAPTURE_DIR --out DIR
-    python -m material_structures teeth sensitivity CAPTURE_DIR (--capture-spp N | --noise-variance V)
+    python -m material_structures teeth render SCENE_JSON CAPTURE_DIR --out DIR [--samples 16]
+    python -m material_structures teeth sensitivity CAPTURE_DIR (--capture-samples N | --noise-variance V)
+
+Old spellings, accepted until the next release with a note on stderr: ``teeth synth OUT`` (positional),
+``--spp`` (``--samples``), ``--spp-background`` (``--samples-background``), ``teeth synth --resolution``
+(``--mesh-resolution``), ``--capture-spp`` (``--capture-samples``), ``teeth sensitivity --json`` (``--out``).
 """
 
 from __future__ import annotations
@@ -15,7 +19,17 @@ import os
 from ..core.errors import MissingFileError, UserError
 from ..core.teeth.fit_checkpoint import TRIALS_DIR
 from ..core.teeth.fit_settings import FitSettings
-from .checks import at_least, between, positive_float, refuse_output_over_inputs, refuse_unwritable_folder, seed
+from .checks import (
+    OLD_SPELLING_NOTE,
+    UsageError,
+    at_least,
+    between,
+    old_spelling,
+    positive_float,
+    refuse_output_over_inputs,
+    refuse_unwritable_folder,
+    seed,
+)
 
 FIT_DEFAULTS = FitSettings()  # the defaults of ``teeth fit``: the fit's own, no second table
 
@@ -25,25 +39,32 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     tsub = p.add_subparsers(dest="teeth_command", metavar="ACTION", required=True)
 
     s = tsub.add_parser("synth", help="render a synthetic capture of a known ground truth")
-    s.add_argument("out", help="output capture folder (capture.json, images/, masks/, scene.json)")
+    s.add_argument("--out", default=None, help="output capture folder (capture.json, images/, masks/, scene.json)")
+    s.add_argument("out_positional", nargs="?", default=None, metavar="OUT",
+                   help="old spelling of --out (a positional folder), accepted until the next release (with a note)")
     s.add_argument("--scene", default=None,
                    help="render this scene JSON (your own ground truth) instead of the built-in jaw section")
     s.add_argument("--teeth", type=between(1, 32, int), default=2,
                    help="number of teeth of the built-in jaw section (incisor, canine, premolar, molar)")
-    s.add_argument("--width", type=between(4, 16384, int), default=96)
-    s.add_argument("--height", type=between(4, 16384, int), default=64)
-    s.add_argument("--lights", type=between(1, 4096, int), default=54)
-    s.add_argument("--cameras", type=between(1, 256, int), default=3)
-    s.add_argument("--spp", type=at_least(1), default=16, help="samples per masked (tooth) pixel")
-    s.add_argument("--spp-background", type=at_least(0), default=2, help="samples per other pixel")
-    s.add_argument("--resolution", type=between(4, 1024, int), default=32,
-                   help="tooth mesh resolution of the built-in jaw section")
-    s.add_argument("--seed", type=seed, default=12345)
+    s.add_argument("--width", type=between(4, 16384, int), default=96, help="image width in pixels")
+    s.add_argument("--height", type=between(4, 16384, int), default=64, help="image height in pixels")
+    s.add_argument("--lights", type=between(1, 4096, int), default=54, help="number of lights (one image each)")
+    s.add_argument("--cameras", type=between(1, 256, int), default=3, help="number of cameras")
+    s.add_argument("--samples", type=between(1, 1 << 24, int), default=16,
+                   help="samples per masked (tooth) pixel; with --renderer mitsuba, per pixel")
+    s.add_argument("--samples-background", type=between(0, 1 << 24, int), default=2,
+                   help="samples per other pixel (0: black)")
+    s.add_argument("--mesh-resolution", type=between(4, 1024, int), default=32,
+                   help="tooth mesh resolution of the built-in jaw section (grid cells a side)")
+    s.add_argument("--seed", type=seed, default=12345, help="random seed of the path samples")
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
-                   help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --spp; "
+                   help="ours (our path tracer) or mitsuba (Mitsuba 3 volpath, all bounces, every pixel at --samples; "
                         "llvm_ad_rgb where Dr.Jit's LLVM backend loads, else scalar_rgb; needs mitsuba, as .venv has): "
                         "for mitsuba the enamel/dentin boundary is made sharp (blend spread 1e-5 mm, as Mitsuba "
                         "renders it) and scene.json is that scene")
+    old_spelling(s, "--spp", "--samples")
+    old_spelling(s, "--spp-background", "--samples-background")
+    old_spelling(s, "--resolution", "--mesh-resolution")
     s.set_defaults(func=run_synth)
 
     f = tsub.add_parser("fit", help="fit the appearance model to a capture folder",
@@ -76,20 +97,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="continue an interrupted fit from its --out folder, with the settings it started with")
     f.add_argument("--scheduler", default=None,
                    help="Dask scheduler address (tcp://host:8786): per-view gradient renders become tasks there")
-    f.add_argument("--dask-workers", type=at_least(1), default=None,
+    f.add_argument("--dask-workers", type=between(1, 1024, int), default=None,
                    help="render on a local Dask cluster of this many processes (on one machine the fit renders "
                         "faster in its own process, the default)")
-    f.add_argument("--workers", type=at_least(1), default=FIT_DEFAULTS.workers,
-                   help="where numba is missing: processes that trace each pass")
+    f.add_argument("--workers", type=between(1, 1024, int), default=FIT_DEFAULTS.workers,
+                   help="processes on this machine that share each render pass (helps where numba is missing; "
+                        "with Dask, --dask-workers or the scheduler's workers render instead)")
     f.add_argument("--no-progress", action="store_true", help="no progress bar")
     f.set_defaults(func=run_fit)
 
     r = tsub.add_parser("render", help="render a scene JSON with the cameras/lights of a capture")
-    r.add_argument("scene")
-    r.add_argument("capture")
-    r.add_argument("--out", required=True)
-    r.add_argument("--spp", type=at_least(1), default=16)
-    r.add_argument("--seed", type=seed, default=1)
+    r.add_argument("scene", help="scene JSON (scene.json, a fit's scene_fit.json)")
+    r.add_argument("capture", help="capture folder whose cameras and lights are rendered (capture.json)")
+    r.add_argument("--out", required=True, help="output folder: one camC_lightL.exr per camera and light")
+    r.add_argument("--samples", type=between(1, 1 << 24, int), default=16, help="samples per pixel")
+    r.add_argument("--seed", type=seed, default=1, help="random seed of the path samples")
+    old_spelling(r, "--spp", "--samples")
     r.set_defaults(func=run_render)
 
     v = tsub.add_parser("sensitivity",
@@ -97,14 +120,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     v.add_argument("capture", help="capture folder (capture.json, masks; images are not needed)")
     v.add_argument("--scene", default=None, help="scene JSON to evaluate at (default CAPTURE/scene.json)")
     noise = v.add_mutually_exclusive_group(required=True)
-    noise.add_argument("--capture-spp", type=at_least(1), help="synthetic capture: its samples per pixel")
+    noise.add_argument("--capture-samples", type=between(1, 1 << 24, int),
+                       help="synthetic capture: its samples per pixel")
     noise.add_argument("--noise-variance", type=positive_float,
                        help="the photographs' noise variance per pixel value")
-    v.add_argument("--passes", type=at_least(2), default=6, help="independent 1-spp Jacobian passes (>= 2)")
-    v.add_argument("--block", type=at_least(1), default=8, help="pixel tile size the image changes are pooled over")
-    v.add_argument("--max-depth", type=at_least(1), default=None,
+    old_spelling(noise, "--capture-spp", "--capture-samples")
+    v.add_argument("--passes", type=between(2, 4096, int), default=6,
+                   help="independent 1-sample-per-pixel Jacobian passes (>= 2)")
+    v.add_argument("--block", type=between(1, 4096, int), default=8,
+                   help="pixel tile size the image changes are pooled over")
+    v.add_argument("--max-depth", type=between(1, 1 << 16, int), default=None,
                    help="stop every path after this many bounces (an experiment: biased dark); default all bounces")
-    v.add_argument("--json", default=None, help="also write the table to this JSON file")
+    v.add_argument("--out", default=None, help="also write the table to this JSON file")
+    old_spelling(v, "--json", "--out")
     v.set_defaults(func=run_sensitivity)
 
 
@@ -113,15 +141,22 @@ def run_synth(args: argparse.Namespace) -> int:
     from ..core.teeth.scene import load_scene
     from ..core.teeth.synthetic import make_scene, render_capture, scene_target
 
-    if args.teeth < 1 or args.width < 4 or args.height < 4 or args.spp < 1:
-        raise UserError("need --teeth >= 1, --width/--height >= 4 and --spp >= 1")
-    refuse_unwritable_folder(args.out, "OUT")
+    if args.out_positional is not None:
+        import sys
+
+        if args.out is not None and args.out != args.out_positional:
+            raise UsageError(f"two output folders: --out {args.out!r} and OUT {args.out_positional!r}; give --out")
+        print(OLD_SPELLING_NOTE.format(old="the positional OUT", new="--out OUT"), file=sys.stderr)
+        args.out = args.out_positional
+    if args.out is None:
+        raise UsageError("teeth synth: the following arguments are required: --out")
+    refuse_unwritable_folder(args.out)
     if args.scene is not None:
         scene = load_scene(args.scene)
         if not scene.teeth:
             raise UserError(f"{args.scene} has no teeth to render")
     else:
-        scene = make_scene(n_teeth=args.teeth, resolution=args.resolution)
+        scene = make_scene(n_teeth=args.teeth, resolution=args.mesh_resolution)
     span = max(12.0, 8.6 * len(scene.teeth) + 6.0)
     fov = 2.0 * __import__("math").degrees(__import__("math").atan(0.5 * span / 300.0))
     cams, lights = default_rig(target=scene_target(scene), width=args.width, height=args.height,
@@ -133,13 +168,13 @@ def run_synth(args: argparse.Namespace) -> int:
         scene.blend_spread = 1e-5  # Mitsuba's enamel/dentin boundary is sharp
         _, variant = import_mitsuba()
         with _bar(len(lights), "synth (mitsuba)", "light") as bar:
-            cap = render_capture_mitsuba(scene, cams, lights, args.spp, args.seed, progress=bar.update,
+            cap = render_capture_mitsuba(scene, cams, lights, args.samples, args.seed, progress=bar.update,
                                          variant=variant)
-        how = (f" rendered by Mitsuba 3 {variant} (volpath, all bounces, {args.spp} spp per pixel; blend spread "
+        how = (f" rendered by Mitsuba 3 {variant} (volpath, all bounces, {args.samples} spp per pixel; blend spread "
                "1e-5 mm)")
     else:
         with _bar(2 * len(lights), "synth", "light-pass") as bar:
-            cap = render_capture(scene, cams, lights, args.spp, args.spp_background, args.seed,
+            cap = render_capture(scene, cams, lights, args.samples, args.samples_background, args.seed,
                                  progress=bar.update)
         how = ""
     cap.save(args.out, scene.to_dict())
@@ -407,9 +442,9 @@ def run_fit(args: argparse.Namespace) -> int:
         _check_free_patterns(fs.free, scene, scene_path)
     on_dask = args.scheduler is not None or args.dask_workers is not None
     if args.workers != 1 and on_dask:
-        raise UserError("--workers is for fits in this process; on Dask, the cluster's workers render")
+        raise UsageError("--workers is for fits in this process; on Dask, the cluster's workers render")
     if args.scheduler is not None and args.dask_workers is not None:
-        raise UserError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
+        raise UsageError("--dask-workers starts a local cluster; --scheduler uses one that runs: give one of them")
     if args.scheduler is not None:
         from ..scaleout.cluster import check_scheduler
 
@@ -521,7 +556,7 @@ def run_render(args: argparse.Namespace) -> int:
     os.makedirs(args.out, exist_ok=True)
     for l0 in range(0, len(cap.lights), 9):
         ids = np.arange(l0, min(l0 + 9, len(cap.lights)))
-        res = render(scene, cap.cameras, cap.lights, RenderSettings(spp=args.spp, seed=args.seed + l0),
+        res = render(scene, cap.cameras, cap.lights, RenderSettings(spp=args.samples, seed=args.seed + l0),
                      light_ids=ids)
         for c in range(len(cap.cameras)):
             for k, li in enumerate(ids):
@@ -539,7 +574,7 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene or os.path.join(args.capture, "scene.json"))
     names, directions = default_directions(scene)
     out = capture_sensitivity(scene, cap, directions, passes=args.passes, block=args.block,
-                              noise_variance=args.noise_variance, capture_spp=args.capture_spp,
+                              noise_variance=args.noise_variance, capture_spp=args.capture_samples,
                               max_depth=args.max_depth)
     bound = cramer_rao_std(out["information"])
     rows = sorted(zip(names, out["chi2"].tolist(), bound.tolist(), strict=True), key=lambda r: -r[1])
@@ -550,10 +585,10 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     print(f"  {'':32s} {'chi2':>12s} {'best std':>10s}")
     for name, c, b in rows:
         print(f"  {name:32s} {c:12.1f} {b:10.3g}")
-    if args.json:
+    if args.out:
         from ..core.json_io import save_json
 
-        save_json(args.json, {"chi2": {r[0]: r[1] for r in rows}, "best_std": {r[0]: r[2] for r in rows},
+        save_json(args.out, {"chi2": {r[0]: r[1] for r in rows}, "best_std": {r[0]: r[2] for r in rows},
                               "noise_variance": out["noise_variance"], "tiles": out["tiles"],
                               "block": args.block, "passes": args.passes})
     return 0

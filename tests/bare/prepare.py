@@ -22,8 +22,9 @@ from material_structures.core.fabric.quaternion import quat_from_axis_angle
 def prepare(out: str) -> None:
     shutil.rmtree(out, ignore_errors=True)
     os.makedirs(out)
-    assert main(["teeth", "synth", os.path.join(out, "capture"), "--teeth", "1", "--width", "12", "--height", "10",
-                 "--lights", "4", "--cameras", "1", "--spp", "1", "--spp-background", "0", "--resolution", "10"]) == 0
+    assert main(["teeth", "synth", "--out", os.path.join(out, "capture"), "--teeth", "1", "--width", "12",
+                 "--height", "10", "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                 "--mesh-resolution", "10"]) == 0
     assert main(["fabric", "synth", "--out", os.path.join(out, "btf"), "--width", "16", "--height", "16",
                  "--lights", "8", "--views", "8"]) == 0
     for k in range(8):

@@ -1,4 +1,4 @@
-"""Outputs never overwrite inputs, across the CLI: each case is a one-line error (exit 2) and the input is
+"""Outputs never overwrite inputs, across the CLI: each case is a one-line error (exit 1) and the input is
 byte-identical afterwards."""
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def inputs(tmp_path_factory):
 ])
 def test_an_output_over_an_input_is_refused(inputs, capsys, argv, victim):
     before = _sha(inputs / victim)
-    assert main([a.format(d=inputs) for a in argv]) == 2
+    assert main([a.format(d=inputs) for a in argv]) == 1  # a runtime error
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "would write over the input" in err and err.count("\n") == 1, err
     assert _sha(inputs / victim) == before

@@ -352,7 +352,7 @@ def test_cli_fit_eval_score(tmp_path, capsys):
     assert main(["fabric", "synth", "--out", btf, "--width", "6", "--height", "5", "--lights", "14",
                  "--views", "14", "--gt-out", str(tmp_path / "gt")]) == 0
     assert main(["fabric", "synth", "--out", hold, "--width", "6", "--height", "5", "--lights", "5",
-                 "--views", "5", "--rotation", "0.8"]) == 0
+                 "--views", "5", "--rotation-deg", "45.8"]) == 0
     assert main(["fabric", "fit", btf, "--out", str(tmp_path / "fit"), "--workers", "1", "--no-progress"]) == 0
     for d in ("fit", "gt"):
         assert main(["fabric", "eval", str(tmp_path / d), "--directions", hold,
@@ -363,7 +363,7 @@ def test_cli_fit_eval_score(tmp_path, capsys):
     assert score["identical"] or score["psnr_db"] > 60
     assert main(["fabric", "score", str(tmp_path / "fit.npz"), hold]) == 0
     assert json.loads(capsys.readouterr().out)["psnr_db"] >= 30
-    assert main(["fabric", "ndf", btf, "--texel", "2", "3", "--resolution", "32",
+    assert main(["fabric", "ndf", btf, "--texel", "2", "3", "--size", "32",
                  "--out", str(tmp_path / "ndf.exr")]) == 0
     from material_structures.core.exr_io import read_exr
 
@@ -374,7 +374,7 @@ def test_cli_fit_eval_score(tmp_path, capsys):
     assert np.allclose(np.array([peak[1], peak[0]]) + 0.5, parabolic_coords(z) * 32, atol=2.5)
     desc = json.loads((tmp_path / "fit" / "params.json").read_text())
     assert set(desc["maps"]) == {"kd", "ks", "sigma", "basis"}
-    assert main(["fabric", "fit", str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 2
+    assert main(["fabric", "fit", str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 1  # runtime error
 
 
 def test_synthetic_noise_levels():

@@ -37,13 +37,13 @@ def test_curves_and_errors(tmp_path, capsys):
                  "--out", str(npz)]) == 0
     assert load_scratch_set(npz).n_scratches == 2
     capsys.readouterr()
-    assert main(["scratch", "info", str(tmp_path / "nope.npz")]) == 2
+    assert main(["scratch", "info", str(tmp_path / "nope.npz")]) == 1
     assert "not found" in capsys.readouterr().err
     (tmp_path / "bad.json").write_text("{")
     assert main(["scratch", "generate", "--kind", "curves", "--curves", str(tmp_path / "bad.json"),
-                 "--out", str(npz)]) == 2
+                 "--out", str(npz)]) == 1  # a bad file: a runtime error
     assert "not valid JSON" in capsys.readouterr().err
-    assert main(["scratch", "generate", "--kind", "curves", "--out", str(npz)]) == 2
+    assert main(["scratch", "generate", "--kind", "curves", "--out", str(npz)]) == 2  # a usage error
     capsys.readouterr()
     assert main(["scratch", "generate", "--kind", "spiral", "--out", str(npz)]) == 2  # one line, no traceback
     assert capsys.readouterr().err.count("\n") == 1

@@ -1,4 +1,5 @@
-"""Bad teeth inputs give a one-line error naming the problem (exit 2 from the CLI) and change nothing:
+"""Bad teeth inputs give a one-line error naming the problem (exit 1 from the CLI, a runtime error; a
+bad command line exits 2) and change nothing:
 malformed or incomplete captures, masks that select nothing, a checkpoint of another fit, a second fit
 into a folder a fit is writing to, an output path that is a file, scenes that cannot be rendered (fields
 missing, meshes that are open, not manifold, inside out or not finite), a resume under other settings."""
@@ -26,8 +27,9 @@ pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory):
     folder = tmp_path_factory.mktemp("cap") / "cap"
-    assert main(["teeth", "synth", str(folder), "--teeth", "1", "--width", "12", "--height", "10", "--lights", "4",
-                 "--cameras", "1", "--spp", "1", "--spp-background", "0", "--resolution", "10"]) == 0
+    assert main(["teeth", "synth", "--out", str(folder), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                 "--mesh-resolution", "10"]) == 0
     return folder
 
 
@@ -77,7 +79,7 @@ def test_malformed_capture_is_refused_by_name(capture_dir, tmp_path, capsys, edi
     with pytest.raises(ValueError, match="capture.json"):
         Capture.load(cap)
     out = tmp_path / "fit"
-    assert main(["teeth", "fit", str(cap), "--out", str(out), "--iterations", "1", "--no-progress"]) == 2
+    assert main(["teeth", "fit", str(cap), "--out", str(out), "--iterations", "1", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
     assert _digest(cap) == before
@@ -154,7 +156,7 @@ def test_output_that_is_a_file_is_a_one_line_error(capture_dir, tmp_path, capsys
     blocker.write_text("keep me")
     for out in (blocker, blocker / "under"):
         assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--iterations", "1",
-                     "--no-progress"]) == 2
+                     "--no-progress"]) == 1
         err = capsys.readouterr().err
         assert err.startswith("error: ") and str(blocker) in err and err.count("\n") == 1, err
     assert blocker.read_text() == "keep me"
@@ -164,20 +166,20 @@ def test_render_refuses_to_write_over_its_inputs(capture_dir, tmp_path, capsys):
     cap = _copy(capture_dir, tmp_path)
     before = _digest(cap)
     for out in (cap / "images", cap, tmp_path):  # the capture's photographs, the capture, a folder holding it
-        assert main(["teeth", "render", str(cap / "scene.json"), str(cap), "--out", str(out), "--spp", "1"]) == 2
+        assert main(["teeth", "render", str(cap / "scene.json"), str(cap), "--out", str(out), "--samples", "1"]) == 1
         err = capsys.readouterr().err
         assert err.startswith("error: ") and "would write over the input" in err and err.count("\n") == 1, err
     assert _digest(cap) == before
 
 
 @pytest.mark.parametrize("argv, said", [
-    (["synth", "OUT", "--cameras", "0"], "argument --cameras: must be >= 1, got 0"),
-    (["synth", "OUT", "--spp", "-3"], "argument --spp: must be >= 1, got -3"),
-    (["synth", "OUT", "--width", "2"], "argument --width: must be >= 4, got 2"),
-    (["render", "S", "C", "--out", "O", "--spp", "0"], "argument --spp: must be >= 1, got 0"),
+    (["synth", "--out", "OUT", "--cameras", "0"], "argument --cameras: must be >= 1, got 0"),
+    (["synth", "--out", "OUT", "--samples", "-3"], "argument --samples: must be >= 1, got -3"),
+    (["synth", "--out", "OUT", "--width", "2"], "argument --width: must be >= 4, got 2"),
+    (["render", "S", "C", "--out", "O", "--samples", "0"], "argument --samples: must be >= 1, got 0"),
     (["sensitivity", "C", "--noise-variance", "nan"], "argument --noise-variance: 'nan' is not a finite number"),
-    (["sensitivity", "C", "--capture-spp", "4", "--block", "0"], "argument --block: must be >= 1, got 0"),
-    (["sensitivity", "C", "--capture-spp", "4", "--passes", "1"], "argument --passes: must be >= 2, got 1"),
+    (["sensitivity", "C", "--capture-samples", "4", "--block", "0"], "argument --block: must be >= 1, got 0"),
+    (["sensitivity", "C", "--capture-samples", "4", "--passes", "1"], "argument --passes: must be >= 2, got 1"),
     (["fit", "C", "--out", "O", "--textured-iterations", "-1"], "argument --textured-iterations: must be >= 0"),
     (["fit", "C", "--out", "O", "--seed", "-2"], "argument --seed: must be >= 0, got -2"),
 ])
@@ -192,18 +194,18 @@ def test_numeric_flags_are_range_checked_at_the_parser(tmp_path, capsys, argv, s
 def test_resume_from_a_missing_or_broken_checkpoint_is_one_line(capture_dir, tmp_path, capsys):
     out = tmp_path / "fit"
     argv = ["teeth", "fit", str(capture_dir), "--out", str(out), "--resume"]  # with progress bars: none drawn
-    assert main(argv) == 2
+    assert main(argv) == 1
     assert "no checkpoint to resume from" in capsys.readouterr().err
     assert not out.exists()  # nothing created
     out.mkdir()
     (out / "checkpoint.json").write_text("{not json")
-    assert main(argv) == 2
+    assert main(argv) == 1
     err = capsys.readouterr().err
     assert "checkpoint.json" in err and "not a fit checkpoint" in err and err.count("\n") == 1, err
     (out / "checkpoint.json").unlink()
     (out / "start_trials").mkdir()  # a fit stopped during its start trials, its saved starts damaged
     (out / "start_trials" / "starts.json").write_text('{"starts": [{"teeth": 1}]}')
-    assert main(argv) == 2
+    assert main(argv) == 1
     err = capsys.readouterr().err
     assert "starts.json: not the starts of a fit's trials" in err and err.count("\n") == 1, err
 
@@ -314,11 +316,11 @@ def test_a_scene_that_cannot_be_rendered_is_one_line(capture_dir, tmp_path, caps
     with pytest.raises(UserError, match="scene.json: "):
         load_scene(path)
     before, cap_before = _digest(tmp_path), _digest(capture_dir)
-    assert main(["teeth", "render", path, str(capture_dir), "--out", str(tmp_path / "r"), "--spp", "1"]) == 2
+    assert main(["teeth", "render", path, str(capture_dir), "--out", str(tmp_path / "r"), "--samples", "1"]) == 1
     err = capsys.readouterr().err
     assert err.startswith(f"error: {path}: ") and said in err and err.count("\n") == 1, err
     assert main(["teeth", "fit", str(capture_dir), "--scene", path, "--out", str(tmp_path / "f"), "--iterations",
-                 "1", "--no-progress"]) == 2
+                 "1", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert err.startswith(f"error: {path}: ") and said in err and err.count("\n") == 1, err
     assert _digest(tmp_path) == before and _digest(capture_dir) == cap_before  # nothing written
@@ -330,7 +332,7 @@ def test_a_capture_whose_scene_json_lacks_teeth_is_one_line(capture_dir, tmp_pat
     d.pop("teeth")
     (cap / "scene.json").write_text(json.dumps(d))
     before = _digest(cap)
-    assert main(["teeth", "fit", str(cap), "--out", str(tmp_path / "f"), "--no-progress"]) == 2
+    assert main(["teeth", "fit", str(cap), "--out", str(tmp_path / "f"), "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert "scene.json: lacks the field 'teeth'" in err and err.count("\n") == 1, err
     assert _digest(cap) == before and not (tmp_path / "f").exists()
@@ -353,7 +355,7 @@ def test_a_resumed_fit_keeps_its_settings_and_refuses_other_flags(capture_dir, t
                         (["--held-out-lights", "2", "--seed", "4"],
                          "--held-out-lights 2 (it started with 0); --seed 4 (it started with 3)"),
                         (["--textured-iterations", "0"], "stopped in the 'textured' phase")):
-        assert main(argv + ["--resume", *flags]) == 2
+        assert main(argv + ["--resume", *flags]) == 1
         err = capsys.readouterr().err
         assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
         assert _digest(out) == before
@@ -366,7 +368,7 @@ def test_a_resumed_fit_keeps_its_settings_and_refuses_other_flags(capture_dir, t
     ckpt = json.loads((out / "checkpoint.json").read_text())
     ckpt["settings"]["spp"] = "many"
     (out / "checkpoint.json").write_text(json.dumps(ckpt))
-    assert main(argv + ["--resume"]) == 2
+    assert main(argv + ["--resume"]) == 1
     err = capsys.readouterr().err
     assert "checkpoint.json: fit settings of the wrong kind" in err and err.count("\n") == 1, err
 
@@ -400,7 +402,7 @@ def test_the_checkpoint_identity_holds_spp_lr_and_the_optimiser(capture_dir, tmp
 def test_a_free_pattern_that_names_no_parameter_is_refused(capture_dir, tmp_path, capsys):
     """--free with a typo fitted fewer parameters than asked, without a word."""
     assert main(["teeth", "fit", str(capture_dir), "--out", str(tmp_path / "f"), "--free", "*.albedo,*.albdo",
-                 "--no-progress"]) == 2
+                 "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: --free *.albdo: no parameter of ") and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []
@@ -417,7 +419,7 @@ def test_a_damaged_checkpoint_is_one_line(capture_dir, tmp_path, capsys, content
     out.mkdir()
     (out / "checkpoint.json").write_bytes(content)
     before = _digest(out)
-    assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--resume", "--no-progress"]) == 2
+    assert main(["teeth", "fit", str(capture_dir), "--out", str(out), "--resume", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "checkpoint.json" in err and said in err and err.count("\n") == 1, err
     assert _digest(out) == before

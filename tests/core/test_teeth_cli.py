@@ -20,9 +20,9 @@ pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 
 def test_synth_then_fit_with_resume(tmp_path):
     cap_dir, fit_dir = tmp_path / "cap", tmp_path / "fit"
-    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
-                 "--lights", "4", "--cameras", "2", "--spp", "2", "--spp-background", "1",
-                 "--resolution", "12"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
+                 "--lights", "4", "--cameras", "2", "--samples", "2", "--samples-background", "1",
+                 "--mesh-resolution", "12"]) == 0
     cap = Capture.load(cap_dir)
     assert cap.images.shape == (2, 4, 12, 16, 3) and cap.masks.any()
     # the stored images are the renderer's output for the stored ground-truth scene (same seeds)
@@ -51,7 +51,7 @@ def test_synth_then_fit_with_resume(tmp_path):
     assert main(common[:4] + [str(fit2)] + common[5:] + ["--iterations", "5"]) == 0
     log5b = json.loads((fit2 / "loss.json").read_text())["log"]
     assert [e["loss"] for e in log5b] == pytest.approx([e["loss"] for e in log5], rel=1e-12)
-    assert main(["teeth", "fit", str(tmp_path / "nope"), "--out", str(fit_dir)]) == 2
+    assert main(["teeth", "fit", str(tmp_path / "nope"), "--out", str(fit_dir)]) == 1
 
 
 def test_synth_renders_a_given_scene(tmp_path, capsys):
@@ -65,8 +65,9 @@ def test_synth_renders_a_given_scene(tmp_path, capsys):
     truth.teeth[0].c = np.array([0.25, -0.15, 0.1])
     save_scene(truth, tmp_path / "truth.json")
     cap_dir = tmp_path / "cap"
-    assert main(["teeth", "synth", str(cap_dir), "--scene", str(tmp_path / "truth.json"), "--width", "16",
-                 "--height", "12", "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "0"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--scene", str(tmp_path / "truth.json"), "--width",
+                 "16", "--height", "12", "--lights", "3", "--cameras", "1", "--samples", "2", "--samples-background",
+                 "0"]) == 0
     written = load_scene(cap_dir / "scene.json")
     np.testing.assert_array_equal(written.teeth[0].enamel.sigma_t, [1.3, 1.5, 1.9])
     np.testing.assert_array_equal(written.teeth[0].c, [0.25, -0.15, 0.1])
@@ -78,19 +79,19 @@ def test_synth_renders_a_given_scene(tmp_path, capsys):
     assert masked.sum() > 30
     np.testing.assert_allclose(cap.images[masked], res.images[masked], rtol=1e-6, atol=1e-9)
     capsys.readouterr()
-    assert main(["teeth", "synth", str(tmp_path / "cap2"), "--scene", str(tmp_path / "nope.json")]) == 2
+    assert main(["teeth", "synth", "--out", str(tmp_path / "cap2"), "--scene", str(tmp_path / "nope.json")]) == 1
     err = capsys.readouterr().err
     assert "nope.json" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
 def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
     cap_dir = tmp_path / "cap"
-    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
-                 "--lights", "4", "--cameras", "1", "--spp", "2", "--spp-background", "1",
-                 "--resolution", "12"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
+                 "--lights", "4", "--cameras", "1", "--samples", "2", "--samples-background", "1",
+                 "--mesh-resolution", "12"]) == 0
     out = tmp_path / "sens.json"
-    assert main(["teeth", "sensitivity", str(cap_dir), "--capture-spp", "2", "--passes", "3", "--block", "4",
-                 "--max-depth", "4", "--json", str(out)]) == 0
+    assert main(["teeth", "sensitivity", str(cap_dir), "--capture-samples", "2", "--passes", "3", "--block", "4",
+                 "--max-depth", "4", "--out", str(out)]) == 0
     table = json.loads(out.read_text())
     names = list(table["chi2"])
     assert "tooth0.enamel.sigma_s[0]" in names and "tooth0.c[2]" in names and table["noise_variance"] > 0
@@ -100,7 +101,7 @@ def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
     capsys.readouterr()
     assert main(["teeth", "sensitivity", str(cap_dir)]) == 2  # neither noise option: one line
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and "--capture-spp" in err and err.count("\n") == 1, err
+    assert err.startswith("error: ") and "--capture-samples" in err and err.count("\n") == 1, err
 
 
 def test_fit_starts_from_the_literature_search(tmp_path):
@@ -111,9 +112,9 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     from material_structures.core.teeth.literature_init import G_VALUES, literature_starts, literature_table
 
     cap_dir = tmp_path / "cap"
-    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
-                 "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "0",
-                 "--resolution", "12"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "3", "--cameras", "1", "--samples", "2", "--samples-background", "0",
+                 "--mesh-resolution", "12"]) == 0
     cap = Capture.load(cap_dir)
     table, _ = literature_table()
     fit_dir = tmp_path / "fit"
@@ -140,9 +141,9 @@ def test_fit_workers_in_one_process_and_clear_errors(tmp_path, capsys):
     ignores it): the same losses as one process; ``--workers`` with Dask and out-of-range values are
     one-line errors (exit 2)."""
     cap_dir = tmp_path / "cap"
-    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
-                 "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "1",
-                 "--resolution", "12"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
+                 "--lights", "3", "--cameras", "1", "--samples", "2", "--samples-background", "1",
+                 "--mesh-resolution", "12"]) == 0
     common = ["teeth", "fit", str(cap_dir), "--init", "perturbed", "--no-progress", "--iterations", "2"]
     logs = {}
     for name, extra in (("one", []), ("two", ["--workers", "2"])):
@@ -187,9 +188,9 @@ def test_fit_cli_defaults_are_fit_settings_and_help_is_short(tmp_path, capsys):
     assert 5 <= len(options) <= 15, options
 
     cap_dir, fit_dir = tmp_path / "cap", tmp_path / "fit"
-    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
-                 "--lights", "3", "--cameras", "1", "--spp", "2", "--spp-background", "1",
-                 "--resolution", "12"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "16", "--height", "12",
+                 "--lights", "3", "--cameras", "1", "--samples", "2", "--samples-background", "1",
+                 "--mesh-resolution", "12"]) == 0
     assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--init", "perturbed", "--no-progress",
                  "--iterations", "2"]) == 0
     ran = json.loads((fit_dir / "loss.json").read_text())
@@ -205,9 +206,9 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
     """With MATERIAL_STRUCTURES_PROGRESS=json (what the Blender add-on sets) the fit reports each iteration,
     what it does between iterations and nothing else as JSON lines on stdout: no progress bars to parse."""
     cap_dir = tmp_path / "cap"
-    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
-                 "--lights", "4", "--cameras", "1", "--spp", "1", "--spp-background", "0",
-                 "--resolution", "10"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                 "--mesh-resolution", "10"]) == 0
     capsys.readouterr()
     monkeypatch.setenv("MATERIAL_STRUCTURES_PROGRESS", "json")
     n = FitSettings().start_trials + 2
@@ -239,9 +240,9 @@ def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(tmp_path, m
     from material_structures.core.teeth.fit_checkpoint import stopped_fit
 
     cap_dir = tmp_path / "cap"
-    assert main(["teeth", "synth", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
-                 "--lights", "4", "--cameras", "1", "--spp", "1", "--spp-background", "0",
-                 "--resolution", "10"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                 "--mesh-resolution", "10"]) == 0
     n = FitSettings().start_trials + 2
     whole, cut = tmp_path / "whole", tmp_path / "cut"
     assert main(["teeth", "fit", str(cap_dir), "--out", str(whole), "--iterations", str(n), "--no-progress"]) == 0

@@ -32,8 +32,9 @@ sys.exit(main({argv!r}))
 @pytest.mark.skipif(__import__("importlib").util.find_spec("numba") is None, reason="needs numba")
 def test_fit_runs_with_numpy_and_numba_only(tmp_path):
     cap = tmp_path / "cap"
-    assert main(["teeth", "synth", str(cap), "--teeth", "1", "--width", "12", "--height", "10", "--lights", "4",
-                 "--cameras", "1", "--spp", "1", "--spp-background", "0", "--resolution", "10"]) == 0
+    assert main(["teeth", "synth", "--out", str(cap), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                 "--mesh-resolution", "10"]) == 0
     out = tmp_path / "fit"
     argv = ["teeth", "fit", str(cap), "--out", str(out), "--iterations", "2"]
     env = {**os.environ, "MATERIAL_STRUCTURES_PROGRESS": "json"}

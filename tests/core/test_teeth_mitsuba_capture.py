@@ -20,8 +20,8 @@ pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 pytest.importorskip("mitsuba")
 
 SEEDS = (11, 12, 13)
-SYNTH = ["--teeth", "1", "--width", "20", "--height", "14", "--lights", "3", "--cameras", "2", "--spp", "256",
-         "--resolution", "12", "--renderer", "mitsuba"]
+SYNTH = ["--teeth", "1", "--width", "20", "--height", "14", "--lights", "3", "--cameras", "2", "--samples", "256",
+         "--mesh-resolution", "12", "--renderer", "mitsuba"]
 
 
 def _tooth_mean(batches: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -34,7 +34,7 @@ def _tooth_mean(batches: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.n
 def test_synth_mitsuba_capture_matches_our_tracer(tmp_path, capsys):
     caps = []
     for s in SEEDS:
-        assert main(["teeth", "synth", str(tmp_path / f"cap{s}"), *SYNTH, "--seed", str(s)]) == 0
+        assert main(["teeth", "synth", "--out", str(tmp_path / f"cap{s}"), *SYNTH, "--seed", str(s)]) == 0
         caps.append(Capture.load(tmp_path / f"cap{s}"))
     out = capsys.readouterr().out
     assert "Mitsuba 3" in out and "blend spread 1e-5 mm" in out
