@@ -17,9 +17,8 @@ from material_structures.core.teeth.gradient_check import fd_check
 pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 
 
-@pytest.mark.parametrize("reference", [pytest.param(False, id="compiled"), pytest.param(True, id="reference")])
-def test_every_gradient_component_matches_central_differences(reference):
-    layout, g, fd = fd_check(reference=reference)
+def test_every_gradient_component_matches_central_differences(tracer):
+    layout, g, fd = fd_check(reference=tracer.reference)
     names = layout.component_names()
     scale = np.max(np.abs(fd))
     rel = np.abs(g - fd) / np.maximum(np.abs(fd), 1e-12)

@@ -126,14 +126,13 @@ def test_full_tooth_matches_mitsuba(mitsuba_refs):
         _compare(mine, refs[k], mask, ("depth 60", k))
 
 
-@pytest.mark.parametrize("reference", [pytest.param(False, id="compiled"), pytest.param(True, id="reference")])
-def test_defaults_render_all_bounces_like_mitsuba(mitsuba_refs, reference):
+def test_defaults_render_all_bounces_like_mitsuba(mitsuba_refs, tracer):
     """``render`` at its defaults (Russian roulette, all bounces) against Mitsuba ``volpath``
     ``max_depth: -1``, the compiled tracer and the numpy reference. (The same comparison at max_depth 6
     fails by 6-17 % per channel, see docs/teeth-tracer.md.)"""
     sc, cam, lights, mask, refs = mitsuba_refs
     for k, light in enumerate(lights):
-        res = [render(sc, [cam], [light], RenderSettings(spp=32, seed=100 + 10 * k + s), reference=reference)
+        res = [render(sc, [cam], [light], RenderSettings(spp=32, seed=100 + 10 * k + s), reference=tracer.reference)
                for s in range(3)]
         assert all(r.stats["capped_paths"] == 0 for r in res)
         _compare([r.images[0, 0] for r in res], refs[k], mask, ("roulette", k))
@@ -150,8 +149,7 @@ def _refractive_scene(eta: float):
     return sc, cam, lights
 
 
-@pytest.mark.parametrize("reference", [pytest.param(False, id="compiled"), pytest.param(True, id="reference")])
-def test_thin_dielectric_boundaries_match_mitsuba(reference):
+def test_thin_dielectric_boundaries_match_mitsuba(tracer):
     """The Fresnel boundaries of eq. 5.1-5.2 (reflect with F, else straight on with weight a_t) against Mitsuba
     ``volpath`` with all bounces through the ``teeth_thin_boundary`` plugin (``mitsuba_capture``), at
     ``render``'s defaults. Measured: tooth means within 0.2-1.4 % (|diff| / tolerance <= 0.22); a plugin whose
@@ -164,6 +162,6 @@ def test_thin_dielectric_boundaries_match_mitsuba(reference):
     caps = [render_capture_mitsuba(sc, [cam], lights, spp=256, seed=s) for s in range(3)]
     for k, light in enumerate(lights):
         ref = [c.images[0, k].astype(np.float64) for c in caps]
-        mine = [render(sc, [cam], [light], RenderSettings(spp=32 if reference else 64, seed=10 * k + s),
-                       reference=reference).images[0, 0] for s in range(3)]
+        mine = [render(sc, [cam], [light], RenderSettings(spp=32 if tracer.reference else 64, seed=10 * k + s),
+                       reference=tracer.reference).images[0, 0] for s in range(3)]
         _compare(mine, ref, mask, ("thin boundaries", k))

@@ -25,9 +25,6 @@ def _slab():
     return sc, [down_camera(12, 12, fov=6.0)], [light((60.0, 20.0, 200.0)), light((-80.0, -40.0, 150.0))]
 
 
-ENGINES = [pytest.param(False, id="compiled"), pytest.param(True, id="reference")]
-
-
 @functools.cache
 def _deep_render(spp: int, reference: bool):
     sc, cams, lights = _slab()
@@ -49,14 +46,13 @@ def _paired_z(rr_depth: int, spp: int = 48, reference: bool = False) -> tuple[np
     return d.mean(axis=0), d.std(axis=0, ddof=1) / np.sqrt(len(d)), rr.stats, deep.stats
 
 
-@pytest.mark.parametrize("reference", ENGINES)
 @pytest.mark.parametrize("rr_depth", [2, 10])
-def test_roulette_is_unbiased_against_a_deep_fixed_depth_render(rr_depth, reference):
+def test_roulette_is_unbiased_against_a_deep_fixed_depth_render(rr_depth, tracer):
     """Mean over pixels of the roulette render = that of a max_depth 200 render (0.95^200 ~ 4e-5 of the
     light left out) within 4 standard errors (+ 1e-9), per channel. Measured: |diff| / SE 1.26, 0.97,
     0.52 (rr_depth 2) and 0.18, 0.05, 0.84 (rr_depth 10), the SE 1.0-1.3 % of the mean; roulette traced
     29 % (rr_depth 2) / 37 % (10) of the depth-200 render's vertices."""
-    diff, se, st_rr, st_deep = _paired_z(rr_depth, reference=reference)
+    diff, se, st_rr, st_deep = _paired_z(rr_depth, reference=tracer.reference)
     assert st_rr["capped_paths"] == 0
     assert st_rr["path_vertices"] < 0.7 * st_deep["path_vertices"]  # roulette did end paths early
     assert np.all(np.abs(diff) < 4 * se + 1e-9), (diff, se, diff / se)
@@ -93,13 +89,12 @@ def test_safety_cap_is_a_fixed_depth(monkeypatch):
     assert "capped_paths" not in fixed.stats
 
 
-@pytest.mark.parametrize("reference", ENGINES)
-def test_roulette_gradient_matches_central_differences(reference):
+def test_roulette_gradient_matches_central_differences(tracer):
     """Every gradient component with roulette on (from vertex 2, so that most paths meet it) against the
     central difference of the same estimator (``fd_check``, common random numbers): <= 5 % (measured:
     worst 3.7e-8). With q computed from the evaluation-scene throughput instead of theta_0's, the worst
     component is off by 227 % (median 3 %)."""
-    layout, g, fd = fd_check(max_depth=None, rr_depth=2, reference=reference)
+    layout, g, fd = fd_check(max_depth=None, rr_depth=2, reference=tracer.reference)
     names = layout.component_names()
     scale = np.max(np.abs(fd))
     assert np.all(np.abs(fd) > 1e-7 * scale), [n for n, f in zip(names, fd, strict=True) if abs(f) <= 1e-7 * scale]
@@ -107,8 +102,7 @@ def test_roulette_gradient_matches_central_differences(reference):
     assert np.max(rel) < 0.05, {n: r for n, r in zip(names, rel, strict=True) if r >= 0.05}
 
 
-@pytest.mark.parametrize("reference", ENGINES)
-def test_roulette_jacobian_matches_reverse_mode_and_per_pixel_differences(reference):
+def test_roulette_jacobian_matches_reverse_mode_and_per_pixel_differences(tracer):
     """Forward mode (``jacobian_cols``) with roulette: contracted with an adjoint it equals the reverse-mode
     gradient of the same paths (to rounding), and a subset of its columns matches per-pixel central
     differences of the same estimator (CRN) within 5 % (relative Frobenius norm). Measured: 3e-16 and
@@ -119,10 +113,10 @@ def test_roulette_jacobian_matches_reverse_mode_and_per_pixel_differences(refere
     h_, w_ = cams[0].height, cams[0].width
     pixels = [np.arange(0, h_ * w_, 2)]
     cols = np.arange(layout.size)
-    res = render(sc, cams, lights, st, pixels=pixels, jacobian_cols=cols, reference=reference)
+    res = render(sc, cams, lights, st, pixels=pixels, jacobian_cols=cols, reference=tracer.reference)
     jac = res.jacobian
     adj = np.random.default_rng(5).random((1, len(lights), h_, w_, 3))
-    g = render(sc, cams, lights, st, pixels=pixels, adjoint=adj, reference=reference).grad
+    g = render(sc, cams, lights, st, pixels=pixels, adjoint=adj, reference=tracer.reference).grad
     a = adj[0].reshape(len(lights), -1, 3)[:, pixels[0]].transpose(1, 0, 2)
     np.testing.assert_allclose(np.einsum("nlc,nlcp->p", a, jac), g, rtol=1e-9, atol=1e-12 * np.abs(g).max())
     x0 = scene_to_vector(sc, layout)
@@ -134,7 +128,7 @@ def test_roulette_jacobian_matches_reverse_mode_and_per_pixel_differences(refere
             x = x0.copy()
             x[p] += sgn * h
             im = render(vector_to_scene(sc, x, layout), cams, lights, st, pixels=pixels, sampling_scene=sc,
-                        reference=reference).images
+                        reference=tracer.reference).images
             imgs.append(im[0].reshape(len(lights), -1, 3)[:, pixels[0]].transpose(1, 0, 2))
         fd = (imgs[0] - imgs[1]) / (2 * h)
         assert np.linalg.norm(fd) > 0, layout.component_names()[p]
