@@ -7,8 +7,8 @@ The numba warm-up: the compiled teeth tracer's kernels are cached on disk (``cac
 compiles them in every process that needs them first, which under ``pytest -n 2`` is both workers and the
 fits' subprocesses at once. The controlling process (or a run without xdist) therefore starts
 ``tests/warm_numba.py`` in the background when the session starts; tests of the teeth tracer (``teeth`` in
-their file's or their own name, the Dask suite) run after all others and wait for it. So the kernels
-compile once per run, and a warm cache costs the warm-up a second or two.
+their file's or their own name, the Dask suite, the ``numba`` marker) run after all others and wait for it.
+So the kernels compile once per run, and a warm cache costs the warm-up a second or two.
 """
 
 from __future__ import annotations
@@ -55,11 +55,14 @@ def cycles_kernel(request) -> str:
     return request.config.getoption("--cycles-kernel")
 
 
-def _needs_numba(nodeid: str) -> bool:
-    """Tests of the teeth tracer: ``teeth`` in the file's, the test's or a parameter's name (the library's teeth
-    fit demo), or the Dask suite."""
-    nodeid = nodeid.replace(os.sep, "/")
-    return "teeth" in nodeid.rsplit("/", 1)[-1] or nodeid.startswith("tests/scaleout/")
+def _needs_numba(item: pytest.Item) -> bool:
+    """Tests of the teeth tracer: ``teeth`` in the file's or the test function's name (not a parameter's: the
+    docs test of ``teeth-fit.md`` needs no tracer), the Dask suite, or the ``numba`` marker (the library's
+    teeth fit demo)."""
+    nodeid = item.nodeid.replace(os.sep, "/")
+    name = getattr(item, "originalname", item.name)
+    return ("teeth" in nodeid.split("::", 1)[0].rsplit("/", 1)[-1] or "teeth" in name
+            or nodeid.startswith("tests/scaleout/") or item.get_closest_marker("numba") is not None)
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
@@ -86,7 +89,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """While the warm-up compiles, run everything else: the teeth tracer's tests go last (a stable sort, the
     same in every xdist worker), so no worker sits waiting while tests it could run are queued behind them."""
     if os.environ.get(_WARM_ENV):
-        items.sort(key=lambda item: _needs_numba(item.nodeid))
+        items.sort(key=_needs_numba)
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
@@ -100,7 +103,7 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
 def _numba_warm(request) -> None:
     """Tests of the teeth tracer wait until the background warm-up has compiled its kernels."""
     done = os.environ.get(_WARM_ENV)
-    if not done or not _needs_numba(request.node.nodeid):
+    if not done or not _needs_numba(request.node):
         return
     start = time.monotonic()
     while not os.path.exists(done) and not os.path.exists(done + ".failed"):

@@ -2,6 +2,8 @@
 
 ``bpy`` imports once per process, so user resources are redirected before the first import.
 The add-on is enabled from this checkout through a temporary extension repository.
+Every test starts from an empty file (``fresh_file``, automatic): what a test leaves in ``bpy.data`` is
+never the next test's starting point.
 """
 
 from __future__ import annotations
@@ -41,6 +43,13 @@ def addon_module() -> str:
     assert mod is not None, f"could not enable {ADDON_MODULE}"
     yield ADDON_MODULE
     addon_utils.disable(ADDON_MODULE, default_set=True)
+
+
+@pytest.fixture(autouse=True)
+def fresh_file() -> None:
+    """An empty file before every test (Blender's File > New > General without its objects). A test that
+    needs several files in turn resets again itself."""
+    bpy.ops.wm.read_homefile(use_empty=True)
 
 
 def _raise(exc):

@@ -72,7 +72,6 @@ def test_operator_ids_are_namespaced(addon_module):
 
 
 def test_setup_operator_enables_osl(addon_module):
-    bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "BLENDER_EEVEE_NEXT" if bpy.app.version < (5, 0, 0) else "BLENDER_EEVEE"
     assert bpy.ops.material_structures.setup_cycles_osl() == {"FINISHED"}

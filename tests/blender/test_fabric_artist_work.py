@@ -199,11 +199,10 @@ def test_viewport_look_follows_the_painted_maps(addon_module, tmp_path):
 
 
 def test_corduroy_preset_has_wales_like_the_library(addon_module):
-    from material_structures import render as R
     from material_structures.core.fabric.preset_maps import CORDUROY_WALES
     from material_structures.showcase.scenes_fabric import _preset_maps
 
-    scene = R.reset_scene()
+    scene = bpy.context.scene
     obj = _plane(scene, "Bolster")
     assert bpy.ops.material_structures.fabric_new_material(preset="CORDUROY") == {"FINISHED"}
     maps = material_maps(obj)  # BTF frame (y down the image)
@@ -216,9 +215,8 @@ def test_corduroy_preset_has_wales_like_the_library(addon_module):
 
 
 def test_viewport_samples_in_the_tab_are_cycles_own(addon_module):
-    from material_structures import render as R
 
-    scene = R.reset_scene()
+    scene = bpy.context.scene
     scene.material_structures.preview_samples = 7
     assert scene.cycles.preview_samples == 7
     scene.cycles.preview_samples = 19

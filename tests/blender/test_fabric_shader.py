@@ -211,9 +211,9 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
     from material_structures.addon.fabric.world_light import world_light_status, world_strength, world_tables
     from material_structures.core.exr_io import read_exr, write_exr
     from material_structures.core.fabric import closure_accuracy as A
-    from material_structures.render import dark_world, reset_scene
+    from material_structures.render import dark_world
 
-    scene = reset_scene()
+    scene = bpy.context.scene
     dark_world(scene)
     assert world_tables(scene)[0] == ""  # black: nothing to sample
     world = dark_world(scene, strength=2.0)  # constant white x 2

@@ -22,7 +22,8 @@ RESOLUTION, SAMPLES = (48, 36), 4
 EXACT = {"test-card"}  # emission only: the same on 4.5, compared there too
 DARKER = np.array([0.99, 0.99, 0.99, 1.0], dtype=np.float32)  # the planted regression: RGB 1 % darker
 
-SCENES = library.available_scenes()
+# the teeth fit demo fits with the compiled tracer: it waits for the numba warm-up (tests/conftest.py)
+SCENES = [pytest.param(n, marks=pytest.mark.numba) if n == "teeth-fit-demo" else n for n in library.available_scenes()]
 MATERIALS = library.available_materials()
 
 

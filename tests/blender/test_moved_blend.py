@@ -95,7 +95,7 @@ def test_file_from_before_embedding_is_converted_on_load(addon_module, tmp_path)
     from material_structures.render.osl import compile_script_node
     from material_structures.render.session import osl_shader_path
 
-    scene = R.reset_scene()
+    scene = bpy.context.scene
     R.configure_cycles(scene, resolution=(8, 8), samples=1)
     R.dark_world(scene)
     mat = R.new_material("Old")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bpy
 import numpy as np
 import pytest
 
@@ -53,7 +54,7 @@ def test_texel_lookup_exact_and_oriented(tmp_path):
 
 
 def test_missing_socket_is_reported():
-    scene = R.reset_scene()
+    scene = bpy.context.scene
     mat = R.new_material("T")
     with pytest.raises(R.OslScriptError, match="NoSuchSocket"):
         R.load_osl_script(mat.node_tree, "ms_constant_emission", scene, inputs=["NoSuchSocket"])

@@ -11,7 +11,6 @@ import pytest
 def test_add_anatomical_tooth(addon_module, template):
     from material_structures.core.teeth.anatomy import SPECS, make_anatomical_tooth
 
-    bpy.ops.wm.read_homefile(use_empty=True)
     assert bpy.ops.material_structures.teeth_add_tooth(kind=template.upper(), resolution=24) == {"FINISHED"}
     enamel = bpy.context.active_object
     dentin = enamel.ms_tooth.partner

@@ -43,7 +43,6 @@ def _scene_file(tmp_path, spread):
 
 
 def test_every_way_of_making_a_tooth_gives_it_a_blend_volume(addon_module, tmp_path):
-    bpy.ops.wm.read_homefile(use_empty=True)
     assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.004, location=(0.02, 0, 0))
     assert bpy.ops.material_structures.teeth_add_tooth(source="MESH") == {"FINISHED"}
@@ -65,7 +64,6 @@ def test_apply_fit_result_drives_the_blend_and_shape_keys_move_it(addon_module, 
     from material_structures.addon.teeth.materials import group_node
     from material_structures.core.teeth.scene import save_scene
 
-    bpy.ops.wm.read_homefile(use_empty=True)
     ts, path = _scene_file(tmp_path, 0.34)
     assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
     fit = ts.copy()
@@ -199,7 +197,6 @@ def test_fit_check_image_is_saved_in_the_blend(addon_module, tmp_path):
 
     from .fresh import run_fresh
 
-    bpy.ops.wm.read_homefile(use_empty=True)
     out = str(tmp_path / "fit")
     os.makedirs(out)
     with open(os.path.join(out, "fit_report.json"), "w") as f:

@@ -161,7 +161,6 @@ def test_tooth_from_mesh(addon_module):
 
 
 def test_errors_are_reported(addon_module):
-    bpy.ops.wm.read_homefile(use_empty=True)
     with pytest.raises(RuntimeError, match="closed mesh"):
         bpy.ops.material_structures.teeth_add_tooth(source="MESH")
     with pytest.raises(RuntimeError, match="not a tooth"):

@@ -141,7 +141,6 @@ def test_background_job_progress_and_cancel(addon_module, capture_dir, tmp_path)
 
 
 def test_fit_errors(addon_module, tmp_path):
-    bpy.ops.wm.read_homefile(use_empty=True)
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir = str(tmp_path)
     with pytest.raises(RuntimeError, match="no capture.json"):

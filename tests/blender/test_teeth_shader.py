@@ -38,7 +38,7 @@ def test_enamel_boundary_reflection_and_straight_transmission(addon_module, thet
     from material_structures import render as R
     from material_structures.addon.teeth.materials import _load_boundary_script
 
-    scene = R.reset_scene()
+    scene = bpy.context.scene
     R.configure_cycles(scene, resolution=(4, 4), samples=512, seed=3)
     R.dark_world(scene)
     a_t = 0.8
@@ -66,7 +66,6 @@ def test_node_groups_and_add_menu(addon_module):
     from material_structures.addon.nodes import MENU_ENTRIES
     from material_structures.addon.teeth.materials import ensure_group
 
-    bpy.ops.wm.read_homefile(use_empty=True)
     groups = (("Enamel", ["Surface", "Volume"]), ("Dentin", ["Volume"]), ("Gingiva", ["Surface", "Volume"]))
     for kind, outputs in groups:
         g = ensure_group(kind, bpy.context.scene)
