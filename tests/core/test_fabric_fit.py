@@ -276,6 +276,36 @@ def test_sort_basis_and_flip_labels():
 # ---------------------------------------------------------------- end to end
 
 
+@pytest.fixture
+def closures_from_the_table(monkeypatch):
+    """``fit_btf`` takes every texel's Cycles closure mix from the closure table (FIT_KEY_BUDGET 0), as for a
+    measured map, instead of fitting each distinct texel geometry (0.15-0.6 s each: 9 of a 4 x 4 fit's 10 s).
+    For the tests of the BTF fit and its cache; ``test_a_fit_writes_the_closures_of_its_texel_geometries``
+    runs the closure fit."""
+    from material_structures.core.fabric import btf_fitter
+
+    monkeypatch.setattr(btf_fitter, "FIT_KEY_BUDGET", 0)
+
+
+@pytest.mark.heavy  # a whole fit (1-3 s): outside `make test-fast`
+def test_a_fit_writes_the_closures_of_its_texel_geometries(tmp_path):
+    """Up to FIT_KEY_BUDGET distinct texel geometries, the fit writes beside its maps the closure mix
+    fitted to each (``fit_closure_maps``), not the table's."""
+    from material_structures.core.fabric.closure_fit import fit_closure_maps, load_closure_maps
+    from material_structures.core.fabric.closure_table import lookup_closure_texels
+
+    maps = synthetic_maps(2, 1, seed=8)
+    wi, wo = light_view_pairs(12, 12)
+    save_btf(tmp_path / "btf", render_btf(maps, wi, wo), wi, wo)
+    fit, _ = fit_btf(tmp_path / "btf", tmp_path / "fit", tile=2, workers=1, progress=False)
+    got = load_closure_maps(tmp_path / "fit")
+    want = fit_closure_maps(fit.sigma, fit.basis)
+    for name in ("weights", "shape", "ggx_scale"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+    table = lookup_closure_texels(fit.sigma.reshape(-1, 2), fit.basis.reshape(-1, 4))[0]
+    assert not np.array_equal(got.weights.reshape(table.shape), table)  # fitted, not looked up
+
+
 def _fit_and_score(tmp_path, noise, n=24, size=10, workers=2):
     maps = synthetic_maps(size, size, seed=7)
     wi, wo = light_view_pairs(n, n)
@@ -292,23 +322,23 @@ def _fit_and_score(tmp_path, noise, n=24, size=10, workers=2):
     return psnr(pred, ref), ang[aniso], stats
 
 
-@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
-def test_fit_recovers_synthetic_model_noise_free(tmp_path):
+@pytest.mark.heavy  # a whole fit (1-3 s): outside `make test-fast`
+def test_fit_recovers_synthetic_model_noise_free(closures_from_the_table, tmp_path):
     p, ang, stats = _fit_and_score(tmp_path, 0.0)
     assert p >= 30.0
     assert ang.size > 10 and np.max(ang) <= 5.0
     assert stats["tiles"] == 4 and stats["tiles_fitted_this_run"] == 4
 
 
-@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
-def test_fit_with_five_percent_noise(tmp_path):
+@pytest.mark.heavy  # a whole fit (1-3 s): outside `make test-fast`
+def test_fit_with_five_percent_noise(closures_from_the_table, tmp_path):
     p, ang, _ = _fit_and_score(tmp_path, 0.05)
     assert p >= 20.0
     assert np.percentile(ang, 90) <= 5.0
 
 
-@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
-def test_fit_resumes_from_tile_checkpoints(tmp_path):
+@pytest.mark.heavy  # a whole fit (1-3 s): outside `make test-fast`
+def test_fit_resumes_from_tile_checkpoints(closures_from_the_table, tmp_path):
     maps = synthetic_maps(4, 4, seed=8)  # 4 tiles of 2 x 2 texels: the checkpoints, not the fit, are under test
     wi, wo = light_view_pairs(12, 12)
     save_btf(tmp_path / "btf", render_btf(maps, wi, wo), wi, wo)
@@ -322,8 +352,8 @@ def test_fit_resumes_from_tile_checkpoints(tmp_path):
         assert np.allclose(getattr(first, name), getattr(again, name), atol=1e-6)
 
 
-@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
-def test_an_image_rewritten_in_place_invalidates_the_cache(tmp_path):
+@pytest.mark.heavy  # a whole fit (1-3 s): outside `make test-fast`
+def test_an_image_rewritten_in_place_invalidates_the_cache(closures_from_the_table, tmp_path):
     """The cache is keyed on every file's size and mtime, not the folder: after one image of the BTF is
     rewritten (same name, same size), the next fit recomputes every tile and its result follows the new
     data."""
@@ -344,8 +374,8 @@ def test_an_image_rewritten_in_place_invalidates_the_cache(tmp_path):
     assert stats["tiles_fitted_this_run"] == 4
 
 
-@pytest.mark.heavy  # a whole fit (15-60 s): outside `make test-fast`
-def test_cli_fit_eval_score(tmp_path, capsys):
+@pytest.mark.heavy  # a whole fit (1-3 s): outside `make test-fast`
+def test_cli_fit_eval_score(closures_from_the_table, tmp_path, capsys):
     from material_structures.cli import main
 
     btf, hold = str(tmp_path / "btf"), str(tmp_path / "hold.npz")
@@ -353,7 +383,10 @@ def test_cli_fit_eval_score(tmp_path, capsys):
                  "--views", "14", "--gt-out", str(tmp_path / "gt")]) == 0
     assert main(["fabric", "synth", "--out", hold, "--width", "6", "--height", "5", "--lights", "5",
                  "--views", "5", "--rotation-deg", "45.8"]) == 0
-    assert main(["fabric", "fit", btf, "--out", str(tmp_path / "fit"), "--workers", "1", "--no-progress"]) == 0
+    # in this process (--no-dask): a local Dask cluster costs 5 s to start and stop; the sigterm tests
+    # (test_bad_inputs_fabric_scratch) and tests/scaleout fit through Dask
+    assert main(["fabric", "fit", btf, "--out", str(tmp_path / "fit"), "--no-dask", "--workers", "1",
+                 "--no-progress"]) == 0
     for d in ("fit", "gt"):
         assert main(["fabric", "eval", str(tmp_path / d), "--directions", hold,
                      "--out", str(tmp_path / f"{d}.npz")]) == 0

@@ -234,8 +234,9 @@ def test_sigterm_stops_a_dask_teeth_fit_with_its_workers_and_it_resumes(capture_
 
     out = tmp_path / "fit"
     # the first checkpoint comes at iteration 5; a tiny capture's iterations are fast, so that before the
-    # signal lands the fit may run a few more (with 8 in all it had sometimes ended: 3 failures in 10 runs)
-    n = 40
+    # signal lands the fit may run a few more (with 8 in all it had sometimes ended: 3 failures in 10 runs;
+    # with 20, the file polled every 0.05 s, it had run 5 when stopped in 5 of 5 runs, 0.08 s an iteration)
+    n = 20
     argv = [sys.executable, "-m", "material_structures", "teeth", "fit", str(capture_dir), "--out", str(out),
             "--init", "scene", "--iterations", str(n), "--held-out-lights", "0", "--dask-workers", "1",
             "--no-progress"]
