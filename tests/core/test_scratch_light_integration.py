@@ -98,18 +98,30 @@ def _rel_l2(a, r):
     return float(np.sqrt(np.sum((np.asarray(a) - r) ** 2) / np.sum(np.square(r))))
 
 
-def test_analytic_vs_quadrature_reference_default_set():
-    """Acceptance (small default version): 120 random configurations, relative L2 < 2 %."""
-    cfgs = random_validation_configs(120, np.random.default_rng(2024))
+def _check_against_quadrature(cfgs):
     ref = np.array([reference_radiance_quadrature(c) for c in cfgs])
     ana = np.array([analytic_radiance_config(c) for c in cfgs])
     assert _rel_l2(ana, ref) < 0.02
     for kind in ("sphere", "polygon"):
         m = np.array([c["kind"] == kind for c in cfgs])
-        assert _rel_l2(ana[m], ref[m]) < 0.02
+        assert m.any() and _rel_l2(ana[m], ref[m]) < 0.02
     # with the thesis' own Si fit (eq. 4.29) and single-chord footprint (eq. 4.15) the error is larger
     thesis = np.array([analytic_radiance_config(c, "thesis", "thesis") for c in cfgs])
     assert 0.01 < _rel_l2(thesis, ref) < 0.1
+
+
+def test_analytic_vs_quadrature_reference_short_set():
+    """The checks of ``test_analytic_vs_quadrature_reference_default_set`` (nightly) on its first 20
+    configurations (10 spheres, 10 polygons; the quadrature reference costs 0.1-0.7 s each). Measured:
+    relative L2 0.26 % (both kinds < 2 %), the thesis' Si fit and footprint 3.7 %."""
+    _check_against_quadrature(random_validation_configs(20, np.random.default_rng(2024)))
+
+
+@pytest.mark.slow
+def test_analytic_vs_quadrature_reference_default_set():
+    """Short counterpart in `make test`: test_analytic_vs_quadrature_reference_short_set (its first 20).
+    Acceptance (small default version): 120 random configurations, relative L2 < 2 %."""
+    _check_against_quadrature(random_validation_configs(120, np.random.default_rng(2024)))
 
 
 @pytest.mark.slow

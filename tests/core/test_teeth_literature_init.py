@@ -103,12 +103,61 @@ def _capture_of_table_points(picks, scale: float = 1.0):
     return pts, float(gs[1]), start, cap
 
 
-# the second assignment of the points to the channels is nightly (`make test-all`; 154 s of 3700 on a loaded
-# 2-core machine); `make test` runs the first, the same search and checks
-@pytest.mark.parametrize("picks", [((1, 1), (0, 0), (1, 0)),
-                                   pytest.param(((0, 0), (1, 1), (1, 0)), marks=pytest.mark.slow)])
+def test_absolute_search_on_half_the_pixels_and_lights_finds_the_table_points(monkeypatch):
+    """``test_absolute_search_finds_the_table_points_of_a_calibrated_capture``'s capture and checks (nightly),
+    with a search on every second masked pixel of 6 lights, refining 1 point per g and channel (in 1/4 of
+    the time), and one search for both ``literature_start`` and ``literature_starts`` (the same arguments:
+    the same search). Measured: both assignments of the points found with these settings."""
+    from material_structures.core.teeth import literature_init
+
+    real, searched = literature_init._search, []
+
+    def search_once(*args):
+        if not searched:
+            searched.append((args, real(*args)))
+        # the same scene, capture and settings (the last argument is the progress callback)
+        first = searched[0][0]
+        assert first[0] is args[0] and first[1] is args[1] and first[2:-1] == args[2:-1]
+        return searched[0][1]
+
+    monkeypatch.setattr(literature_init, "_search", search_once)
+    picks = ((1, 1), (0, 0), (1, 0))
+    pts, g, start, cap = _capture_of_table_points(picks)
+    kw = dict(pixel_stride=2, n_lights=6, spp=8, tile=4, scale_invariant=False, refine_keep=1)
+    calls = []
+    found = literature_start(start, cap, N_SIGMA, N_ALBEDO, progress=calls.append, **kw)
+    assert sum(calls) == literature_points(N_SIGMA, N_ALBEDO, refine_keep=1)
+    _check_found(found, pts, g)
+    _check_starts(literature_starts(start, cap, N_SIGMA, N_ALBEDO, **kw), pts, g)
+
+
+def _check_found(found, pts, g):
+    for t in found.teeth:
+        for m in (t.enamel, t.dentin):
+            np.testing.assert_allclose(m.sigma_t, pts[:, 0], rtol=1e-12)
+            np.testing.assert_allclose(m.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
+            assert m.g1 == g
+            assert (m.g2, m.beta) == (-0.2, 0.8)  # VolumeMaterial's defaults, not the scene's 0.4 / 0.55
+        np.testing.assert_array_equal(t.c, 0.0)
+        np.testing.assert_array_equal(t.a_t, MODEL_A_T)  # not the scene's 0.6
+
+
+def _check_starts(starts, pts, g):
+    """One start per g, for the fit's trials: the capture's g among them, with the capture's points."""
+    assert [s.teeth[0].enamel.g1 for s in starts] == list(G_VALUES)
+    mine = starts[list(G_VALUES).index(g)].teeth[0]
+    np.testing.assert_allclose(mine.enamel.sigma_t, pts[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(mine.dentin.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
+
+
+# nightly (`make test-all`; 154 s of 3700 on a loaded 2-core machine for the second assignment of the points
+# to the channels, 35-60 s for the first); `make test` runs the search on half the pixels and lights
+# (test_absolute_search_on_half_the_pixels_and_lights_finds_the_table_points)
+@pytest.mark.slow
+@pytest.mark.parametrize("picks", [((1, 1), (0, 0), (1, 0)), ((0, 0), (1, 1), (1, 0))])
 def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
-    """Points of the table whose images differ (sigma_t 0.3 or 1.39 / mm, albedo 0.5 or 0.978). Denser or
+    """Short counterpart in `make test`: test_absolute_search_on_half_the_pixels_and_lights_finds_the_table_points.
+    Points of the table whose images differ (sigma_t 0.3 or 1.39 / mm, albedo 0.5 or 0.978). Denser or
     brighter neighbours (sigma_t 6.46 vs 30 / mm at albedo 0.5, albedo 0.978 vs 0.999 at sigma_t 0.3) give
     images within a few 1e-3 of each other in this error, less than a 32-spp capture's noise: no search
     can tell them apart, so they are not asked for. With all bounces (the default transport), sigma_t
@@ -122,31 +171,16 @@ def test_absolute_search_finds_the_table_points_of_a_calibrated_capture(picks):
                              scale_invariant=False,
                              progress=calls.append)
     assert sum(calls) == literature_points(N_SIGMA, N_ALBEDO)  # the table, then the refinement's points
-    for t in found.teeth:
-        for m in (t.enamel, t.dentin):
-            np.testing.assert_allclose(m.sigma_t, pts[:, 0], rtol=1e-12)
-            np.testing.assert_allclose(m.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
-            assert m.g1 == g
-            assert (m.g2, m.beta) == (-0.2, 0.8)  # VolumeMaterial's defaults, not the scene's 0.4 / 0.55
-        np.testing.assert_array_equal(t.c, 0.0)
-        np.testing.assert_array_equal(t.a_t, MODEL_A_T)  # not the scene's 0.6
-    # one start per g, for the fit's trials: the capture's g among them, with the capture's points
-    starts = literature_starts(start, cap, N_SIGMA, N_ALBEDO, pixel_stride=1, n_lights=12, spp=8, tile=4,
-                               scale_invariant=False)
-    assert [s.teeth[0].enamel.g1 for s in starts] == list(G_VALUES)
-    mine = starts[list(G_VALUES).index(g)].teeth[0]
-    np.testing.assert_allclose(mine.enamel.sigma_t, pts[:, 0], rtol=1e-12)
-    np.testing.assert_allclose(mine.dentin.albedo, np.minimum(pts[:, 1], 0.999), rtol=1e-12)
+    _check_found(found, pts, g)
+    _check_starts(literature_starts(start, cap, N_SIGMA, N_ALBEDO, pixel_stride=1, n_lights=12, spp=8, tile=4,
+                                    scale_invariant=False), pts, g)
 
 
-def test_scale_invariant_search_ignores_the_exposure():
-    """A capture 3x too bright (uncalibrated exposure) gives the scale-invariant search the same start,
-    and the absolute search a different one."""
+def _check_exposure_is_ignored(**kw):
     picks = ((1, 1), (2, 1), (1, 0))
     _, _, start, cap = _capture_of_table_points(picks)
     bright = copy.copy(cap)  # the same render 3x brighter (rendering it again at scale=3.0 gives these values)
     bright.images = cap.images * np.float32(3.0)
-    kw = dict(pixel_stride=1, n_lights=12, spp=1, tile=4)
     a = literature_start(start, cap, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
     b = literature_start(start, bright, N_SIGMA, N_ALBEDO, **kw).teeth[0].enamel
     np.testing.assert_allclose(b.sigma_t, a.sigma_t, rtol=1e-12)
@@ -154,6 +188,21 @@ def test_scale_invariant_search_ignores_the_exposure():
     assert b.g1 == a.g1
     c = literature_start(start, bright, N_SIGMA, N_ALBEDO, scale_invariant=False, **kw).teeth[0].enamel
     assert np.any(c.sigma_t != a.sigma_t) or np.any(c.albedo != a.albedo)
+
+
+def test_scale_invariant_search_on_half_the_pixels_and_lights_ignores_the_exposure():
+    """``test_scale_invariant_search_ignores_the_exposure`` (nightly) with searches of the table alone (no
+    refinement: its 8-spp renders on 12 lights were 3/4 of the time) on every second masked pixel of 6
+    lights. Measured: the absolute search's start differs in two channels."""
+    _check_exposure_is_ignored(pixel_stride=2, n_lights=6, spp=1, tile=4, refine_keep=0)
+
+
+@pytest.mark.slow
+def test_scale_invariant_search_ignores_the_exposure():
+    """Short counterpart in `make test`: test_scale_invariant_search_on_half_the_pixels_and_lights_ignores_the_exposure.
+    A capture 3x too bright (uncalibrated exposure) gives the scale-invariant search the same start,
+    and the absolute search a different one."""
+    _check_exposure_is_ignored(pixel_stride=1, n_lights=12, spp=1, tile=4)
 
 
 def test_search_rejects_missing_data_and_bad_settings():
