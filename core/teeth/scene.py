@@ -37,7 +37,8 @@ SCENE_FORMAT = "material_structures.teeth.scene/1"
 
 
 def _rgb(x) -> np.ndarray:
-    a = np.asarray(x, dtype=np.float64).reshape(-1)
+    # a copy: a scene owns its values (a shared default edited in place would change every scene made from it)
+    a = np.array(x, dtype=np.float64).reshape(-1)
     if a.size == 1:
         a = np.repeat(a, 3)
     if a.shape != (3,):
@@ -75,7 +76,7 @@ class VolumeMaterial:
 
 
 def _texture(a) -> np.ndarray:
-    t = np.asarray(a, dtype=np.float64)
+    t = np.array(a, dtype=np.float64)  # its own copy (see _rgb)
     if t.ndim == 1:
         t = _rgb(t).reshape(1, 1, 3)
     if t.ndim != 3 or t.shape[2] != 3:
@@ -98,8 +99,11 @@ class Tooth:
     kind: str = "incisor"
 
     def __post_init__(self) -> None:
+        # the tooth's own media: teeth made from one material (the synthetic truth, a library shade) must not
+        # share it, or editing one tooth's (a fit, a test) edits them all and every scene made from it later
+        self.enamel, self.dentin = copy.deepcopy(self.enamel), copy.deepcopy(self.dentin)
         self.a_t = _texture(self.a_t)
-        self.c = np.asarray(self.c, dtype=np.float64).reshape(3)
+        self.c = np.array(self.c, dtype=np.float64).reshape(3)
         if self.enamel_mesh.corner_uv is None:
             raise UserError(f"tooth {self.name!r}: the enamel mesh needs UVs for the a_t texture")
 
@@ -126,6 +130,7 @@ class Gums:
     eta: float = ETA_GUMS
 
     def __post_init__(self) -> None:
+        self.material = copy.deepcopy(self.material)  # its own (see Tooth)
         self.a_t = _texture(self.a_t)
         if self.mesh.corner_uv is None:
             raise UserError("the gums mesh needs UVs for the a_t texture")
