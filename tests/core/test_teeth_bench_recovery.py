@@ -10,8 +10,29 @@ from material_structures.benchmarks.teeth import RECOVERY_SETTINGS, run_recovery
 pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 
 
+def test_run_recovery_on_a_small_rig_reports_result_best_and_start(monkeypatch):
+    """``test_run_recovery_reports_result_best_and_start`` (nightly) with the acceptance scene and rig at 24 x 16
+    pixels instead of 96 x 64 (the same views; 30 of the 37 s were the 2 iterations' renders)."""
+    from material_structures.core.teeth import capture
+
+    real_rig, rigs = capture.default_rig, []
+
+    def small_rig(*a, **kw):
+        rigs.append(kw)
+        return real_rig(*a, **{**kw, "width": 24, "height": 16})
+
+    monkeypatch.setattr(capture, "default_rig", small_rig)
+    _check_recovery(run_recovery(iterations=2, synth_spp=1))
+    assert [(r["width"], r["height"]) for r in rigs] == [(96, 64)]  # the acceptance rig's call
+
+
+@pytest.mark.slow
 def test_run_recovery_reports_result_best_and_start():
-    out = run_recovery(iterations=2, synth_spp=1)
+    """Short counterpart in `make test`: test_run_recovery_on_a_small_rig_reports_result_best_and_start."""
+    _check_recovery(run_recovery(iterations=2, synth_spp=1))
+
+
+def _check_recovery(out):
     keys = ("recovery_sigma_t_rel_err", "recovery_albedo_rel_err", "recovery_dentin_abs_err")
     assert out["recovery_iterations"] == 2
     for part in (out, out["recovery_best_loss_params"], out["recovery_start"]):

@@ -230,22 +230,45 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
     assert "it/s" not in err and "|" not in err  # no tqdm bars
 
 
+@pytest.fixture(scope="module")
+def uninterrupted_fit(tmp_path_factory):
+    """A tiny capture and its fit with the start trials, not interrupted: (capture, fit folder, iterations,
+    the literature search's starts). Shared by the interrupted fits below (read only)."""
+    from material_structures.core.teeth import literature_init
+
+    folder = tmp_path_factory.mktemp("trials")
+    cap_dir, whole = folder / "cap", folder / "whole"
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                 "--mesh-resolution", "10"]) == 0
+    n = FitSettings().start_trials + 2
+    real_search, starts = literature_init.literature_starts, []
+
+    def search(*a, **kw):
+        starts.extend(real_search(*a, **kw))
+        return [s.copy() for s in starts]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(literature_init, "literature_starts", search)
+        assert main(["teeth", "fit", str(cap_dir), "--out", str(whole), "--iterations", str(n), "--no-progress"]) == 0
+    assert len(starts) == 3
+    return cap_dir, whole, n, starts
+
+
 # trial iterations before Ctrl-C: in the second start's first half; in the first start's second half (half 15); 0:
 # after the trials, while the winner's files move into --out
 @pytest.mark.parametrize("stop_after", [22, 47, 0])
-def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(tmp_path, monkeypatch, stop_after):
+def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(uninterrupted_fit, tmp_path, monkeypatch,
+                                                                     stop_after):
     """Ctrl-C during the start trials, then ``--resume``: the trials go on from their checkpoints (no second
     search) and the fit ends with the uninterrupted fit's losses and result, to the bit."""
     from material_structures.core.teeth import literature_init, start_trials
     from material_structures.core.teeth.fit_checkpoint import stopped_fit
 
-    cap_dir = tmp_path / "cap"
-    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
-                 "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
-                 "--mesh-resolution", "10"]) == 0
-    n = FitSettings().start_trials + 2
-    whole, cut = tmp_path / "whole", tmp_path / "cut"
-    assert main(["teeth", "fit", str(cap_dir), "--out", str(whole), "--iterations", str(n), "--no-progress"]) == 0
+    cap_dir, whole, n, starts = uninterrupted_fit
+    cut = tmp_path / "cut"
+    # the uninterrupted fit's search (the same capture: the same starts), not a second one (60 % of a fit)
+    monkeypatch.setattr(literature_init, "literature_starts", lambda *a, **k: [s.copy() for s in starts])
 
     real_fit, ran = start_trials.fit, [0]
 

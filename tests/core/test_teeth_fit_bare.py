@@ -29,14 +29,32 @@ sys.exit(main({argv!r}))
 """
 
 
-@pytest.mark.skipif(__import__("importlib").util.find_spec("numba") is None, reason="needs numba")
+NEEDS_NUMBA = pytest.mark.skipif(__import__("importlib").util.find_spec("numba") is None, reason="needs numba")
+
+
+@NEEDS_NUMBA
+def test_a_fit_from_the_scene_runs_with_numpy_and_numba_only(tmp_path):
+    """``test_fit_runs_with_numpy_and_numba_only`` (nightly) from the capture's scene (``--init scene``):
+    without the literature search and the start trials (8 of its 16 s), the fit, its report, check image
+    and loss plot."""
+    _check_fit_runs_bare(tmp_path, ["--init", "scene"])
+
+
+@pytest.mark.slow
+@NEEDS_NUMBA
 def test_fit_runs_with_numpy_and_numba_only(tmp_path):
+    """Short counterpart in `make test`: test_a_fit_from_the_scene_runs_with_numpy_and_numba_only.
+    The default fit: the literature search, the start trials, then the fit."""
+    _check_fit_runs_bare(tmp_path, [])
+
+
+def _check_fit_runs_bare(tmp_path, init: list[str]) -> None:
     cap = tmp_path / "cap"
     assert main(["teeth", "synth", "--out", str(cap), "--teeth", "1", "--width", "12", "--height", "10",
                  "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
                  "--mesh-resolution", "10"]) == 0
     out = tmp_path / "fit"
-    argv = ["teeth", "fit", str(cap), "--out", str(out), "--iterations", "2"]
+    argv = ["teeth", "fit", str(cap), "--out", str(out), "--iterations", "2", *init]
     env = {**os.environ, "MATERIAL_STRUCTURES_PROGRESS": "json"}
     r = subprocess.run([sys.executable, "-c", RUN.format(blocked=BLOCKED, argv=argv)], capture_output=True,
                        text=True, env=env, timeout=600)

@@ -15,6 +15,7 @@ from material_structures.core.teeth.param_vector import ParamLayout, scene_to_ve
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 
 from ._teeth_scenes import down_camera, light, slab_scene
+from .conftest import TRACERS
 
 pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 
@@ -89,8 +90,52 @@ def test_safety_cap_is_a_fixed_depth(monkeypatch):
     assert "capped_paths" not in fixed.stats
 
 
+def _one_component_of_each_kind(layout) -> list[int]:
+    """A component of every parameter (enamel.sigma_t, ..., cavity.albedo), the k-th parameter's k-th
+    channel (mod its size): 19 of fd_test_scene's 48."""
+    kinds: dict[str, list[int]] = {}
+    for i, name in enumerate(layout.component_names()):
+        kinds.setdefault(name.split("[")[0], []).append(i)
+    return [comps[k % len(comps)] for k, comps in enumerate(kinds.values())]
+
+
+def test_roulette_gradient_of_the_reference_tracer_matches_central_differences_of_each_kind():
+    """``test_roulette_gradient_matches_central_differences[reference]`` (nightly) on one component of every
+    parameter: the numpy tracer's 97 renders were 14 s. The same estimator, renders and 5 % bound."""
+    sc, cams, lights = fd_test_scene()
+    layout = ParamLayout(sc)
+    x0 = scene_to_vector(sc, layout)
+    st = RenderSettings(spp=3, max_depth=None, seed=7, rr_depth=2)  # fd_check's, with roulette from vertex 2
+    adj = np.random.default_rng(3).random((1, len(lights), cams[0].height, cams[0].width, 3))
+    g = render(sc, cams, lights, st, adjoint=adj, reference=True).grad
+    comps = _one_component_of_each_kind(layout)
+    assert len(comps) == 19
+    fd = []
+    for p in comps:
+        h = 1e-5 * max(abs(x0[p]), 0.05)
+        vals = []
+        for sgn in (1, -1):
+            x = x0.copy()
+            x[p] += sgn * h
+            img = render(vector_to_scene(sc, x, layout), cams, lights, st, sampling_scene=sc, reference=True).images
+            vals.append(np.sum(adj * img))
+        fd.append((vals[0] - vals[1]) / (2 * h))
+    fd, g = np.array(fd), g[comps]
+    names = [layout.component_names()[p] for p in comps]
+    scale = np.max(np.abs(fd))
+    assert np.all(np.abs(fd) > 1e-7 * scale), [n for n, f in zip(names, fd, strict=True) if abs(f) <= 1e-7 * scale]
+    rel = np.abs(g - fd) / np.maximum(np.abs(fd), 1e-12)
+    assert np.max(rel) < 0.05, {n: r for n, r in zip(names, rel, strict=True) if r >= 0.05}
+
+
+# the numpy reference tracer's check of all 48 components is nightly (14 s); `make test` checks one of
+# each kind (test_roulette_gradient_of_the_reference_tracer_matches_central_differences_of_each_kind)
+@pytest.mark.parametrize("tracer", [TRACERS[0], pytest.param(TRACERS[1], marks=pytest.mark.slow)], indirect=True,
+                         ids=[t.name for t in TRACERS])
 def test_roulette_gradient_matches_central_differences(tracer):
-    """Every gradient component with roulette on (from vertex 2, so that most paths meet it) against the
+    """Short counterpart in `make test` of [reference]:
+    test_roulette_gradient_of_the_reference_tracer_matches_central_differences_of_each_kind.
+    Every gradient component with roulette on (from vertex 2, so that most paths meet it) against the
     central difference of the same estimator (``fd_check``, common random numbers): <= 5 % (measured:
     worst 3.7e-8). With q computed from the evaluation-scene throughput instead of theta_0's, the worst
     component is off by 227 % (median 3 %)."""
