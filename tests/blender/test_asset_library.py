@@ -12,10 +12,27 @@ pytest.importorskip("PIL")
 
 @pytest.fixture(scope="module")
 def built_library(tmp_path_factory, addon_module):
-    from material_structures.showcase.asset_library import build_asset_library
+    """The library built as ``make library`` builds it, with one material's preview rendered and the others'
+    flat grey (each preview is that material's library render, which test_library_regression.py checks; a teeth
+    preview alone costs ~20 s of Cycles volume set-up). ``make test-bare`` builds the whole library for real."""
+    import numpy as np
+
+    from material_structures.showcase import asset_library
 
     folder = str(tmp_path_factory.mktemp("library"))
-    path = build_asset_library(folder, preview_size=24, samples=1, progress=False)
+    render = asset_library.render_material_preview
+    rendered = []
+
+    def preview(name, work, resolution, samples):
+        if not rendered:
+            rendered.append(name)
+            return render(name, work, resolution, samples)
+        return np.full((resolution[1], resolution[0], 4), 0.5, dtype=np.float32)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(asset_library, "render_material_preview", preview)
+        path = asset_library.build_asset_library(folder, preview_size=24, samples=1, progress=False)
+    assert len(rendered) == 1
     return folder, path
 
 

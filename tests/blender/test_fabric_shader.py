@@ -149,7 +149,12 @@ def test_closure_approximation_error(addon_module, sigma, tilt, bound):
     assert np.median(rel) <= bound
 
 
-@pytest.mark.parametrize(("env_name", "sigma", "tilt"), [("sky", (0.3, 0.8), 20.0), ("interior", (2.5, 2.5), 10.0)])
+# one environment per test in make test, the other nightly (make test-all): the shader's code path is the same
+NIGHTLY = pytest.mark.slow
+
+
+@pytest.mark.parametrize(("env_name", "sigma", "tilt"), [("sky", (0.3, 0.8), 20.0),
+                                                         pytest.param("interior", (2.5, 2.5), 10.0, marks=NIGHTLY)])
 def test_fitted_closures_under_an_hdri_match_the_core_closure_model(addon_module, tmp_path, env_name, sigma, tilt):
     """World light only (a procedural HDRI written as an EXR): the shader's fitted closures, rendered by
     Cycles, against the numpy quadrature of core's closure model (closure_fit.closure_eval) under the
@@ -168,7 +173,8 @@ def test_fitted_closures_under_an_hdri_match_the_core_closure_model(addon_module
     assert np.all(ref > 0)
 
 
-@pytest.mark.parametrize(("env_name", "sigma", "tilt"), [("sky", (0.3, 0.8), 30.0), ("interior", (2.5, 2.5), 30.0)])
+@pytest.mark.parametrize(("env_name", "sigma", "tilt"), [pytest.param("sky", (0.3, 0.8), 30.0, marks=NIGHTLY),
+                                                         ("interior", (2.5, 2.5), 30.0)])
 def test_exact_world_light_matches_eq_3_9_under_an_hdri(addon_module, tmp_path, env_name, sigma, tilt):
     """World light only: the shader's exact world path (environment importance sampling, eq. 3.9's
     specular term, Cycles' diffuse closure for k_d) against the numpy quadrature of eq. 3.9 times the

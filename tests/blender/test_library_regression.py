@@ -22,9 +22,21 @@ RESOLUTION, SAMPLES = (48, 36), 4
 EXACT = {"test-card"}  # emission only: the same on 4.5, compared there too
 DARKER = np.array([0.99, 0.99, 0.99, 1.0], dtype=np.float32)  # the planted regression: RGB 1 % darker
 
-# the teeth fit demo fits with the compiled tracer: it waits for the numba warm-up (tests/conftest.py)
-SCENES = [pytest.param(n, marks=pytest.mark.numba) if n == "teeth-fit-demo" else n for n in library.available_scenes()]
-MATERIALS = library.available_materials()
+# Nightly only (make test-all): the 16-tooth smile (its Cycles volume set-up takes minutes; make test checks its
+# build in test_teeth_scenes.py and renders its materials and Blend Volumes on one tooth, "Dentin Shade A1") and
+# two of the three dentin shades (the same tooth and node groups with other values: A1 stays).
+NIGHTLY = {"teeth-smile", "Dentin Shade A3 (yellowish)", "Dentin Shade C2 (greyish)"}
+
+
+def _entry(name: str):
+    marks = [pytest.mark.slow] if name in NIGHTLY else []
+    if name == "teeth-fit-demo":  # fits with the compiled tracer: waits for the numba warm-up (tests/conftest.py)
+        marks.append(pytest.mark.numba)
+    return pytest.param(name, marks=marks)
+
+
+SCENES = [_entry(n) for n in library.available_scenes()]
+MATERIALS = [_entry(n) for n in library.available_materials()]
 
 
 def _slug(name: str) -> str:
