@@ -86,10 +86,13 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """While the warm-up compiles, run everything else: the teeth tracer's tests go last (a stable sort, the
-    same in every xdist worker), so no worker sits waiting while tests it could run are queued behind them."""
+    """While the warm-up compiles, run everything else: the files holding a test of the teeth tracer go last,
+    whole (a stable sort, the same in every xdist worker). Whole files, because ``--dist loadfile`` hands a file
+    to a worker when its first test comes up: a file sorted apart would take its tracer test along early, and
+    that worker would sit waiting for the warm-up while tests it could run are queued behind it."""
     if os.environ.get(_WARM_ENV):
-        items.sort(key=_needs_numba)
+        late = {item.nodeid.split("::", 1)[0] for item in items if _needs_numba(item)}
+        items.sort(key=lambda item: item.nodeid.split("::", 1)[0] in late)
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:

@@ -25,7 +25,9 @@ DARKER = np.array([0.99, 0.99, 0.99, 1.0], dtype=np.float32)  # the planted regr
 # Nightly only (make test-all): the 16-tooth smile (its Cycles volume set-up takes minutes; make test checks its
 # build in test_teeth_scenes.py and renders its materials and Blend Volumes on one tooth, "Dentin Shade A1") and
 # two of the three dentin shades (the same tooth and node groups with other values: A1 stays).
-NIGHTLY = {"teeth-smile", "Dentin Shade A3 (yellowish)", "Dentin Shade C2 (greyish)"}
+# The teeth fit demo (a fit, then its fitted tooth in Cycles) likewise: make test fits from the Teeth panel and
+# applies the result (test_teeth_fit.py) and renders the teeth materials (Dentin Shade A1).
+NIGHTLY = {"teeth-smile", "teeth-fit-demo", "Dentin Shade A3 (yellowish)", "Dentin Shade C2 (greyish)"}
 
 
 def _entry(name: str):

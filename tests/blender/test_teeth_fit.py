@@ -212,7 +212,7 @@ def test_a_cancelled_fit_resumes_from_the_panel_to_the_uninterrupted_fit(addon_m
     # the cancel must land after the first checkpoint (iteration 5) and before the end: the compiled tracer's
     # iterations on this tiny capture are a fraction of a second, the numpy tracer's (where numba is missing,
     # the 4.5 job) several seconds
-    n = 40 if _fit_tracer_compiled() else 7
+    n = 20 if _fit_tracer_compiled() else 7
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir, fs.init, fs.iterations = capture_dir, "SCENE", n
     whole, cut = tmp_path / "whole", tmp_path / "cut"
