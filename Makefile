@@ -12,9 +12,11 @@ VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender_manifest.toml)
 # the next patch version: the repository test publishes a build of it over this one to see Blender upgrade
 NEXT_VERSION := $(shell echo $(VERSION) | awk -F. '{print $$1 "." $$2 "." $$3 + 1}')
 # test processes (pytest-xdist; 0: everything in one process). Test files stay whole on one worker (--dist
-# loadfile: a file's Blender state and module fixtures are its own). --durations: the slowest tests, every run.
+# loadfile: a file's Blender state and module fixtures are its own), handed out in the order tests/conftest.py
+# sorts them (--no-loadscope-reorder: xdist would otherwise start with the files holding the most tests, the
+# teeth tracer's among them, which then wait for the numba warm-up). --durations: the slowest tests, every run.
 PYTEST_JOBS ?= 2
-PYTEST_XDIST = -n $(PYTEST_JOBS) --dist loadfile
+PYTEST_XDIST = -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder
 PYTEST_DURATIONS ?= 25
 
 .PHONY: lock setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \

@@ -65,6 +65,7 @@ def _needs_numba(item: pytest.Item) -> bool:
             or nodeid.startswith("tests/scaleout/") or item.get_closest_marker("numba") is not None)
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own sessionstart spawns the workers: they inherit the variable
 def pytest_sessionstart(session: pytest.Session) -> None:
     config = session.config
     if hasattr(config, "workerinput") or os.environ.get(_WARM_ENV):
