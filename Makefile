@@ -20,7 +20,7 @@ PYTEST_XDIST = -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder
 PYTEST_DURATIONS ?= 25
 
 .PHONY: lock setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
-	release docs bench refs clean help
+	release docs bench refs samples clean help
 
 help:
 	@echo "make demo        set up and render the sample library into out/"
@@ -31,6 +31,7 @@ help:
 	@echo "make test-bare   the built zip in a Python with only bpy 5.2 (a desktop Blender): every operator"
 	@echo "make test-bare-compat  the same on Blender 4.5 LTS"
 	@echo "make library     (re)build the artist asset library in samples/library"
+	@echo "make samples     regenerate the sample data in samples/ (a BTF, a teeth capture, the brush states)"
 	@echo "make build       installable extension zips in dist/, per platform and Python (with the asset library)"
 	@echo "make release     the zips and Blender's repository index in dist/: serve dist/ and add its index.json URL"
 	@echo "make docs        the documentation site into site/ (mkdocs --strict)"
@@ -81,18 +82,16 @@ samples/library/material_structures_library.blend: | $(STAMP)
 # the linux-x64 zip of one Python installed into a venv with only bpy (tests/bare/bare_blender.py)
 test-bare: $(STAMP) $(BSTAMP) samples/library/material_structures_library.blend
 	$(PY) -m material_structures release --out dist --platform linux-x64 --python 3.13
-	$(PY) tests/bare/prepare.py build/bare-data
 	.venv-bare/bin/python tests/bare/bare_blender.py dist/material_structures-$(VERSION)-cp313-linux_x64.zip \
-		build/bare-data build/bare-313
+		build/bare-313
 	$(PY) -m material_structures release --out build/next-313 --platform linux-x64 --python 3.13 \
 		--set-version $(NEXT_VERSION)
 	.venv-bare/bin/python tests/bare/repository.py dist build/next-313 build/repo-313
 
 test-bare-compat: $(STAMP) $(BCSTAMP) samples/library/material_structures_library.blend
 	$(PY) -m material_structures release --out build/release-311 --platform linux-x64 --python 3.11
-	$(PY) tests/bare/prepare.py build/bare-data
 	.venv-bare-compat/bin/python tests/bare/bare_blender.py \
-		build/release-311/material_structures-$(VERSION)-cp311-linux_x64.zip build/bare-data build/bare-311
+		build/release-311/material_structures-$(VERSION)-cp311-linux_x64.zip build/bare-311
 	$(PY) -m material_structures release --out build/next-311 --platform linux-x64 --python 3.11 \
 		--set-version $(NEXT_VERSION)
 	.venv-bare-compat/bin/python tests/bare/repository.py build/release-311 build/next-311 build/repo-311
@@ -103,6 +102,10 @@ demo: $(STAMP)
 
 library: $(STAMP)
 	$(PY) -m material_structures library build
+
+# the sample data shipped in samples/ (committed; regenerate after changing a format or the synthetic models)
+samples: $(STAMP)
+	$(PY) scripts/make_samples.py samples
 
 build: $(STAMP) samples/library/material_structures_library.blend
 	$(PY) -m material_structures build --out dist

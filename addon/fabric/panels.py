@@ -62,7 +62,9 @@ class VIEW3D_PT_material_structures_fabric(SidebarPanel, bpy.types.Panel):
             box.progress(factor=job.progress, text=job.status_text().replace(" (Esc cancels)", ""))
             box.operator("material_structures.fabric_fit_cancel", icon="CANCEL")
         else:
-            box.operator("material_structures.fabric_fit_btf", icon="PLAY")
+            row = box.row(align=True)
+            row.operator("material_structures.fabric_fit_btf", icon="PLAY")
+            row.operator("material_structures.use_sample", text="Fit Sample", icon="FILE_FOLDER").sample = "BTF"
             if job is not None:
                 box.label(text=f"Last fit: {job.ended_text()}")
         brush = context.scene.material_structures.fabric_brush
@@ -88,6 +90,8 @@ class VIEW3D_PT_material_structures_fabric(SidebarPanel, bpy.types.Panel):
             box.prop(brush, "anisotropy_factor")
         else:
             box.prop(brush, "states_dir")
+            box.operator("material_structures.use_sample", text="Open Sample States", icon="FILE_FOLDER").sample = \
+                "STATES"
         box.operator("material_structures.fabric_brush", icon="BRUSH_DATA")
         box.label(text="Each stroke is one step of Edit > Undo (Ctrl+Z)", icon="INFO")
 

@@ -54,7 +54,9 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
                 split.prop(m, "enamel", text="")
             if all(m.enamel is None for m in fs.tooth_map):
                 col.label(text="No capture tooth is mapped to a tooth of this scene", icon="ERROR")
-        box.operator("material_structures.teeth_read_capture_teeth", icon="FILE_REFRESH")
+        row = box.row(align=True)
+        row.operator("material_structures.teeth_read_capture_teeth", icon="FILE_REFRESH")
+        row.operator("material_structures.use_sample", text="Open Sample", icon="FILE_FOLDER").sample = "CAPTURE"
         box.prop(fs, "out_dir")
         box.prop(fs, "iterations")
         box.prop(fs, "init")

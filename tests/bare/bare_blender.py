@@ -2,9 +2,11 @@
 Blender's Python has), every operator of every panel used as a user would, then the saved file reopened in a
 fresh process.
 
-    .venv-bare/bin/python tests/bare/bare_blender.py ZIP DATA WORK
+    .venv-bare/bin/python tests/bare/bare_blender.py ZIP WORK
 
-``DATA``: ``tests/bare/prepare.py``'s inputs (capture, BTF, brushing states). ``WORK``: a scratch folder. The
+The inputs a user brings are the samples shipped in the zip (``samples/``: a BTF, a teeth capture, the brush's
+Data-Driven states), put into the panels by the Open Sample operator (``use_sample``) as a new user following
+docs/getting-started.md would. ``WORK``: a scratch folder. The
 first process installs the zip through ``extensions.package_install_files`` (its wheels with it), runs the
 operators (fabric, scratches, teeth, the asset library, a small render of each), saves WORK/bare.blend and
 what it expects to find there (WORK/expect.json); the second reopens the file and checks maps, scratch sets,
@@ -152,7 +154,7 @@ def render_only(bpy, objs, path: str) -> float:
 
 
 # -- the first process: install, use every panel, save -------------------------------------------------
-def use(zip_path: str, data: str, work: str) -> None:
+def use(zip_path: str, work: str) -> None:
     t0 = time.perf_counter()
     bpy = start_blender(work)
     import addon_utils
@@ -188,7 +190,9 @@ def use(zip_path: str, data: str, work: str) -> None:
     activate(bpy, velvet)
     brush = scene.material_structures.fabric_brush
     brush.radius, brush.strength = 0.08, 1.0
-    brush.states_dir = os.path.join(data, "states")
+    op("use_sample", sample="STATES")  # the Data-Driven mode's Open Sample States
+    samples = mod("addon.operators")
+    assert os.path.isdir(os.path.join(brush.states_dir, "state_7")), brush.states_dir
     mat = velvet.active_material
     sums = fabric_map_sums(bpy, mat)
     for i, mode in enumerate(("COMB", "RECOLOR", "SMOOTH", "ANISOTROPY", "DATA_DRIVEN")):
@@ -218,23 +222,28 @@ def use(zip_path: str, data: str, work: str) -> None:
     TIMES["fabric"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    sample_btf = samples.sample_path("BTF")
     fitted = plane(bpy, "Fabric Fitted", 4.8)
-    btf_out = os.path.join(work, "btf_fit")
-    op("fabric_fit_btf", directory=os.path.join(data, "btf"), out_dir=btf_out)
+    op("use_sample", sample="BTF")  # the Fabric panel's Fit Sample: Fit BTF on the shipped sample BTF
     fmat = fitted.active_material
-    assert fmat is not None and fmat.get("material_structures_fabric") and fmat.name.startswith("Fabric btf_fit"), \
-        fmat
-    job = mod("addon.fabric.fit_job").current_job()
-    assert job.done_iterations == job.iterations > 0 and job.state() == "FINISHED", job.status_text()
-    expect["fabric_maps"][fmat.name] = fabric_map_sums(bpy, fmat)
+    assert fmat is not None and fmat.get("material_structures_fabric") and \
+        fmat.name.startswith("Fabric fabric_btf_fit"), fmat
     fj = mod("addon.fabric.fit_job")
-    job = fj.FabricFitJob(os.path.join(data, "btf"), os.path.join(work, "btf_fit_cancelled"), workers=1).start()
+    job = fj.current_job()
+    assert job.done_iterations == job.iterations > 0 and job.state() == "FINISHED", job.status_text()
+    assert job.out_dir.startswith(work) and not job.out_dir.startswith(os.path.dirname(sample_btf)), job.out_dir
+    expect["fabric_maps"][fmat.name] = fabric_map_sums(bpy, fmat)
+    picked = plane(bpy, "Fabric Picked", 6.0)  # Fit BTF with the folder picked in the file browser
+    op("fabric_fit_btf", directory=sample_btf, out_dir=os.path.join(work, "btf_fit"))
+    assert picked.active_material is not None and picked.active_material.name.startswith("Fabric btf_fit")
+    expect["fabric_maps"][picked.active_material.name] = fabric_map_sums(bpy, picked.active_material)
+    job = fj.FabricFitJob(sample_btf, os.path.join(work, "btf_fit_cancelled"), workers=1).start()
     fj.set_current_job(job)
     # at once: the 16 x 16 BTF's fit ends within a second (its closures come from the table), and a cancel
     # after the end is "No fabric fit is running"
     op("fabric_fit_cancel")
     assert job.poll() == "CANCELLED", job.poll()
-    TIMES["fabric fit (16 x 16 BTF) + cancel"] = time.perf_counter() - t
+    TIMES["fabric fits (16 x 16 sample BTF, twice) + cancel"] = time.perf_counter() - t
 
     # -- scratches ----------------------------------------------------------------------------------------
     t = time.perf_counter()
@@ -281,11 +290,14 @@ def use(zip_path: str, data: str, work: str) -> None:
     op("teeth_set_dentin", coefficients=(0.1, 0.2, -0.3))
     for kind in ("enamel", "dentin", "gingiva"):
         op_in_node_editor(bpy, f"material_structures.teeth_add_{kind}_node", inc.active_material)
-    capture = os.path.join(data, "capture")
-    op("teeth_import_scene", filepath=os.path.join(capture, "scene.json"))
+    # the Teeth panel's Open Sample: the sample capture's folder, an output folder, its tooth imported (no tooth
+    # of this scene has its name)
+    n_objects = len(scene.objects)
+    op("use_sample", sample="CAPTURE")
     fs = scene.ms_teeth_fit
-    fs.capture_dir = capture
-    fs.out_dir = os.path.join(work, "teeth_fit")
+    capture = samples.sample_path("CAPTURE")
+    assert fs.capture_dir == capture and len(scene.objects) > n_objects, (fs.capture_dir, capture)
+    assert fs.out_dir.startswith(work), fs.out_dir
     op("teeth_read_capture_teeth")
     target = fs.tooth_map[0].enamel
     assert target is not None, "Read Capture Teeth mapped no tooth"
@@ -303,6 +315,7 @@ def use(zip_path: str, data: str, work: str) -> None:
     assert tuple(round(x, 6) for x in target.ms_tooth.coefficients()) == tuple(
         round(x, 6) for x in target.ms_tooth.fitted)
     op("teeth_apply_fit_file", filepath=job.result_path)
+    op("teeth_import_scene", filepath=job.result_path)  # the fitted scene beside the others
     t = time.perf_counter()
     job = tf.FitJob(capture, os.path.join(work, "teeth_fit_cancelled"), iterations=1000, init="scene").start()
     tf.set_current_job(job)
@@ -394,14 +407,14 @@ def main(argv: list[str]) -> int:
     if argv[:1] == ["--reload"]:
         reload(argv[1])
         return 0
-    zip_path, data, work = (os.path.abspath(a) for a in argv[:3])
+    zip_path, work = (os.path.abspath(a) for a in argv[:2])
     import shutil
 
     shutil.rmtree(work, ignore_errors=True)
     os.makedirs(work)
     t0 = time.perf_counter()
     # a process per part: bpy imports once per process, and the reopened file must not see this one's state
-    r = subprocess.run([sys.executable, __file__, "--use", zip_path, data, work])
+    r = subprocess.run([sys.executable, __file__, "--use", zip_path, work])
     if r.returncode != 0:
         return r.returncode
     r = subprocess.run([sys.executable, __file__, "--reload", work])
@@ -413,6 +426,6 @@ def main(argv: list[str]) -> int:
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--use"]:
-        use(*sys.argv[2:5])
+        use(*sys.argv[2:4])
         sys.exit(0)
     sys.exit(main(sys.argv[1:]))
