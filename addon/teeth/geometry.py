@@ -25,21 +25,12 @@ from mathutils import Matrix
 
 from ...core.teeth.blend_spread import DEFAULT_SPREAD_MM
 from ...core.teeth.dentin_blend_shapes import MODE_NAMES
+from ...core.teeth.tooth_from_surface import tooth_from_enamel_surface, vertex_normals
 from .blend_volume import ensure_blend
 from .materials import INNER_ATTRIBUTE
 
 GAP_MM = 2e-4
 UV_NAME = "UVMap"
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (outward for counter-clockwise faces)."""
-    t = vertices[faces]
-    fn = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    vn = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
-    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
 
 
 def make_mesh(name: str, vertices: np.ndarray, faces: np.ndarray, corner_uv: np.ndarray | None = None,
@@ -175,9 +166,6 @@ def tooth_from_mesh_object(obj, enamel_occlusal_mm: float = 1.8, enamel_side_mm:
     ``world_split``) is baked in once. Placed with ``placement_from_mesh_object`` the tooth's enamel surface
     lies exactly on the source's surface. ``obj.matrix_world`` must be up to date (a depsgraph update after
     moving it from Python)."""
-    from ...core.teeth.dentin_blend_shapes import DentinBlendShape, canonical_modes
-    from ...core.teeth.mesh import TriMesh
-
     me = obj.data
     me.calc_loop_triangles()
     tris = np.empty(len(me.loop_triangles) * 3, dtype=np.int32)
@@ -189,25 +177,10 @@ def tooth_from_mesh_object(obj, enamel_occlusal_mm: float = 1.8, enamel_side_mm:
     _, rest = world_split(obj)
     v = co.reshape(-1, 3).astype(np.float64) @ (np.array(rest.to_3x3()) * float(mm_per_unit)).T
     f = tris.reshape(-1, 3).astype(np.int64)
+    corner_uv = None
     if me.uv_layers:
         uv = np.empty(len(me.loops) * 2, dtype=np.float32)
         me.uv_layers.active.data.foreach_get("uv", uv)
         corner_uv = uv.reshape(-1, 2)[loops.reshape(-1, 3)].astype(np.float64)
-    else:
-        c = v.mean(axis=0)
-        u = (np.arctan2(v[:, 1] - c[1], v[:, 0] - c[0]) / (2 * np.pi)) % 1.0
-        w = (v[:, 2].max() - v[:, 2]) / max(np.ptp(v[:, 2]), 1e-9)
-        corner_uv = np.stack([u, w], axis=1)[f]
-    enamel = TriMesh(v, f, corner_uv)
-    if not enamel.is_watertight():
-        raise ValueError(f"'{obj.name}' is not a closed (watertight) triangle mesh")
-    if enamel.volume() < 0:
-        enamel = TriMesh(v, f[:, [0, 2, 1]], corner_uv[:, [0, 2, 1]])
-        f = enamel.faces
-    z = v[:, 2]
-    h = np.clip((z - z.min()) / max(np.ptp(z), 1e-9), 0.0, 1.0)
-    thickness = enamel_side_mm + (enamel_occlusal_mm - enamel_side_mm) * h ** 4
-    base = TriMesh(v - thickness[:, None] * vertex_normals(v, f), f, corner_uv)
-    crown = float(np.ptp(z))
-    shifted = TriMesh(base.vertices - np.array([0.0, 0.0, z.min()]), f, corner_uv)  # CEJ-ish at z = 0
-    return enamel, DentinBlendShape(base, canonical_modes(shifted, crown))
+    # a surface that is not closed: a UserError (a ValueError), which the operators report in one line
+    return tooth_from_enamel_surface(v, f, corner_uv, enamel_occlusal_mm, enamel_side_mm, name=obj.name)
