@@ -24,6 +24,9 @@ from material_structures.core import json_schema as J
 from material_structures.core.errors import UserError
 
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
+# the files the project writes include a teeth capture and fit (the compiled tracer): wait for the numba warm-up
+# (tests/conftest.py) rather than compile it a second time beside it
+pytestmark = pytest.mark.numba
 
 
 # ---- the schemas themselves
