@@ -6,6 +6,8 @@ sampled with theta_0, contribution f(theta_0 +- h e_p) / p(theta_0) (``sampling_
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from .capture import Camera, PointLight
@@ -30,8 +32,10 @@ def fd_test_scene() -> tuple[TeethScene, list[Camera], list[PointLight]]:
 
 
 def fd_check(spp: int = 3, max_depth: int | None = 5, seed: int = 7, rel_step: float = 1e-5,
-             rr_depth: int | None = None, reference: bool = False) -> tuple[ParamLayout, np.ndarray, np.ndarray]:
-    """Returns (layout, analytic gradient, central-difference gradient) of sum(adjoint * C).
+             rr_depth: int | None = None, reference: bool = False,
+             components: Sequence[int] | None = None) -> tuple[ParamLayout, np.ndarray, np.ndarray]:
+    """Returns (layout, analytic gradient, central-difference gradient) of sum(adjoint * C); with
+    ``components``, both only at those indices of the layout (in that order).
 
     ``max_depth=None`` checks the all-bounce estimator with Russian roulette (from vertex ``rr_depth``,
     default ``RenderSettings``'s): its survival probabilities are evaluated at theta_0 (part of
@@ -46,8 +50,9 @@ def fd_check(spp: int = 3, max_depth: int | None = 5, seed: int = 7, rel_step: f
         st.rr_depth = rr_depth
     adj = np.random.default_rng(3).random((1, len(lights), cams[0].height, cams[0].width, 3))
     g = render(sc, cams, lights, st, adjoint=adj, reference=reference).grad
-    fd = np.zeros_like(g)
-    for p in range(layout.size):
+    comps = list(range(layout.size)) if components is None else list(components)
+    fd = np.zeros(len(comps))
+    for i, p in enumerate(comps):
         h = rel_step * max(abs(x0[p]), 0.05)
         vals = []
         for sgn in (1, -1):
@@ -56,5 +61,5 @@ def fd_check(spp: int = 3, max_depth: int | None = 5, seed: int = 7, rel_step: f
             img = render(vector_to_scene(sc, x, layout), cams, lights, st, sampling_scene=sc,
                          reference=reference).images
             vals.append(np.sum(adj * img))
-        fd[p] = (vals[0] - vals[1]) / (2 * h)
-    return layout, g, fd
+        fd[i] = (vals[0] - vals[1]) / (2 * h)
+    return layout, g[comps], fd

@@ -102,25 +102,9 @@ def _one_component_of_each_kind(layout) -> list[int]:
 def test_roulette_gradient_of_the_reference_tracer_matches_central_differences_of_each_kind():
     """``test_roulette_gradient_matches_central_differences[reference]`` (nightly) on one component of every
     parameter: the numpy tracer's 97 renders were 14 s. The same estimator, renders and 5 % bound."""
-    sc, cams, lights = fd_test_scene()
-    layout = ParamLayout(sc)
-    x0 = scene_to_vector(sc, layout)
-    st = RenderSettings(spp=3, max_depth=None, seed=7, rr_depth=2)  # fd_check's, with roulette from vertex 2
-    adj = np.random.default_rng(3).random((1, len(lights), cams[0].height, cams[0].width, 3))
-    g = render(sc, cams, lights, st, adjoint=adj, reference=True).grad
-    comps = _one_component_of_each_kind(layout)
+    comps = _one_component_of_each_kind(ParamLayout(fd_test_scene()[0]))
     assert len(comps) == 19
-    fd = []
-    for p in comps:
-        h = 1e-5 * max(abs(x0[p]), 0.05)
-        vals = []
-        for sgn in (1, -1):
-            x = x0.copy()
-            x[p] += sgn * h
-            img = render(vector_to_scene(sc, x, layout), cams, lights, st, sampling_scene=sc, reference=True).images
-            vals.append(np.sum(adj * img))
-        fd.append((vals[0] - vals[1]) / (2 * h))
-    fd, g = np.array(fd), g[comps]
+    layout, g, fd = fd_check(max_depth=None, rr_depth=2, reference=True, components=comps)
     names = [layout.component_names()[p] for p in comps]
     scale = np.max(np.abs(fd))
     assert np.all(np.abs(fd) > 1e-7 * scale), [n for n, f in zip(names, fd, strict=True) if abs(f) <= 1e-7 * scale]
