@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -19,8 +20,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """Send what the benchmark writes to standard output, Blender's own C-level log lines included, to
+    standard error, so that standard output holds only the JSON."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _run_quiet(name: str) -> dict:
+    from ..benchmarks import run_benchmark
+
+    with _stdout_to_stderr():
+        return run_benchmark(name)
+
+
 def run(args: argparse.Namespace) -> int:
-    from ..benchmarks import available, run_benchmark
+    from ..benchmarks import available
 
     names = available()
     if args.list:
@@ -33,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         for name in sorted(names):
             print(f"[bench] {name} ...", file=sys.stderr, flush=True)
             try:
-                result = run_benchmark(name)
+                result = _run_quiet(name)
             except Exception as exc:  # keep going, report at the end
                 failed += 1
                 result = {"error": f"{type(exc).__name__}: {exc}"}
@@ -45,5 +69,5 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("give a benchmark NAME, --list or --all")
     if args.name not in names:
         raise UsageError(f"unknown benchmark {args.name!r}; available: {', '.join(sorted(names))}")
-    print(json.dumps(run_benchmark(args.name)))
+    print(json.dumps(_run_quiet(args.name)))
     return 0
