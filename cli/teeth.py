@@ -87,6 +87,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         f"{FIT_DEFAULTS.textured_iterations})")
     f.add_argument("--held-out-lights", type=at_least(0), default=None,
                    help=f"lights left out of the fit to check it by (default {FIT_DEFAULTS.held_out_lights})")
+    f.add_argument("--held-out-camera", type=at_least(0), default=None, metavar="INDEX",
+                   help="a camera (its index in capture.json) left out of the fit and rendered afterwards under "
+                        "every light, to check new views by (default: none)")
     f.add_argument("--free", default=None,
                    help="comma-separated parameter name patterns to fit (default: every material, a_t and the "
                         "dentin shape)")
@@ -227,7 +230,8 @@ def _bar(total: int, desc: str, unit: str, disable: bool = False):
 
 # the FitSettings that ``teeth fit`` flags set (the flag of each); --workers says only where the fit renders
 FIT_FLAGS = {"iterations": "--iterations", "textured_iterations": "--textured-iterations",
-             "held_out_lights": "--held-out-lights", "seed": "--seed", "free": "--free"}
+             "held_out_lights": "--held-out-lights", "held_out_camera": "--held-out-camera", "seed": "--seed",
+             "free": "--free"}
 
 
 # flags a resumed fit takes: how many iterations it runs (its checkpoints continue to any length)
@@ -422,9 +426,11 @@ def _adopt_trial(work: str, chosen: int, out: str) -> None:
 def run_fit(args: argparse.Namespace) -> int:
     import time
 
+    import numpy as np
+
     from ..core.folder_lock import FolderLock
     from ..core.json_io import save_json
-    from ..core.teeth.capture import Capture
+    from ..core.teeth.capture import Capture, split_camera
     from ..core.teeth.fit_checkpoint import load_state
     from ..core.teeth.fit_report import held_out_check, plot_loss
     from ..core.teeth.optimise import fit, held_out_light_ids
@@ -466,6 +472,9 @@ def run_fit(args: argparse.Namespace) -> int:
         fs = resumed_settings(args, _saved_settings(args.out, state), ckpt)
     elif stopped_in_trials:
         fs = resumed_settings(args, _trials_settings(trials_work), os.path.join(trials_work, "starts.json"))
+    full_cap, cam_cap = cap, None
+    if fs.held_out_camera >= 0:  # the fit, its search, trials, check and intervals see the other cameras only
+        cap, cam_cap = split_camera(full_cap, fs.held_out_camera)
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     os.makedirs(args.out, exist_ok=True)  # before the search and the trials: a bad --out fails at once
     resume = args.resume
@@ -530,13 +539,38 @@ def run_fit(args: argparse.Namespace) -> int:
         print(f"checking the fit on {len(held_out)} held-out lights", flush=True)
     check = held_out_check(best, cap, held_out, os.path.join(args.out, "check.png"), workers=fs.workers)
     report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,
-              "seconds_this_run": time.perf_counter() - t_start, "held_out": check}
+              "held_out": check}
+    if cam_cap is not None:
+        if as_json:
+            _event(progress="status", message=f"checking the fit from the held-out camera {fs.held_out_camera}")
+        elif not args.no_progress:
+            print(f"checking the fit from the held-out camera {fs.held_out_camera}", flush=True)
+        cam_check = held_out_check(best, cam_cap, np.arange(len(cam_cap.lights)),
+                                   os.path.join(args.out, "check_camera.png"), workers=fs.workers)
+        report["held_out_camera"] = {"camera": fs.held_out_camera, **cam_check}
+    if cap.masks is not None:
+        from ..core.teeth.fit_intervals import parameter_intervals
+
+        if as_json:
+            _event(progress="status", message="estimating what the capture determines")
+        elif not args.no_progress:
+            print("estimating what the capture determines (intervals)", flush=True)
+        trained = np.setdiff1d(np.arange(len(cap.lights)), held_out)
+        try:
+            report["intervals"] = parameter_intervals(best, cap, light_ids=trained, seed=fs.seed)
+        except UserError as e:  # a capture whose noise cannot be estimated: the fit stands, without intervals
+            report["intervals"] = {"error": str(e)}
+    report["seconds_this_run"] = time.perf_counter() - t_start
     if os.path.isfile(trials_path):
         with open(trials_path) as f:
             report["start_trials"] = json.load(f)
     save_json(os.path.join(args.out, "fit_report.json"), report)
     summary = (f"held-out lights: {check['rms_relative']:.1%} RMS per pixel, {check['rms_relative_tiles']:.1%} "
                f"on 8 x 8 tiles (check.png)" if check["lights"] else "no held-out lights")
+    if cam_cap is not None:
+        cc = report["held_out_camera"]
+        summary += (f"; held-out camera {fs.held_out_camera}: {cc['rms_relative']:.1%} RMS per pixel, "
+                    f"{cc['rms_relative_tiles']:.1%} on 8 x 8 tiles (check_camera.png)")
     print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json; {summary}; "
           "fit_report.json, loss.png, scene_best.json")
     return 0

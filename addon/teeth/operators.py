@@ -41,15 +41,21 @@ def show_fit_check(fs, out_dir: str) -> None:
     as the Image datablock ``CHECK_IMAGE_NAME``, packed into the .blend (a new fit's check replaces it)."""
     import json
 
-    fs.check_error, fs.check_image = "", ""
+    from ...core.teeth.fit_intervals import summary
+
+    fs.check_error, fs.check_image, fs.check_intervals = "", "", ""
     try:
         with open(os.path.join(out_dir, "fit_report.json")) as f:
-            held = json.load(f).get("held_out", {})
+            report = json.load(f)
     except (OSError, ValueError):
         return
+    held = report.get("held_out", {})
     if held.get("lights"):
         fs.check_error = (f"Held-out lights: {held['rms_relative']:.1%} RMS per pixel, "
                           f"{held['rms_relative_tiles']:.1%} on 8 x 8 tiles")
+    intervals = report.get("intervals", {})
+    if intervals.get("parameters"):
+        fs.check_intervals = summary(intervals)
     png = os.path.join(out_dir, "check.png")
     if os.path.isfile(png):
         fs.check_image = png

@@ -73,6 +73,8 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
             box.label(text=fs.status)
         if fs.check_error:
             box.label(text=fs.check_error, icon="CHECKMARK")
+        if fs.check_intervals:
+            box.label(text=fs.check_intervals, icon="INFO")
         img = bpy.data.images.get(CHECK_IMAGE_NAME) if fs.check_image else None
         if img is not None and img.preview is None:  # packed in the .blend; its preview is made again on reopen
             try:

@@ -168,6 +168,10 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                                           description="The last fit's held-out lights: capture | fit | difference")
     check_error: bpy.props.StringProperty(name="Held-out Error", default="",
                                           description="The last fit's error on lights it never used")
+    check_intervals: bpy.props.StringProperty(
+        name="What the Capture Determines", default="",
+        description="The last fit's parameters that the capture determines (each with a 2-sigma interval in "
+                    "fit_report.json) and the combinations it leaves open")
     # Job state: read from this Blender session's background fit, never stored in the .blend (a file saved
     # while a fit ran reopens idle). ``last_result`` is what became of the last fit, kept with the file.
     running: bpy.props.BoolProperty(name="Running", get=_get_running,

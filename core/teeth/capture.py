@@ -228,3 +228,21 @@ class Capture:
             if not seen_m.all():
                 raise UserError(f"{path}: no mask for cameras {np.flatnonzero(~seen_m).tolist()}")
         return cls(cams, lights, images, masks)
+
+
+def split_camera(capture: Capture, camera: int) -> tuple[Capture, Capture]:
+    """(the capture without camera ``camera``, the capture of that camera alone): a fit's training views and
+    the view it holds out to check new viewpoints by."""
+    n = len(capture.cameras)
+    if not 0 <= camera < n:
+        raise UserError(f"the held-out camera {camera} is not in the capture (its cameras are 0-{n - 1})")
+    if n < 2:
+        raise UserError("the capture has one camera: holding it out leaves the fit nothing to see")
+    keep = [c for c in range(n) if c != camera]
+
+    def part(ids: list[int]) -> Capture:
+        return Capture([capture.cameras[c] for c in ids], capture.lights,
+                       None if capture.images is None else capture.images[ids],
+                       None if capture.masks is None else capture.masks[ids])
+
+    return part(keep), part([camera])

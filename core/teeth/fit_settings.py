@@ -61,6 +61,9 @@ class FitSettings:
     # ---- result
     average_tail: float = 0.3  # the result is the mean of this fraction of the last iterates (0: best loss)
     held_out_lights: int = 3  # lights left out of the fit and rendered at the result to check it
+    # a camera left out of the fit, rendered at the result under every light to check new views by (-1: none;
+    # the thesis holds out the left one of its 3)
+    held_out_camera: int = -1
     checkpoint_every: int = 5
 
     def __post_init__(self) -> None:
@@ -78,6 +81,8 @@ class FitSettings:
             raise UserError(f"average_tail must be in [0, 1), got {self.average_tail}")
         if self.held_out_lights < 0 or self.checkpoint_every < 1:
             raise UserError("held_out_lights must be >= 0 and checkpoint_every >= 1")
+        if self.held_out_camera < -1:
+            raise UserError(f"held_out_camera must be a camera's index or -1 (none), got {self.held_out_camera}")
         if self.optimiser not in ("adam", "gauss-newton"):
             raise UserError(f'optimiser must be "adam" or "gauss-newton", got {self.optimiser!r}')
         if self.optimiser == "gauss-newton":

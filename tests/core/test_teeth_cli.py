@@ -126,6 +126,12 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     report = json.loads((fit_dir / "fit_report.json").read_text())
     assert report["start_trials"] == trials and trials["iterations"] == [1, 1, 1] and report["iterations"] == 1
     assert json_schema.errors(report, "teeth-fit-report") is None  # core/schemas/teeth-fit-report.schema.json
+    # what the capture determines: an entry per parameter, an interval exactly where it is determined
+    iv = report["intervals"]
+    # enamel, dentin, gums: 6 sigma_s/sigma_a and 3 phase parameters each; 3 dentin coefficients
+    assert iv["noise_variance"] > 0 and len(iv["parameters"]) == 30
+    assert all((p["interval_2sigma"] is not None) == p["determined"] for p in iv["parameters"])
+    assert iv["determined_count"] == sum(p["determined"] for p in iv["parameters"])
     assert not (fit_dir / "start_trials").exists() and (fit_dir / "checkpoint.json").is_file()
     fitted = load_scene(fit_dir / "scene_fit.json")  # only c is free: the materials are the chosen start's
     expected = literature_starts(load_scene(cap_dir / "scene.json"), cap)[trials["chosen"]]
@@ -304,3 +310,40 @@ def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(uninterrupt
         assert json.loads((cut / name).read_text()) == json.loads((whole / name).read_text()), name
     losses = [[e["loss"] for e in json.loads((d / "loss.json").read_text())["log"]] for d in (whole, cut)]
     assert len(losses[0]) == n and losses[1] == losses[0]
+
+
+def test_fit_holds_out_a_camera_and_checks_it_under_every_light(tmp_path, capsys):
+    """``--held-out-camera 1``: the fit never sees camera 1 (its checkpoint's capture identity has 2 of the 3
+    cameras), renders it afterwards under all lights, and fit_report.json gives that check beside the held-out
+    lights' (schema-valid; check_camera.png written). A camera the capture lacks, and a one-camera capture,
+    are one-line errors that write nothing."""
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "4", "--cameras", "3", "--samples", "2", "--samples-background", "0",
+                 "--mesh-resolution", "12"]) == 0
+    fit_dir = tmp_path / "fit"
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--init", "perturbed", "--iterations", "1",
+                 "--no-progress", "--held-out-camera", "1"]) == 0
+    report = json.loads((fit_dir / "fit_report.json").read_text())
+    assert json_schema.errors(report, "teeth-fit-report") is None
+    cam = report["held_out_camera"]
+    assert cam["camera"] == 1 and cam["lights"] == [0, 1, 2, 3] and cam["rms_relative"] > 0
+    assert report["held_out"]["lights"] == [2]  # the fit's own held-out light, as without a held-out camera
+    assert (fit_dir / "check_camera.png").is_file()
+    ident = json.loads((fit_dir / "checkpoint.json").read_text())
+    assert "held_out_camera" in json.dumps(ident)
+    assert "held-out camera 1:" in capsys.readouterr().out
+    for cams, index, said in ((3, "3", "the held-out camera 3 is not in the capture (its cameras are 0-2)"),
+                              (1, "0", "holding it out leaves the fit nothing to see")):
+        src = cap_dir
+        if cams == 1:
+            src = tmp_path / "cap1"
+            assert main(["teeth", "synth", "--out", str(src), "--teeth", "1", "--width", "12", "--height", "10",
+                         "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                         "--mesh-resolution", "12"]) == 0
+        out = tmp_path / f"bad{cams}"
+        capsys.readouterr()
+        assert main(["teeth", "fit", str(src), "--out", str(out), "--held-out-camera", index]) in (1, 2)
+        err = capsys.readouterr().err
+        assert said in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+        assert not out.exists()
