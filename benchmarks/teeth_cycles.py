@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import time
 
+BLEND_SPP_CYCLES = 1024
+BLEND_SPP_CORE = 1024
+
 
 def teeth_cycles() -> dict:
     from ..render.session import prepare_user_resources
@@ -23,15 +26,17 @@ def teeth_cycles() -> dict:
     out, _, _, _ = cross_check(spp_cycles=256, spp_core=64, width=64, height=40, max_depth=64)
     out["blender"] = ".".join(str(v) for v in bpy.app.version)
     # The core's default logistic enamel/dentin blend (spread 1 / ln 19 mm): Cycles renders it through each
-    # tooth's Blend Volume (addon/teeth/blend_volume.py); the core at 64 spp in two independent halves.
+    # tooth's Blend Volume (addon/teeth/blend_volume.py) at 1024 spp; the core at 1024 spp in two independent
+    # halves, whose difference is the reference's own noise. (At 256 / 64 spp the noise alone moved the worst
+    # tooth-channel error by 1-2 points between seeds.)
     ts, cam, light = check_scene(2, 20, 64, 40)
     ts.blend_spread = DEFAULT_SPREAD_MM
     region = tooth_regions(ts, cam)
     t0 = time.perf_counter()
-    cyc = render_cycles(ts, cam, light, 256, bounces=64)
+    cyc = render_cycles(ts, cam, light, BLEND_SPP_CYCLES, bounces=64)
     t1 = time.perf_counter()
-    core_a = render_core(ts, cam, light, 32, seed=3, max_depth=64)
-    core_b = render_core(ts, cam, light, 32, seed=4, max_depth=64)
+    core_a = render_core(ts, cam, light, BLEND_SPP_CORE // 2, seed=3, max_depth=64)
+    core_b = render_core(ts, cam, light, BLEND_SPP_CORE // 2, seed=4, max_depth=64)
     blended = compare(cyc, 0.5 * (core_a + core_b), region)
     noise = compare(core_a, core_b, region)
     out["default_spread_mean_colour_rel_err"] = blended["mean_colour_rel_err"]
@@ -42,6 +47,7 @@ def teeth_cycles() -> dict:
     out["default_spread_core_halves_median_px_rel_diff"] = noise["median_px_rel_err"]
     out["default_spread_cycles_seconds"] = t1 - t0
     out["default_spread_mm"] = DEFAULT_SPREAD_MM
+    out["default_spread_spp_cycles"], out["default_spread_spp_core"] = BLEND_SPP_CYCLES, BLEND_SPP_CORE
     return out
 
 

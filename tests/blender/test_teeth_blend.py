@@ -86,11 +86,45 @@ def test_apply_fit_result_drives_the_blend_and_shape_keys_move_it(addon_module, 
     assert tuple(node.inputs["Dentin Albedo"].default_value)[:3] == pytest.approx((0.81, 0.72, 0.63), abs=1e-6)
     assert node.inputs["Dentin Beta"].default_value == pytest.approx(0.55, abs=1e-6)
     assert node.inputs[SPREAD].default_value == pytest.approx(0.5, abs=1e-6)
+    # the dentin mesh's sharp step of the extinction follows the fitted enamel's sigma_t (a driver)
+    dnode = group_node(enamel.ms_tooth.partner.active_material)
+    assert tuple(dnode.inputs["Enamel Sigma_t"].default_value) == pytest.approx((0.7, 0.8, 1.9), abs=1e-6)
     # the dentin's shape keys are live: the grids (their bounds, in the tooth's mm) follow the occlusal slider
     # (c from 0.6 to -0.6 moves the dentin's occlusal end by about 1.2 mm; the bounds step by whole voxels)
     enamel.ms_tooth.set_coefficients((0.0, 0.0, -0.6))
     _, box_moved = _evaluated_grids(obj)
     assert np.abs(box_moved - box_fit).max() > 0.5
+
+
+def test_a_file_with_the_blend_of_the_grid_step_gets_the_mesh_step(addon_module, tmp_path):
+    """A file made when the Blend Volume took the dentin's step from the sign of its q grid (node layout 1: the
+    Dentin group without ``Enamel Sigma_t``, its volume empty under Blend Volume) is rebuilt to the mesh step
+    when its teeth are made again: the Dentin's volume then carries sigma_t,dentin - sigma_t,enamel."""
+    from material_structures.addon.teeth.blend_volume import BLEND_GROUP, VERSION_KEY, ensure_blend_group
+    from material_structures.addon.teeth.materials import (
+        STEP_ROW,
+        VOLUME_VERSION,
+        VOLUME_VERSION_KEY,
+        ensure_blend_input,
+    )
+
+    _, path = _scene_file(tmp_path, 0.34)
+    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+    dentin_group = bpy.data.node_groups["Dentin"]
+    dentin_group.interface.remove(next(s for s in dentin_group.interface.items_tree
+                                       if s.item_type == "SOCKET" and s.name == STEP_ROW[0]))
+    dentin_group[VOLUME_VERSION_KEY] = 1
+    bpy.data.node_groups[BLEND_GROUP][VERSION_KEY] = 1
+    ensure_blend_input(dentin_group)
+    ensure_blend_group()
+    assert dentin_group[VOLUME_VERSION_KEY] == VOLUME_VERSION
+    assert STEP_ROW[0] in {s.name for s in dentin_group.interface.items_tree if s.item_type == "SOCKET"}
+    blend = bpy.data.node_groups[BLEND_GROUP]
+    assert blend[VERSION_KEY] == 2
+    # no node of the rebuilt Blend group reads the sign of q any more: q feeds only the sigmoid's division
+    q_users = [lk.to_node for lk in blend.links if lk.from_node.type == "ATTRIBUTE"
+               and lk.from_node.attribute_name == "ms_q"]
+    assert [n.operation for n in q_users] == ["DIVIDE"]
 
 
 def test_blend_at_a_narrow_spread_renders_the_sharp_model(addon_module):
@@ -239,3 +273,75 @@ def test_fit_progress_moves_during_the_start_trials(addon_module, tmp_path):
     assert job.progress == pytest.approx(70 / 150)
     job.on_event({"progress": "fit", "iteration": 100, "iterations": 100, "loss": 1.0})
     assert job.progress == pytest.approx(1.0)
+
+
+@pytest.mark.slow
+def test_cycles_renders_the_default_blend_as_the_core(addon_module):
+    """Nightly (``bench teeth-cycles``' figure, about 3 minutes): at the core's default spread the teeth that
+    Cycles renders through the Blend Volume match the core path tracer, worst tooth-channel mean colour within
+    3 % and the 8 x 8 box-filtered per-pixel median within 5 % (1024 spp each side; the core's own two halves
+    differ by about 0.7 %). With the dentin step from the q grid's sign, the worst was 3.2-4.6 %."""
+    from material_structures.addon.teeth.verify import check_scene, compare, render_core, render_cycles, tooth_regions
+    from material_structures.core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
+
+    ts, cam, light = check_scene(2, 20, 64, 40)
+    ts.blend_spread = DEFAULT_SPREAD_MM
+    region = tooth_regions(ts, cam)
+    cycles = render_cycles(ts, cam, light, 1024, seed=11, bounces=64)
+    core = 0.5 * (render_core(ts, cam, light, 512, seed=12, max_depth=64)
+                  + render_core(ts, cam, light, 512, seed=13, max_depth=64))
+    out = compare(cycles, core, region)
+    assert out["mean_colour_rel_err"] <= 0.03, out
+    assert out["median_px_rel_err"] <= 0.05, out
+
+
+@pytest.mark.slow
+def test_apply_fit_result_renders_what_teeth_render_renders(addon_module, tmp_path):
+    """Nightly (about 4 minutes): a fit's ``scene_fit.json`` (materials unlike the scene's, moved dentin, the
+    default spread) applied through Apply Fit Result renders in Cycles the tooth means that ``teeth render`` of
+    the same file gives, within 3 % per tooth and channel (1024 spp each side)."""
+    import subprocess
+    import sys
+
+    from material_structures.addon.teeth.scene_build import add_camera, add_point_light, configure_teeth_cycles
+    from material_structures.addon.teeth.verify import check_scene, tooth_regions
+    from material_structures.core.exr_io import read_exr
+    from material_structures.core.teeth.capture import Capture
+    from material_structures.core.teeth.scene import save_scene
+    from material_structures.core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
+    from material_structures.render import dark_world, render_to_array
+
+    ts, cam, light = check_scene(2, 20, 64, 40)
+    ts.blend_spread = DEFAULT_SPREAD_MM
+    scene_path, fit_path = str(tmp_path / "scene.json"), str(tmp_path / "scene_fit.json")
+    save_scene(ts, scene_path)
+    fit = ts.copy()
+    for k, t in enumerate(fit.teeth):
+        t.enamel.sigma_t = t.enamel.sigma_t * (0.8 + 0.3 * k)
+        t.enamel.g1 = 0.45
+        t.dentin.albedo = np.array([0.9, 0.8, 0.6])
+        t.dentin.sigma_t = t.dentin.sigma_t * 1.2
+        t.c = np.array([0.0, 0.0, 0.4 - 0.8 * k])
+    save_scene(fit, fit_path)
+    capture = tmp_path / "capture"
+    Capture([cam], [light], images=np.zeros((1, 1, cam.height, cam.width, 3), np.float32)).save(capture)
+    out = tmp_path / "core"
+    proc = subprocess.run([sys.executable, "-m", "material_structures", "teeth", "render", fit_path, str(capture),
+                           "--out", str(out), "--samples", "1024", "--seed", "5"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    core = read_exr(str(out / "cam0_light0.exr"))[:, :, :3]
+
+    assert bpy.ops.material_structures.teeth_import_scene(filepath=scene_path) == {"FINISHED"}
+    assert bpy.ops.material_structures.teeth_apply_fit_file(filepath=fit_path) == {"FINISHED"}
+    scene = bpy.context.scene
+    mm = next(o for o in scene.objects if o.ms_tooth.role == "ENAMEL").ms_tooth.mm_per_unit
+    dark_world(scene)
+    add_camera(scene, cam, mm_per_unit=mm)
+    add_point_light(scene, light, mm_per_unit=mm)
+    configure_teeth_cycles(scene, 1024, 6, 256)
+    cycles = render_to_array(scene)[:, :, :3]
+
+    region = tooth_regions(fit, cam)
+    for i in range(len(fit.teeth)):
+        a, b = cycles[region == i].mean(axis=0), core[region == i].mean(axis=0)
+        assert np.abs(a / b - 1.0).max() <= 0.03, (i, a, b)
