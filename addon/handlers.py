@@ -17,6 +17,7 @@ from .fabric.material import ensure_closures_without_osl
 from .scratch.handlers import SCRATCH_HANDLERS
 from .scratch.material import MARKER as SCRATCH_MARKER
 from .scratch.material import ensure_base_metal
+from .teeth.blend_volume import upgrade_after_load as upgrade_teeth_after_load
 
 
 @persistent
@@ -29,6 +30,7 @@ def on_load_post(*_args) -> None:
         elif group.library is None and group.get(SCRATCH_MARKER):
             ensure_base_metal(group)
     sync_fabric_after_load()  # the world tables live in the temp folder: re-extract them for this file
+    upgrade_teeth_after_load()  # the teeth's node layouts of older files
 
 
 @persistent

@@ -21,8 +21,9 @@ In Cycles:
   max(2.5 mm, 8 s), beyond which l is within 3.4e-4 of 0 or 1), ``ms_o`` the signed distance to the
   enamel's outer surface, ``ms_m`` the tooth's interior as a fog grid (its active voxels make Cycles'
   volume bounds cover the whole tooth);
-* that volume's material (node group ``BLEND_GROUP``) is, inside the tooth (ms_o < 0), the scattering
-  sigma_s = a_mix sigma_t,mix through two Volume Scatter (Henyey-Greenstein) lobes with the mixed g1, g2,
+* that volume's material (node group ``BLEND_GROUP``) is, in 1/mm (Cycles takes a volume object's density in
+  its object space, the tooth's millimetre frame, whatever the scene's unit), inside the tooth (ms_o < 0), the
+  scattering sigma_s = a_mix sigma_t,mix through two Volume Scatter (Henyey-Greenstein) lobes with the mixed g1, g2,
   beta, plus a Volume Absorption of sigma_t,enamel - sigma_s, so that its extinction is the enamel's and, with
   the dentin's step, the sharp sigma_t of either region. Where sigma_s > sigma_t that absorption is negative,
   which Cycles takes as it is when the colour is linked (a colour *value* is clamped to [0, 1]; measured on
@@ -63,9 +64,12 @@ SHARP_SPREAD_MM = 0.01
 Q_BAND_MIN_MM = 2.5
 Q_BAND_SPREADS = 8.0
 GRID_Q, GRID_O, GRID_M = "ms_q", "ms_o", "ms_m"
-# the Blend group's node layout: 2 = the sharp sigma_t step is the Dentin mesh's (1: the q grid's sign)
+# the Blend group's node layout: 3 = coefficients per mm of the object's own frame (2: scaled by "mm per Unit",
+# which Cycles applied twice in a scene in metres), 2 = the sharp sigma_t step is the Dentin mesh's (1: the q
+# grid's sign)
 VERSION_KEY = "ms_volume_version"
-BLEND_VERSION = 2
+BLEND_VERSION = 3
+UNIT = "mm per Unit"  # an input of layouts 1-2, removed
 MEDIA = ("Enamel", "Dentin")
 PARAMS = (("Sigma_t", 3), ("Albedo", 3), ("G1", 0), ("G2", 0), ("Beta", 0))  # (socket, components or 0)
 
@@ -180,9 +184,11 @@ def ensure_blend_group() -> bpy.types.ShaderNodeTree:
 
     group = bpy.data.node_groups.get(BLEND_GROUP)
     if group is not None and group.get(MARKER):
-        if group.get(VERSION_KEY, 1) < BLEND_VERSION:
+        if group.get(VERSION_KEY, 1) < BLEND_VERSION and group.library is None:
             for node in list(group.nodes):
                 group.nodes.remove(node)
+            for item in [i for i in group.interface.items_tree if i.item_type == "SOCKET" and i.name == UNIT]:
+                group.interface.remove(item)
             _blend_nodes(group)
         return group
     group = bpy.data.node_groups.new(BLEND_GROUP, "ShaderNodeTree")
@@ -195,7 +201,6 @@ def ensure_blend_group() -> bpy.types.ShaderNodeTree:
         add_group_input(group, f"{medium} G2", "NodeSocketFloat", d["g2"], -0.95, 0.95)
         add_group_input(group, f"{medium} Beta", "NodeSocketFloat", d["beta"], 0.0, 1.0)
     add_group_input(group, SPREAD, "NodeSocketFloat", DEFAULT_SPREAD_MM, 0.0, 100.0)
-    add_group_input(group, "mm per Unit", "NodeSocketFloat", 1000.0, 1e-6, 1e9)
     group.interface.new_socket("Volume", in_out="OUTPUT", socket_type="NodeSocketShader")
     _blend_nodes(group)
     describe_teeth_sockets(group)
@@ -237,7 +242,9 @@ def _blend_nodes(group) -> None:
         links.new(gin.outputs[f"Dentin {name}"], n.inputs[2])
         return n.outputs[0]
 
-    scale = _math(nodes, links, "MULTIPLY", gin.outputs["mm per Unit"], inside)
+    # coefficients per millimetre: Cycles takes a volume object's density in its object space, here the tooth's
+    # millimetre frame, whatever the scene's unit (measured: x 1000 in a scene in metres gave 1e24 pixels)
+    scale = inside
     sigma_s = _vec(nodes, links, "MULTIPLY", mixed_vec("Albedo"), mixed_vec("Sigma_t"))
     sigma_s = _vec(nodes, links, "SCALE", sigma_s, scale=scale)
     # the enamel's sigma_t over the whole tooth; the Dentin mesh's volume adds the sharp step to the dentin's
@@ -304,8 +311,6 @@ def link_materials(blend_mat, enamel_mat, dentin_mat) -> None:
             for k in range(n) if n else (-1,):
                 _add_driver(blend_mat.node_tree, dst, k, src, srcp if k < 0 else f"{srcp}[{k}]")
     enode = group_node(enamel_mat)
-    if enode is not None:
-        bnode.inputs["mm per Unit"].default_value = enode.inputs["mm per Unit"].default_value
     dnode = group_node(dentin_mat)
     if enode is not None and dnode is not None and STEP_INPUT in dnode.inputs:
         # the dentin's sharp step sigma_t,dentin - sigma_t,enamel needs the enamel's sigma_t
@@ -395,3 +400,19 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
     set_blending(dm, on)
     obj.hide_render = not on
     return obj
+
+
+def upgrade_after_load() -> None:
+    """Teeth of a file made by an older version: the Enamel/Dentin groups and the Blend group get the current
+    node layouts, and every tooth with a Blend Volume its materials linked again (the dentin's step driver)."""
+    from .materials import ensure_blend_input
+
+    for group in bpy.data.node_groups:
+        if group.library is None and group.get(MARKER) in MEDIA:
+            ensure_blend_input(group)
+    if bpy.data.node_groups.get(BLEND_GROUP) is not None:
+        ensure_blend_group()
+    for obj in bpy.data.objects:
+        ms = getattr(obj, "ms_tooth", None)
+        if obj.library is None and ms is not None and ms.role == "ENAMEL" and blend_object(obj) is not None:
+            ensure_blend(obj)
