@@ -100,8 +100,13 @@ def test_a_file_with_the_blend_of_the_grid_step_gets_the_mesh_step(addon_module,
     """A file made when the Blend Volume took the dentin's step from the sign of its q grid (node layout 1: the
     Dentin group without ``Enamel Sigma_t``, its volume empty under Blend Volume) is rebuilt to the mesh step
     when its teeth are made again: the Dentin's volume then carries sigma_t,dentin - sigma_t,enamel."""
-    from material_structures.addon.teeth.blend_volume import (BLEND_GROUP, BLEND_VERSION, UNIT, VERSION_KEY,
-                                                              ensure_blend_group)
+    from material_structures.addon.teeth.blend_volume import (
+        BLEND_GROUP,
+        BLEND_VERSION,
+        UNIT,
+        VERSION_KEY,
+        ensure_blend_group,
+    )
     from material_structures.addon.teeth.materials import (
         STEP_ROW,
         VOLUME_VERSION,
