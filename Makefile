@@ -18,6 +18,10 @@ NEXT_VERSION := $(shell echo $(VERSION) | awk -F. '{print $$1 "." $$2 "." $$3 + 
 PYTEST_JOBS ?= 2
 PYTEST_XDIST = -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder
 PYTEST_DURATIONS ?= 25
+# the teeth tracer's compiled kernels, shared by every target and Python that runs the same sources: the test
+# suites, the zip installed into a bare Blender (core/teeth/numba_kernels.py); a clean clone compiles them once
+# per Python instead of once per stage
+export MATERIAL_STRUCTURES_NUMBA_CACHE ?= $(CURDIR)/build/numba-cache
 
 .PHONY: lock setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
 	release docs bench refs samples clean help

@@ -14,8 +14,15 @@ carries the code of everything it calls or inlines from other modules, and the m
 read. An edit of ``bvh.py`` therefore used to leave every cached caller in ``path_tracer_compiled`` running
 the old traversal. Here every function of the modules in ``KERNEL_MODULES`` gets a source stamp that is the
 hash of all those modules' sources together (``kernel_sources_digest``): editing any one of them makes
-every cached function of all of them stale, and numba compiles them afresh on the next run (the cache
-files stay where numba puts them; only the stamp in their index differs).
+every cached function of all of them stale, and numba compiles them afresh on the next run. The stamp is that
+hash alone, not the files' modification times: the same sources installed again (an extension reinstalled,
+a fresh clone) keep their compiled code.
+
+Where the cache lives: beside the sources (numba's ``__pycache__``), or, where the environment variable
+``MATERIAL_STRUCTURES_NUMBA_CACHE`` names a folder, in ``<folder>/teeth-<hash>``, which any copy of the same
+sources finds wherever it is installed (a test run and the extension zip installed into a bare Blender, machines
+of one CPU type sharing a folder). numba keys each compiled function further by its signature, Python
+version and CPU, so a cache written elsewhere is only used where it fits.
 """
 
 from __future__ import annotations
@@ -26,6 +33,8 @@ import inspect
 import os
 import sys
 from collections.abc import Callable
+
+SHARED_CACHE_ENV = "MATERIAL_STRUCTURES_NUMBA_CACHE"
 
 _PENDING: list[tuple[Callable, str]] = []  # numba_callable functions not yet registered with numba
 _ACTIVE = False
@@ -107,6 +116,19 @@ def kernel_sources_digest(folder: str = _HERE) -> str:
     return _digest(tuple(stats))
 
 
+def _shared_cache_path(folder: str) -> str | None:
+    """``<SHARED_CACHE_ENV>/teeth-<digest>`` where the variable is set and that folder can be written, else None."""
+    base = os.environ.get(SHARED_CACHE_ENV)
+    if not base:
+        return None
+    path = os.path.join(os.path.abspath(base), "teeth-" + kernel_sources_digest(folder)[:20])
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError:
+        return None
+    return path if os.access(path, os.W_OK) else None
+
+
 def _install_locator() -> None:
     """Put :class:`KernelSourcesLocator` first in numba's list of cache locators (once per process)."""
     from numba.core import caching
@@ -117,25 +139,30 @@ def _install_locator() -> None:
         return
 
     class KernelSourcesLocator(caching._CacheLocator):
-        """numba cache locator for the functions of ``KERNEL_MODULES``: where and under which name numba's own
-        locator would cache them, with the source stamp ``(numba's stamp of the function's file,
-        kernel_sources_digest())``: an edit of any kernel module makes the index of every such function stale."""
+        """numba cache locator for the functions of ``KERNEL_MODULES``: numba's own place and name for them, or the
+        shared folder of ``SHARED_CACHE_ENV`` where that is writable; the source stamp is
+        ``kernel_sources_digest()``, so an edit of any kernel module makes the index of every such function stale,
+        and a copy of the same sources elsewhere finds it."""
 
-        def __init__(self, inner, folder: str):
+        def __init__(self, inner, folder: str, shared: str | None):
             self._inner = inner
             self._folder = folder
+            self._shared = shared
 
         def ensure_cache_path(self):
-            self._inner.ensure_cache_path()
+            if self._shared is None:
+                self._inner.ensure_cache_path()
+            else:
+                super().ensure_cache_path()
 
         def get_cache_path(self):
-            return self._inner.get_cache_path()
+            return self._shared or self._inner.get_cache_path()
 
         def get_disambiguator(self):
             return self._inner.get_disambiguator()
 
         def get_source_stamp(self):
-            return self._inner.get_source_stamp(), kernel_sources_digest(self._folder)
+            return kernel_sources_digest(self._folder)
 
         @classmethod
         def from_function(cls, py_func, py_file):
@@ -149,7 +176,7 @@ def _install_locator() -> None:
                     continue
                 inner = other.from_function(py_func, py_file)
                 if inner is not None:
-                    return cls(inner, folder)
+                    return cls(inner, folder, _shared_cache_path(folder))
             return None
 
     # first in line, and once per process (a copy of this package imported beside it finds its own class there)

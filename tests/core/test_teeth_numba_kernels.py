@@ -286,6 +286,42 @@ def test_editing_bvh_recompiles_its_cached_callers(tmp_path):
     assert run() == (0, False)  # compiled afresh with the edited bvh.py
 
 
+def _probe_copy(root) -> None:
+    """A copy of the teeth package as ``root/probe`` and the probe script as ``root/probe_run.py``."""
+    pkg = root / "probe"
+    (pkg / "core" / "teeth").mkdir(parents=True)
+    for init in (pkg / "__init__.py", pkg / "core" / "__init__.py"):
+        init.write_text("")
+    for path in TEETH.glob("*.py"):
+        shutil.copy(path, pkg / "core" / "teeth" / path.name)
+    (root / "probe_run.py").write_text(textwrap.dedent(_PROBE))
+
+
+def test_a_copy_elsewhere_finds_the_shared_cache(tmp_path):
+    """With ``MATERIAL_STRUCTURES_NUMBA_CACHE`` set, the kernels one copy of the package compiled load in a
+    copy of the same sources installed elsewhere (as the extension zip in a bare Blender after ``make test``),
+    and nothing lands in either copy's ``__pycache__``."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
+    env[numba_kernels.SHARED_CACHE_ENV] = str(tmp_path / "shared")
+    env["NUMBA_DEBUG_CACHE"] = "1"
+
+    def run(root) -> tuple[int, str]:
+        out = subprocess.run([sys.executable, str(root / "probe_run.py"), str(root)], capture_output=True,
+                             text=True, env=env, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
+        mark = [line for line in out.stdout.splitlines() if "dentin_reach_grid._mark-" in line]
+        how = "loaded" if any("data loaded from" in line for line in mark) else "compiled"
+        return int(out.stdout.split("marked")[-1]), how
+
+    for name in ("a", "b"):
+        _probe_copy(tmp_path / name)
+    first = run(tmp_path / "a")
+    assert first[0] > 0 and first[1] == "compiled"
+    assert run(tmp_path / "b") == (first[0], "loaded")
+    assert list((tmp_path / "shared").glob("teeth-*/dentin_reach_grid._mark-*.nbi"))
+    assert not list(tmp_path.glob("*/probe/core/teeth/__pycache__/*.nb[ic]"))
+
+
 def test_kernel_sources_digest_follows_each_file(tmp_path):
     for name in numba_kernels.KERNEL_MODULES:
         (tmp_path / f"{name}.py").write_text(f"# {name}\n")
