@@ -86,7 +86,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="then this many iterations with the enamel transmittance as a texture (default "
                         f"{FIT_DEFAULTS.textured_iterations})")
     f.add_argument("--held-out-lights", type=at_least(0), default=None,
-                   help=f"lights left out of the fit to check it by (default {FIT_DEFAULTS.held_out_lights})")
+                   help="lights left out of the fit to check it by: those farthest off the capture's axis, so the "
+                        f"check predicts lights outside the cone the fit saw (default {FIT_DEFAULTS.held_out_lights})")
     f.add_argument("--held-out-camera", type=at_least(0), default=None, metavar="INDEX",
                    help="a camera (its index in capture.json) left out of the fit and rendered afterwards under "
                         "every light, to check new views by (default: none)")
@@ -433,9 +434,9 @@ def run_fit(args: argparse.Namespace) -> int:
     from ..core.teeth.capture import Capture, split_camera
     from ..core.teeth.fit_checkpoint import load_state
     from ..core.teeth.fit_report import held_out_check, plot_loss
-    from ..core.teeth.optimise import fit, held_out_light_ids
+    from ..core.teeth.optimise import fit, held_out_light_ids, light_angles_deg
     from ..core.teeth.scene import load_scene
-    from ..core.teeth.synthetic import perturbed_start
+    from ..core.teeth.synthetic import perturbed_start, scene_target
 
     t_start = time.perf_counter()
     cap = Capture.load(args.capture)
@@ -532,12 +533,16 @@ def run_fit(args: argparse.Namespace) -> int:
     if bar is not None:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))
-    held_out = held_out_light_ids(len(cap.lights), fs.held_out_lights)
+    angles = light_angles_deg(cap, scene_target(scene))
+    held_out = held_out_light_ids(cap, scene_target(scene), fs.held_out_lights)
     if as_json:
         _event(progress="status", message=f"checking the fit on {len(held_out)} held-out lights")
     elif not args.no_progress and len(held_out):
         print(f"checking the fit on {len(held_out)} held-out lights", flush=True)
     check = held_out_check(best, cap, held_out, os.path.join(args.out, "check.png"), workers=fs.workers)
+    if len(held_out):  # how far outside the training cone the check reaches
+        check["light_angles_deg"] = [round(float(a), 2) for a in angles[held_out]]
+        check["training_cone_deg"] = round(float(np.delete(angles, held_out).max()), 2)
     report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,
               "held_out": check}
     if cam_cap is not None:

@@ -53,6 +53,9 @@ def show_fit_check(fs, out_dir: str) -> None:
     if held.get("lights"):
         fs.check_error = (f"Held-out lights: {held['rms_relative']:.1%} RMS per pixel, "
                           f"{held['rms_relative_tiles']:.1%} on 8 x 8 tiles")
+        if held.get("light_angles_deg") and "training_cone_deg" in held:
+            fs.check_error += (f" (lights up to {max(held['light_angles_deg']):.0f}\u00b0 off axis, "
+                               f"trained within {held['training_cone_deg']:.0f}\u00b0)")
     intervals = report.get("intervals", {})
     if intervals.get("parameters"):
         fs.check_intervals = summary(intervals)

@@ -9,7 +9,8 @@ dual domains xi = log sigma_t, kappa = log10(1 - albedo) (eq. 5.22-5.24) for 80 
 Gauss-Newton steps for the materials (the dentin coefficients join the fit only then, and keep Adam, on
 a gradient by central differences with common random numbers: ``dentin_shape_gradient``); 300
 iterations; the result is the mean of the last 30 % of the iterates (Polyak-Ruppert averaging). A few
-lights never enter the fit and check it afterwards (``held_out_lights``).
+lights never enter the fit and check it afterwards (``held_out_lights``): those farthest off the capture's
+axis, so the check is a prediction outside the cone of lights the fit was trained in.
 
 Plain data without numpy, so the command line's ``--help`` can show it without loading the renderer.
 """

@@ -44,19 +44,36 @@ from .path_tracer import RenderSettings
 from .scene import TeethScene
 
 __all__ = ["Adam", "DEFAULT_FREE", "FitSettings", "FitState", "block_sums", "fit", "free_mask", "held_out_light_ids",
-           "iteration_gradient", "l2_loss", "paired_loss", "plot_loss", "tail_start", "texture_phase_scene"]
+           "light_angles_deg", "iteration_gradient", "l2_loss", "paired_loss", "plot_loss", "tail_start",
+           "texture_phase_scene"]
 
 GN_ESTIMATOR = "pooled"  # (mean J_i)^T (mean J_i): the per-pass mean lost (docs/teeth-fit.md)
 GN_GUARD_FACTOR = 4.0  # the divergence guard's damping factor
 
 
-def held_out_light_ids(n_lights: int, n_held_out: int) -> np.ndarray:
-    """The lights a fit never uses, to check it afterwards: ``n_held_out`` spread evenly over the
-    capture's light order (at most a quarter of the lights; none from captures of fewer than 4)."""
-    n = min(int(n_held_out), n_lights // 4)
+def light_angles_deg(capture: Capture, target: np.ndarray) -> np.ndarray:
+    """Each light's angle in degrees off the capture's axis, seen from ``target`` (the teeth's centre): the
+    axis is the mean of the unit directions from ``target`` to the cameras (the mouth axis of a capture rig)."""
+    target = np.asarray(target, dtype=np.float64)
+
+    def unit(v: np.ndarray) -> np.ndarray:
+        return v / max(float(np.linalg.norm(v)), 1e-300)
+
+    axis = unit(np.sum([unit(c.center - target) for c in capture.cameras], axis=0))
+    dirs = np.array([unit(li.position - target) for li in capture.lights]).reshape(-1, 3)
+    return np.degrees(np.arccos(np.clip(dirs @ axis, -1.0, 1.0)))
+
+
+def held_out_light_ids(capture: Capture, target: np.ndarray, n_held_out: int) -> np.ndarray:
+    """The lights a fit never uses, to check it afterwards: the ``n_held_out`` farthest off the capture's axis
+    (``light_angles_deg``; ties by index), so that the check predicts lights outside the cone the fit was
+    trained in. At most a quarter of the lights; none from captures of fewer than 4."""
+    n = min(int(n_held_out), len(capture.lights) // 4)
     if n <= 0:
         return np.zeros(0, dtype=np.int64)
-    return np.unique(np.floor((np.arange(n) + 0.5) * n_lights / n).astype(np.int64))
+    angles = light_angles_deg(capture, target)
+    order = np.lexsort((np.arange(len(angles)), -np.round(angles, 9)))
+    return np.sort(order[:n]).astype(np.int64)
 
 
 def fit_identity(scene: TeethScene, capture: Capture, layout: ParamLayout, free: np.ndarray, s: FitSettings) -> dict:
@@ -180,7 +197,9 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         if getattr(s, setting) > off and gradient is not None and setting not in inspect.signature(gradient).parameters:
             raise ValueError(f"settings.{setting} > {off} needs a gradient function that takes {setting}=; "
                              f"set {setting}={off} to use this one")
-    held_out = held_out_light_ids(len(capture.lights), s.held_out_lights)
+    from .synthetic import scene_target
+
+    held_out = held_out_light_ids(capture, scene_target(scene), s.held_out_lights)
     training = np.setdiff1d(np.arange(len(capture.lights)), held_out)
     layout0 = ParamLayout(scene)
     identity = fit_identity(scene, capture, layout0, free_mask(layout0, s.free), s)

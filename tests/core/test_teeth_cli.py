@@ -40,6 +40,8 @@ def test_synth_then_fit_with_resume(tmp_path):
     # one of the 4 lights (at most a quarter) is held out: never fitted, rendered at the result to check it
     report = json.loads((fit_dir / "fit_report.json").read_text())
     assert report["held_out"]["lights"] == [2] and (fit_dir / "check.png").exists()
+    held = report["held_out"]  # the light farthest off the capture's axis, outside the cone the fit saw
+    assert len(held["light_angles_deg"]) == 1 and held["training_cone_deg"] < held["light_angles_deg"][0]
     assert all(2 not in e["lights"] for e in log3)
     assert 0 < report["held_out"]["rms_relative"] < 1 and len(report["held_out"]["mean_ratio_rgb"]) == 3
     assert main(common + ["--iterations", "5", "--resume"]) == 0
