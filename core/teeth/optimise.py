@@ -76,6 +76,12 @@ def held_out_light_ids(capture: Capture, target: np.ndarray, n_held_out: int) ->
     return np.sort(order[:n]).astype(np.int64)
 
 
+def _teeth_centre(scene: TeethScene) -> np.ndarray:
+    from .synthetic import scene_target  # the synthetic scenes' module imports this one's neighbours
+
+    return scene_target(scene)
+
+
 def fit_identity(scene: TeethScene, capture: Capture, layout: ParamLayout, free: np.ndarray, s: FitSettings) -> dict:
     """What a checkpoint was made for: the capture (sizes and a digest of its images and masks), the
     parameter layout and which of it is free, the held-out lights, the seed, the samples per pixel of both
@@ -92,7 +98,8 @@ def fit_identity(scene: TeethScene, capture: Capture, layout: ParamLayout, free:
                         "size": [int(capture.images.shape[2]), int(capture.images.shape[3])], "digest": h.hexdigest()},
             "teeth": [t.name for t in scene.teeth],
             "layout": [[e.name, int(e.size)] for e in layout.entries],
-            "free": np.flatnonzero(free).tolist(), "seed": s.seed, "held_out_lights": s.held_out_lights,
+            "free": np.flatnonzero(free).tolist(), "seed": s.seed,
+            "held_out_lights": held_out_light_ids(capture, _teeth_centre(scene), s.held_out_lights).tolist(),
             "spp": s.spp, "image_spp": s.image_spp, "lr": s.lr, "optimiser": s.optimiser}
 
 
@@ -197,9 +204,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         if getattr(s, setting) > off and gradient is not None and setting not in inspect.signature(gradient).parameters:
             raise ValueError(f"settings.{setting} > {off} needs a gradient function that takes {setting}=; "
                              f"set {setting}={off} to use this one")
-    from .synthetic import scene_target
-
-    held_out = held_out_light_ids(capture, scene_target(scene), s.held_out_lights)
+    held_out = held_out_light_ids(capture, _teeth_centre(scene), s.held_out_lights)
     training = np.setdiff1d(np.arange(len(capture.lights)), held_out)
     layout0 = ParamLayout(scene)
     identity = fit_identity(scene, capture, layout0, free_mask(layout0, s.free), s)
