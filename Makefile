@@ -22,6 +22,9 @@ PYTEST_DURATIONS ?= 25
 # suites, the zip installed into a bare Blender (core/teeth/numba_kernels.py); a clean clone compiles them once
 # per Python instead of once per stage
 export MATERIAL_STRUCTURES_NUMBA_CACHE ?= $(CURDIR)/build/numba-cache
+# the project's own modules, compiled before a test run: where PYTHONDONTWRITEBYTECODE is set, each of the run's
+# processes would compile them again on import (the venvs' packages are compiled when installed)
+SOURCES := __init__.py __main__.py addon benchmarks cli core render scaleout showcase tests
 
 .PHONY: lock setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
 	release docs bench refs samples clean help
@@ -67,6 +70,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 test: $(STAMP) lint
+	@$(PY) -m compileall -q -j 0 $(SOURCES) > /dev/null
 	$(PY) -m pytest -m "not slow" -q $(PYTEST_XDIST) --durations=$(PYTEST_DURATIONS)
 
 test-fast: $(STAMP)
@@ -74,10 +78,12 @@ test-fast: $(STAMP)
 
 # nightly: everything, then the render regression again with Cycles' CPU kernel forced down to SSE4.2
 test-all: $(STAMP) lint
+	@$(PY) -m compileall -q -j 0 $(SOURCES) > /dev/null
 	$(PY) -m pytest -q $(PYTEST_XDIST) --durations=$(PYTEST_DURATIONS)
 	$(PY) -m pytest -m regression -q $(PYTEST_XDIST) --cycles-kernel=sse42 tests/blender
 
 test-compat: $(CSTAMP)
+	@$(CPY) -m compileall -q -j 0 $(SOURCES) > /dev/null
 	$(CPY) -m pytest -m "blender and not slow" -q $(PYTEST_XDIST) --durations=$(PYTEST_DURATIONS) tests/blender
 
 samples/library/material_structures_library.blend: | $(STAMP)

@@ -263,7 +263,10 @@ def test_editing_bvh_recompiles_its_cached_callers(tmp_path):
         shutil.copy(path, pkg / "core" / "teeth" / path.name)
     script = tmp_path / "probe_run.py"
     script.write_text(textwrap.dedent(_PROBE))
-    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
+    # the copy's own __pycache__: not numba's user-wide folder, not the Makefile's shared one (which holds this
+    # tree's kernels, the copy's sources being the same)
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith("NUMBA_CACHE") and k != numba_kernels.SHARED_CACHE_ENV}
     env["NUMBA_DEBUG_CACHE"] = "1"  # numba prints "[cache] data loaded from ..." / "data saved to ..."
 
     def run() -> tuple[int, bool]:
