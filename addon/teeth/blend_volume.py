@@ -405,14 +405,20 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
 
 def upgrade_after_load() -> None:
     """Teeth of a file made by an older version: the Enamel/Dentin groups and the Blend group get the current
-    node layouts, and every tooth with a Blend Volume its materials linked again (the dentin's step driver)."""
+    node layouts, and every tooth with a Blend Volume its materials linked again (the dentin's step driver).
+    A file of the current layouts is left as it was opened (nothing rebuilt, no driver made again)."""
     from .materials import ensure_blend_input
 
+    changed = False
     for group in bpy.data.node_groups:
         if group.library is None and group.get(MARKER) in MEDIA:
-            ensure_blend_input(group)
-    if bpy.data.node_groups.get(BLEND_GROUP) is not None:
+            changed |= ensure_blend_input(group)
+    blend = bpy.data.node_groups.get(BLEND_GROUP)
+    if blend is not None and blend.get(MARKER) and blend.library is None:
+        changed |= blend.get(VERSION_KEY, 1) < BLEND_VERSION
         ensure_blend_group()
+    if not changed:
+        return
     for obj in bpy.data.objects:
         ms = getattr(obj, "ms_tooth", None)
         if obj.library is None and ms is not None and ms.role == "ENAMEL" and blend_object(obj) is not None:

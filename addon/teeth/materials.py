@@ -254,16 +254,17 @@ def _native_boundary(group, gin, inner_attr):
     return pick.outputs[0]
 
 
-def ensure_blend_input(group) -> None:
+def ensure_blend_input(group) -> bool:
     """Give an Enamel/Dentin group from an older file the ``Blend Volume`` input (and the Dentin its
-    ``Enamel Sigma_t``), its volume rebuilt to the current :data:`VOLUME_VERSION`."""
+    ``Enamel Sigma_t``), its volume rebuilt to the current :data:`VOLUME_VERSION`. Returns whether it changed
+    the group (a current one is left untouched)."""
     kind = group.get(MARKER)
     if kind not in BLENDED_GROUPS:
-        return
+        return False
     have = {s.name for s in group.interface.items_tree if s.item_type == "SOCKET" and s.in_out == "INPUT"}
     rows = [BLEND_ROW] + ([STEP_ROW] if kind == "Dentin" else [])
     if all(r[0] in have for r in rows) and group.get(VOLUME_VERSION_KEY, 1) >= VOLUME_VERSION:
-        return
+        return False
     for row in rows:
         if row[0] not in have:
             add_group_input(group, *row)
@@ -275,6 +276,7 @@ def ensure_blend_input(group) -> None:
     gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
     group.links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
     describe_teeth_sockets(group)
+    return True
 
 
 def _upstream(socket) -> set:

@@ -96,6 +96,32 @@ def test_apply_fit_result_drives_the_blend_and_shape_keys_move_it(addon_module, 
     assert np.abs(box_moved - box_fit).max() > 0.5
 
 
+def test_opening_a_current_file_rebuilds_nothing_and_an_older_one_is_upgraded(addon_module, tmp_path, monkeypatch):
+    """Opening a file whose teeth have the current node layouts remakes none of their Blend Volumes (no driver
+    added again, nothing for the file to have changed by); a file whose Dentin group is of an older layout gets
+    its teeth linked again, once each."""
+    import importlib
+
+    from material_structures.addon.teeth.materials import VOLUME_VERSION_KEY
+
+    blend_volume = importlib.import_module(f"{addon_module}.addon.teeth.blend_volume")  # the enabled add-on's
+
+    _, path = _scene_file(tmp_path, 0.34)
+    assert bpy.ops.material_structures.teeth_import_scene(filepath=path) == {"FINISHED"}
+    current, older = str(tmp_path / "current.blend"), str(tmp_path / "older.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=current)
+    bpy.data.node_groups["Dentin"][VOLUME_VERSION_KEY] = 1
+    bpy.ops.wm.save_as_mainfile(filepath=older)
+    made = []
+    real = blend_volume.ensure_blend
+    monkeypatch.setattr(blend_volume, "ensure_blend", lambda enamel, *a, **k: made.append(enamel.name)
+                        or real(enamel, *a, **k))
+    bpy.ops.wm.open_mainfile(filepath=current)
+    assert made == []
+    bpy.ops.wm.open_mainfile(filepath=older)
+    assert len(made) == 1 and bpy.data.node_groups["Dentin"][VOLUME_VERSION_KEY] > 1
+
+
 def test_a_file_with_the_blend_of_the_grid_step_gets_the_mesh_step(addon_module, tmp_path):
     """A file made when the Blend Volume took the dentin's step from the sign of its q grid (node layout 1: the
     Dentin group without ``Enamel Sigma_t``, its volume empty under Blend Volume) is rebuilt to the mesh step
@@ -134,11 +160,14 @@ def test_a_file_with_the_blend_of_the_grid_step_gets_the_mesh_step(addon_module,
     assert [n.operation for n in q_users] == ["DIVIDE"]
 
 
+@pytest.mark.slow
 def test_teeth_render_alike_in_a_scene_in_metres_and_in_millimetres(addon_module, tmp_path):
-    """Import Teeth Scene (default spread) into Blender's default scene, in metres, and into a scene whose unit is
-    the millimetre: the same camera and lamp give the same tooth means (16 spp, the same seed; the two differ by
-    about 1 %). Cycles takes a volume object's density in its own frame: when the Blend Volume also scaled by
-    millimetres per unit, the scene in metres rendered pixels of 1e24 and took 9x as long."""
+    """Nightly (four Blend Volume renders, 60-85 s): Import Teeth Scene (default spread) into Blender's default
+    scene, in metres, and into a scene whose unit is the millimetre: the same camera and lamp give the same tooth
+    means (16 spp, the same seed; the two differ by about 1 %). Cycles takes a volume object's density in its own
+    frame: when the Blend Volume also scaled by millimetres per unit, the scene in metres rendered pixels of 1e24
+    and took 9x as long. In ``make test``: ``test_blend_at_a_narrow_spread_renders_the_sharp_model``, whose
+    Blend Volume renders in a scene in metres (the same fault fails it)."""
     from material_structures.addon.teeth.scene_build import add_camera, add_point_light, configure_teeth_cycles
     from material_structures.addon.teeth.verify import check_scene, tooth_regions
     from material_structures.core.teeth.scene import save_scene
@@ -168,22 +197,26 @@ def test_teeth_render_alike_in_a_scene_in_metres_and_in_millimetres(addon_module
 
 
 def test_blend_at_a_narrow_spread_renders_the_sharp_model(addon_module):
-    """A spread of 0.02 mm (the Blend Volume on) renders the two-tooth check scene as the sharp meshes do: image
-    means within 5 % per channel (32 x 20 px, 32 spp; measured -2.2 %, -2.2 %, -0.3 % on 5.2)."""
+    """A spread of 0.02 mm (the Blend Volume on), in a scene in metres (Blender's default), renders the two-tooth
+    check scene as the sharp meshes do in a scene in millimetres: image means within 5 % per channel (32 x 20 px,
+    32 spp; measured -2.2 %, -2.2 %, -0.3 % on 5.2, both in millimetres). A Blend Volume scaled by millimetres
+    per unit as well as by Cycles renders pixels of 1e24 here."""
     from material_structures.addon.teeth import verify as V
     from material_structures.addon.teeth.blend_volume import blend_object
     from material_structures.render import render_to_array
 
     means = []
-    for spread in (1e-6, 0.02):
+    for spread, scale_length in ((1e-6, 0.001), (0.02, 1.0)):
         ts, cam, light = V.check_scene(2, 16, 32, 20)
         ts.blend_spread = spread
         scene = V.reset_scene()
+        scene.unit_settings.scale_length = scale_length
+        mm = 1000.0 * scale_length
         V.dark_world(scene)
-        out = V.build_teeth_scene(ts, scene.collection, mm_per_unit=1.0)
+        out = V.build_teeth_scene(ts, scene.collection, mm_per_unit=mm)
         assert all(blend_object(e).hide_render == (spread < 0.01) for e, _ in out["teeth"])
-        V.add_camera(scene, cam, mm_per_unit=1.0)
-        V.add_point_light(scene, light, mm_per_unit=1.0)
+        V.add_camera(scene, cam, mm_per_unit=mm)
+        V.add_point_light(scene, light, mm_per_unit=mm)
         V.configure_teeth_cycles(scene, 32, 0, 64)
         means.append(render_to_array(scene)[:, :, :3].mean(axis=(0, 1)))
     assert means[1] == pytest.approx(means[0], rel=0.05)
