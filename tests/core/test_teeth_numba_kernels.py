@@ -255,14 +255,8 @@ def test_editing_bvh_recompiles_its_cached_callers(tmp_path):
     """A copy of the teeth package: a first run fills numba's cache with ``dentin_reach_grid._mark``, which calls
     ``bvh.closest_point_triangle``; an edit of bvh.py alone (every distance + 1 mm, so no cell lies within reach)
     must reach the second run, which numba's own stamp (the hash of dentin_reach_grid.py) would not notice."""
-    pkg = tmp_path / "probe"
-    (pkg / "core" / "teeth").mkdir(parents=True)
-    for init in (pkg / "__init__.py", pkg / "core" / "__init__.py"):
-        init.write_text("")
-    for path in TEETH.glob("*.py"):
-        shutil.copy(path, pkg / "core" / "teeth" / path.name)
-    script = tmp_path / "probe_run.py"
-    script.write_text(textwrap.dedent(_PROBE))
+    _probe_copy(tmp_path)
+    pkg, script = tmp_path / "probe", tmp_path / "probe_run.py"
     # the copy's own __pycache__: not numba's user-wide folder, not the Makefile's shared one (which holds this
     # tree's kernels, the copy's sources being the same)
     env = {k: v for k, v in os.environ.items()
