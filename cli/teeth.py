@@ -533,8 +533,9 @@ def run_fit(args: argparse.Namespace) -> int:
     if bar is not None:
         bar.close()
     plot_loss(log, os.path.join(args.out, "loss.png"))
-    angles = light_angles_deg(cap, scene_target(scene))
-    held_out = held_out_light_ids(cap, scene_target(scene), fs.held_out_lights)
+    target = scene_target(scene)
+    angles = light_angles_deg(cap, target)
+    held_out = held_out_light_ids(cap, target, fs.held_out_lights)
     if as_json:
         _event(progress="status", message=f"checking the fit on {len(held_out)} held-out lights")
     elif not args.no_progress and len(held_out):

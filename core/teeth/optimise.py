@@ -42,6 +42,7 @@ from .param_vector import (
 )
 from .path_tracer import RenderSettings
 from .scene import TeethScene
+from .synthetic import scene_target
 
 __all__ = ["Adam", "DEFAULT_FREE", "FitSettings", "FitState", "block_sums", "fit", "free_mask", "held_out_light_ids",
            "light_angles_deg", "iteration_gradient", "l2_loss", "paired_loss", "plot_loss", "tail_start",
@@ -76,12 +77,6 @@ def held_out_light_ids(capture: Capture, target: np.ndarray, n_held_out: int) ->
     return np.sort(order[:n]).astype(np.int64)
 
 
-def _teeth_centre(scene: TeethScene) -> np.ndarray:
-    from .synthetic import scene_target  # the synthetic scenes' module imports this one's neighbours
-
-    return scene_target(scene)
-
-
 def fit_identity(scene: TeethScene, capture: Capture, layout: ParamLayout, free: np.ndarray, s: FitSettings) -> dict:
     """What a checkpoint was made for: the capture (sizes and a digest of its images and masks), the
     parameter layout and which of it is free, the held-out lights, the seed, the samples per pixel of both
@@ -99,7 +94,7 @@ def fit_identity(scene: TeethScene, capture: Capture, layout: ParamLayout, free:
             "teeth": [t.name for t in scene.teeth],
             "layout": [[e.name, int(e.size)] for e in layout.entries],
             "free": np.flatnonzero(free).tolist(), "seed": s.seed,
-            "held_out_lights": held_out_light_ids(capture, _teeth_centre(scene), s.held_out_lights).tolist(),
+            "held_out_lights": held_out_light_ids(capture, scene_target(scene), s.held_out_lights).tolist(),
             "spp": s.spp, "image_spp": s.image_spp, "lr": s.lr, "optimiser": s.optimiser}
 
 
@@ -204,7 +199,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         if getattr(s, setting) > off and gradient is not None and setting not in inspect.signature(gradient).parameters:
             raise ValueError(f"settings.{setting} > {off} needs a gradient function that takes {setting}=; "
                              f"set {setting}={off} to use this one")
-    held_out = held_out_light_ids(capture, _teeth_centre(scene), s.held_out_lights)
+    held_out = held_out_light_ids(capture, scene_target(scene), s.held_out_lights)
     training = np.setdiff1d(np.arange(len(capture.lights)), held_out)
     layout0 = ParamLayout(scene)
     identity = fit_identity(scene, capture, layout0, free_mask(layout0, s.free), s)
