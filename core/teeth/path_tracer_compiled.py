@@ -856,7 +856,7 @@ def _nee(geo, med, tex, job, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, r
     return n_shadow, casts
 
 
-@njit(cache=True, _nrt=False, error_model="numpy")
+@njit(cache=True, _nrt=False, inline="always", error_model="numpy")
 def _trace_path(geo, med, tex, job, o0, d0, seed_path, row, cam, pix, img_on, gradpass, out_rows, ab, grad, jac,
                 scratch, path_vecs, rs):
     """One camera path (``path_tracer._trace_chunk`` for a single path). Returns (vertices, shadow rays,
