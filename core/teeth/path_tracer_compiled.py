@@ -856,7 +856,7 @@ def _nee(geo, med, tex, job, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, r
     return n_shadow, casts
 
 
-@njit(cache=True, _nrt=False, inline="always", error_model="numpy")
+@njit(cache=True, _nrt=False, forceinline=True, error_model="numpy")
 def _trace_path(geo, med, tex, job, o0, d0, seed_path, row, cam, pix, img_on, gradpass, out_rows, ab, grad, jac,
                 scratch, path_vecs, rs):
     """One camera path (``path_tracer._trace_chunk`` for a single path). Returns (vertices, shadow rays,
@@ -1105,8 +1105,9 @@ def _trace_path(geo, med, tex, job, o0, d0, seed_path, row, cam, pix, img_on, gr
 def _trace_part(geo, med, tex, job, r0, r1, s0, s1, out_rows, g, jac, jac_off, ab, mode, scratch, path_vecs, rs, o, d,
                 counts) -> None:
     """One part of ``_trace_rows``: rows r0..r1, samples s0..s1 of each, counters into ``counts``. Allocates
-    nothing (runs without reference counting) and holds the only call of ``_trace_path``, which is inlined
-    here: a call would pass every field of every array of the scene's tuples on the stack, per path."""
+    nothing (runs without reference counting) and holds the only call of ``_trace_path``, which LLVM inlines
+    here (``forceinline``): a call would pass every field of every array of the scene's tuples on the stack,
+    per path."""
     fxy, rot, center, width = job.fxy, job.rot, job.center, job.width
     cam_of, pix_of, spp, seed, jitter, want_grad = job.cam_of, job.pix_of, job.spp, job.seed, job.jitter, job.want_grad
     yes, no = mode[0] == 0, mode[0] == 1
@@ -1130,7 +1131,7 @@ def _trace_part(geo, med, tex, job, r0, r1, s0, s1, out_rows, g, jac, jac_off, a
             for c in range(3):
                 d[c] /= nn
                 o[c] = center[cam, c]
-            # one call site (``_trace_path`` is inlined here): the image, or the gradient's two passes
+            # one call site (LLVM inlines ``_trace_path`` here): the image, or the gradient's two passes
             nv = ns = nc = cap = lv = 0
             for ps in range(2 if want_grad else 1):
                 if not want_grad:
