@@ -26,8 +26,8 @@ export MATERIAL_STRUCTURES_NUMBA_CACHE ?= $(CURDIR)/build/numba-cache
 # processes would compile them again on import (the venvs' packages are compiled when installed)
 SOURCES := __init__.py __main__.py addon benchmarks cli core render scaleout showcase tests
 
-.PHONY: lock setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library build \
-	release docs bench refs samples clean help
+.PHONY: lock setup setup-compat test test-fast test-all test-compat test-bare test-bare-compat lint demo library \
+	previews build release docs bench refs samples clean help
 
 help:
 	@echo "make demo        set up and render the sample library into out/"
@@ -38,6 +38,7 @@ help:
 	@echo "make test-bare   the built zip in a Python with only bpy 5.2 (a desktop Blender): every operator"
 	@echo "make test-bare-compat  the same on Blender 4.5 LTS"
 	@echo "make library     (re)build the artist asset library in samples/library"
+	@echo "make previews    render the library previews a build copies (showcase/previews), after a material changes"
 	@echo "make samples     regenerate the sample data in samples/ (a BTF, a teeth capture, the brush states)"
 	@echo "make build       installable extension zips in dist/, per platform and Python (with the asset library)"
 	@echo "make release     the zips and Blender's repository index in dist/: serve dist/ and add its index.json URL"
@@ -112,6 +113,9 @@ demo: $(STAMP)
 
 library: $(STAMP)
 	$(PY) -m material_structures library build
+
+previews: $(STAMP)
+	$(PY) -m material_structures library previews
 
 # the sample data shipped in samples/ (committed; regenerate after changing a format or the synthetic models)
 samples: $(STAMP)

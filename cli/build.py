@@ -182,14 +182,17 @@ def download_wheels(python: str, platform: str, cache: str) -> list[str]:
 
 def _stage(source_dir: str, stage: str, manifest: dict) -> None:
     """A copy of the extension's files (the manifest's root exclusions left out) in ``stage``."""
-    top = {p.strip("/") for p in manifest.get("build", {}).get("paths_exclude_pattern", [])
-           if p.startswith("/") and p.count("/") <= 2}
+    # the root-anchored exclusions ("/tests/", "/showcase/previews/") as paths relative to the root
+    anchored = {p.strip("/") for p in manifest.get("build", {}).get("paths_exclude_pattern", [])
+                if p.startswith("/") and "*" not in p}
     shutil.rmtree(stage, ignore_errors=True)
 
     def ignore(folder: str, names: list[str]) -> set[str]:
         out = {n for n in names if n in ("__pycache__", ".git") or n.endswith((".pyc", ".oso", ".blend1"))}
-        if os.path.samefile(folder, source_dir):
-            out |= {n for n in names if n in top or n.endswith(".egg-info") or n.startswith(".venv")}
+        rel = os.path.relpath(folder, source_dir).replace(os.sep, "/")
+        out |= {n for n in names if (n if rel == "." else f"{rel}/{n}") in anchored}
+        if rel == ".":
+            out |= {n for n in names if n.endswith(".egg-info") or n.startswith(".venv")}
         return out
 
     shutil.copytree(source_dir, stage, ignore=ignore, symlinks=False)

@@ -5,11 +5,19 @@ Layout of the library folder (a Blender asset library; register it in Preference
     material_structures_library.blend   materials marked as assets, images packed
     blender_assets.cats.txt             the catalogs (Fabric/Velvet, Metal/..., Teeth/...)
     previews/<name>.png                 the rendered previews (also loaded as asset previews)
+
+A build at the default preview size and samples copies each material's stored preview
+(``showcase/previews/<name>.png``, written by ``library previews``) instead of rendering it: the ten
+previews take about 100 s of Cycles (the three dentin shades about 15 s each, the volume set-up of their
+tooth), and a build runs before every bare-Blender test stage. A material without a stored preview, another
+size or sample count, or ``library build --render-previews`` renders. ``make test-all`` renders every
+preview again and compares it with the stored one.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 import uuid
 
@@ -23,6 +31,9 @@ from .library import MATERIALS, available_materials, render_material_preview
 LIBRARY_BLEND = "material_structures_library.blend"
 CATALOG_FILE = "blender_assets.cats.txt"
 _NAMESPACE = uuid.UUID("6f1c2b1e-3f6a-4d8e-9a51-7d1e5b0c9a42")
+PREVIEW_SIZE = 128  # pixels, width = height
+PREVIEW_SAMPLES = 16
+STORED_PREVIEWS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "previews")
 
 
 def catalog_uuid(path: str) -> str:
@@ -49,8 +60,51 @@ def write_catalogs(folder: str, paths: list[str]) -> str:
     return out
 
 
-def build_asset_library(folder: str, preview_size: int = 128, samples: int = 16, progress: bool = True) -> str:
-    """Render previews and write the library .blend; returns its path."""
+def preview_file_name(name: str) -> str:
+    return f"{_slug(name)}.png"
+
+
+def stored_preview(name: str, preview_size: int = PREVIEW_SIZE, samples: int = PREVIEW_SAMPLES,
+                   folder: str = STORED_PREVIEWS) -> str | None:
+    """The stored preview of library material ``name``, or None where there is none or the build asks for
+    another size or sample count than the stored previews were rendered with."""
+    if (preview_size, samples) != (PREVIEW_SIZE, PREVIEW_SAMPLES):
+        return None
+    path = os.path.join(folder, preview_file_name(name))
+    return path if os.path.isfile(path) else None
+
+
+def render_preview_png(name: str, work: str, path: str, preview_size: int = PREVIEW_SIZE,
+                       samples: int = PREVIEW_SAMPLES) -> str:
+    """Render ``name``'s preview into the PNG ``path`` (written under a temporary name, then renamed)."""
+    rgba = render_material_preview(name, work, (preview_size, preview_size), samples)
+    tmp = f"{path}.tmp-{os.getpid()}.png"
+    Image.fromarray(to_display_uint8(rgba)).save(tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def store_previews(folder: str = STORED_PREVIEWS, progress: bool = True) -> list[str]:
+    """Render every library material's preview at the default size and samples into ``folder`` (the previews
+    a build copies); returns the paths."""
+    os.makedirs(folder, exist_ok=True)
+    work = os.path.join(folder, ".work")
+    names = available_materials()
+    iterator = names
+    if progress:
+        from tqdm import tqdm  # not in a desktop Blender: only for the progress bar
+
+        iterator = tqdm(names, desc="library previews", unit="material", file=sys.stderr)
+    try:
+        return [render_preview_png(n, work, os.path.join(folder, preview_file_name(n))) for n in iterator]
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def build_asset_library(folder: str, preview_size: int = PREVIEW_SIZE, samples: int = PREVIEW_SAMPLES,
+                        progress: bool = True, render_previews: bool = False) -> str:
+    """Write the library .blend with its previews (the stored ones where they apply, unless
+    ``render_previews``); returns its path."""
     os.makedirs(os.path.join(folder, "previews"), exist_ok=True)
     work = os.path.join(folder, ".work")
     names = available_materials()
@@ -61,9 +115,12 @@ def build_asset_library(folder: str, preview_size: int = 128, samples: int = 16,
 
         iterator = tqdm(names, desc="library previews", unit="material", file=sys.stderr)
     for name in iterator:
-        rgba = render_material_preview(name, work, (preview_size, preview_size), samples)
-        path = os.path.join(folder, "previews", f"{_slug(name)}.png")
-        Image.fromarray(to_display_uint8(rgba)).save(path)
+        path = os.path.join(folder, "previews", preview_file_name(name))
+        stored = None if render_previews else stored_preview(name, preview_size, samples)
+        if stored is not None:
+            shutil.copyfile(stored, path)
+        else:
+            render_preview_png(name, work, path, preview_size, samples)
         previews[name] = path
 
     # The library file: only the materials (and what they use), each marked as an asset.

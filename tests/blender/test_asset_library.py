@@ -12,28 +12,74 @@ pytest.importorskip("PIL")
 
 @pytest.fixture(scope="module")
 def built_library(tmp_path_factory, addon_module):
-    """The library built as ``make library`` builds it, with one material's preview rendered and the others'
-    flat grey (each preview is that material's library render, which test_library_regression.py checks; a teeth
-    preview alone costs ~20 s of Cycles volume set-up). ``make test-bare`` builds the whole library for real."""
-    import numpy as np
-
+    """The library built as ``make library`` builds it (default preview size and samples), with one material's
+    preview rendered and the others copied from the stored previews (a build copies them; that each one is
+    still its material's render is ``test_stored_previews_are_what_the_materials_render``, nightly)."""
     from material_structures.showcase import asset_library
 
     folder = str(tmp_path_factory.mktemp("library"))
+    stored = asset_library.stored_preview
     render = asset_library.render_material_preview
+    first = asset_library.available_materials()[0]
     rendered = []
 
     def preview(name, work, resolution, samples):
-        if not rendered:
-            rendered.append(name)
-            return render(name, work, resolution, samples)
-        return np.full((resolution[1], resolution[0], 4), 0.5, dtype=np.float32)
+        rendered.append(name)
+        return render(name, work, resolution, samples)
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(asset_library, "render_material_preview", preview)
-        path = asset_library.build_asset_library(folder, preview_size=24, samples=1, progress=False)
-    assert len(rendered) == 1
+        mp.setattr(asset_library, "stored_preview", lambda name, *a: None if name == first else stored(name, *a))
+        path = asset_library.build_asset_library(folder, progress=False)
+    assert rendered == [first]
     return folder, path
+
+
+def test_a_default_build_copies_the_stored_previews(built_library):
+    """Every library material has a stored preview at the default size; a default build copies it byte for byte
+    (rendering only where there is none), another size or sample count renders."""
+    from PIL import Image
+
+    from material_structures.showcase import asset_library as A
+
+    folder, _ = built_library
+    names = A.available_materials()
+    for name in names:
+        stored = A.stored_preview(name)
+        assert stored is not None, f"no stored preview of {name!r}: run make previews"
+        with Image.open(stored) as im:
+            assert im.size == (A.PREVIEW_SIZE, A.PREVIEW_SIZE)
+        assert A.stored_preview(name, 24, A.PREVIEW_SAMPLES) is None
+        assert A.stored_preview(name, A.PREVIEW_SIZE, 1) is None
+        if name != names[0]:  # the fixture rendered the first one
+            with open(stored, "rb") as a, open(os.path.join(folder, "previews", A.preview_file_name(name)), "rb") as b:
+                assert a.read() == b.read(), name
+    assert sorted(os.listdir(A.STORED_PREVIEWS)) == sorted(A.preview_file_name(n) for n in names)
+
+
+@pytest.mark.slow
+def test_stored_previews_are_what_the_materials_render(addon_module, tmp_path):
+    """Nightly (about 100 s): each stored preview is its material's render now, so a material edited without
+    ``make previews`` is caught: image means within 5 % per channel and the median 8 x 8 block within 10 %
+    (16 spp: another CPU's kernel gives other noise). The dentin previews of a library built before the
+    Blend Volume's mesh step differ by 16-94 % in their channel means."""
+    import numpy as np
+    from PIL import Image
+
+    from material_structures.showcase import asset_library as A
+
+    for name in A.available_materials():
+        out = A.render_preview_png(name, str(tmp_path / "work"), str(tmp_path / A.preview_file_name(name)))
+        now = np.asarray(Image.open(out), dtype=float)[..., :3]
+        stored = np.asarray(Image.open(A.stored_preview(name)), dtype=float)[..., :3]
+        means_now, means_stored = now.mean(axis=(0, 1)), stored.mean(axis=(0, 1))
+        assert np.all(np.abs(means_now / means_stored - 1.0) <= 0.05), (name, means_now, means_stored)
+        n = A.PREVIEW_SIZE // 8
+        blocks_now = now.reshape(n, 8, n, 8, 3).mean(axis=(1, 3))
+        blocks_stored = stored.reshape(n, 8, n, 8, 3).mean(axis=(1, 3))
+        lit = blocks_stored.mean(axis=-1) > 5.0
+        rel = np.abs(blocks_now - blocks_stored)[lit] / blocks_stored[lit].clip(1.0)
+        assert np.median(rel) <= 0.10, (name, float(np.median(rel)))
 
 
 def test_library_holds_every_material_as_an_asset(built_library):
@@ -53,7 +99,7 @@ def test_library_holds_every_material_as_an_asset(built_library):
         assert mat.asset_data is not None
         assert mat.asset_data.catalog_id == catalog_uuid(entry.catalog)
         assert f"{catalog_uuid(entry.catalog)}:{entry.catalog}:" in cats
-        assert mat.preview is not None and tuple(mat.preview.image_size) == (24, 24)
+        assert mat.preview is not None and tuple(mat.preview.image_size) == (128, 128)
         for node in mat.node_tree.nodes:  # maps travel inside the library file
             if node.type == "TEX_IMAGE":
                 assert node.image.packed_file is not None

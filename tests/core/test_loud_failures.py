@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 
 import numpy as np
 import pytest
@@ -335,3 +336,16 @@ def test_an_output_under_a_file_is_refused_before_the_work(tmp_path, capsys, arg
     assert main([a.format(f=f) for a in argv]) == 1
     _one_line(capsys, said.format(f=f))
     assert f.read_text() == "keep me" and list(tmp_path.iterdir()) == [f]
+
+
+@pytest.mark.parametrize("extra", [["--samples", "3"], ["--preview-size", "64"], ["--render-previews"]])
+def test_library_previews_at_other_settings_is_a_usage_error(capsys, extra):
+    """The stored previews are rendered at the settings a default build copies them for: anything else is refused
+    before anything renders or is written."""
+    stored = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                          "showcase", "previews")
+    before = {n: os.path.getmtime(os.path.join(stored, n)) for n in os.listdir(stored)}
+    assert main(["library", "previews", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: library previews renders the stored previews at 128 px") and "\n" not in err
+    assert {n: os.path.getmtime(os.path.join(stored, n)) for n in os.listdir(stored)} == before
