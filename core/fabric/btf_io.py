@@ -158,8 +158,23 @@ def _npz_shape(path: str, key: str) -> tuple[int, ...]:
     return shape
 
 
+def _check_values(source: str, k0: int, vals: np.ndarray) -> None:
+    """Refuse non-finite or negative radiance in images ``k0...`` (``vals``: (m, H, W, 3)), naming the first
+    image that holds one. A min and a max (NaN propagates through both) clear a good block in two passes."""
+    lo, hi = vals.min(), vals.max()
+    if np.isfinite(lo) and np.isfinite(hi) and lo >= 0:
+        return
+    finite = np.isfinite(vals).all(axis=(1, 2, 3))
+    if not finite.all():
+        bad = k0 + int(np.flatnonzero(~finite)[0])
+        raise UserError(f"{source}: values[{bad}] holds non-finite values (NaN/Inf)")
+    bad = k0 + int(np.flatnonzero((vals < 0).any(axis=(1, 2, 3)))[0])
+    raise UserError(f"{source}: values[{bad}] holds negative radiance (a BTF's values are reflected radiance, >= 0)")
+
+
 def iter_btf_blocks(path: str | os.PathLike, block: int = 256, progress: bool = False):
-    """Yield ``(start, values[start:start + block])`` float32 blocks of a BTF (bounded memory).
+    """Yield ``(start, values[start:start + block])`` float32 blocks of a BTF (bounded memory; a block may be
+    read-only).
 
     Raises ValueError/FileNotFoundError with the offending file for size mismatches, missing
     files, non-finite pixels and directions below the horizon.
@@ -189,16 +204,8 @@ def iter_btf_blocks(path: str | os.PathLike, block: int = 256, progress: bool = 
                                         f"({type(exc).__name__}: {exc})") from None
                     if len(buf) != per * m:
                         raise UserError(f"{hdr.source}: values is truncated near image {k0}")
-                    vals = np.frombuffer(buf, dtype=dtype).reshape(m, h, w, 3).astype(np.float32)
-                    finite = np.isfinite(vals).all(axis=(1, 2, 3))
-                    if not finite.all():
-                        bad = k0 + int(np.flatnonzero(~finite)[0])
-                        raise UserError(f"{hdr.source}: values[{bad}] holds non-finite values (NaN/Inf)")
-                    negative = (vals < 0).any(axis=(1, 2, 3))
-                    if negative.any():
-                        bad = k0 + int(np.flatnonzero(negative)[0])
-                        raise UserError(f"{hdr.source}: values[{bad}] holds negative radiance (a BTF's values are "
-                                        "reflected radiance, >= 0)")
+                    vals = np.frombuffer(buf, dtype=dtype).reshape(m, h, w, 3).astype(np.float32, copy=False)
+                    _check_values(hdr.source, k0, vals)
                     if bar:
                         bar.update(m)
                     yield k0, vals

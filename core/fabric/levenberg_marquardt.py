@@ -18,6 +18,11 @@ import numpy as np
 
 from .quaternion import quat_from_rotvec, quat_multiply, quat_to_matrix
 
+try:  # the compiled sums (specular_moments); without numba the numpy ones below
+    from . import specular_moments as _compiled
+except ImportError:  # pragma: no cover - numba ships with the extension and every environment
+    _compiled = None
+
 LOG_SIGMA_MIN = np.log(0.01)
 LOG_SIGMA_MAX = np.log(10.0)
 
@@ -59,7 +64,16 @@ class Samples:
             "ci": self.wi[:, 2].astype(dtype),
             "co": self.wo[:, 2].astype(dtype),
             "wt": (self.weight / (4.0 * np.pi)).astype(dtype),
+            # the same samples for the compiled sums (left out of the dict: the numpy ones run)
+            "compiled": self.compiled_data(),
         }
+
+    def compiled_data(self) -> tuple:
+        """The samples as ``specular_moments`` takes them: ``h, wi, wo`` (3, N), ``1 / |h|^2``, ``w / 4 pi``
+        and ``E = w / pi`` (N,), float64."""
+        h = self.wi + self.wo
+        return (np.ascontiguousarray(h.T), np.ascontiguousarray(self.wi.T), np.ascontiguousarray(self.wo.T),
+                1.0 / np.sum(h * h, axis=-1), self.weight / (4.0 * np.pi), self.weight / np.pi)
 
 
 CHUNK = 16  # texels per kernel call: keeps the temporaries in cache
@@ -126,10 +140,31 @@ def specular_terms(s: Samples, log_sigma: np.ndarray, quat: np.ndarray, derivati
     return g, dl
 
 
-def _trial_moments(kd: dict, u: np.ndarray, quat: np.ndarray, y: np.ndarray) -> LinearMoments:
-    """Moments ``G.G, G.E, G.Y`` (float64) for the optimal albedos at a trial point."""
+def target_moments(y: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``E.Y`` and ``Y.Y`` (T, 3) per texel and channel of the weighted targets ``y`` (T, N, 3)."""
+    if _compiled is None:
+        return np.einsum("n,tnc->tc", e, y), np.einsum("tnc,tnc->tc", y, y)
+    ey, yy = np.empty((y.shape[0], 3)), np.empty((y.shape[0], 3))
+    _compiled.target_moments(np.ascontiguousarray(y), np.ascontiguousarray(e, dtype=np.float64), ey, yy)
+    return ey, yy
+
+
+def _rows(u: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
+    return np.arange(len(u)) if rows is None else np.asarray(rows, dtype=np.int64)
+
+
+def _trial_moments(kd: dict, u: np.ndarray, quat: np.ndarray, y: np.ndarray, rows: np.ndarray | None = None
+                   ) -> LinearMoments:
+    """Moments ``G.G, G.E, G.Y`` (float64) for the optimal albedos at a trial point: texel k has parameters
+    ``u[k], quat[k]`` and targets ``y[rows[k]]`` (``rows``: all of ``y`` in order where None)."""
+    rows = _rows(u, rows)
+    t = len(rows)
+    if _compiled is not None and "compiled" in kd:
+        rt, sx2, sy2 = _prepare(u, quat, np.float64)
+        gg, ge, gy = np.empty(t), np.empty(t), np.empty((t, 3))
+        _compiled.trial_moments(*kd["compiled"], rt, sx2[:, 0].copy(), sy2[:, 0].copy(), y, rows, gg, ge, gy)
+        return LinearMoments(gg=gg, ge=ge, gy=gy)
     rt, sx2, sy2 = _prepare(u, quat)
-    t = rt.shape[0]
     e = kd["e64"]
     gg, ge, gy = np.empty(t), np.empty(t), np.empty((t, 3))
     for a in range(0, t, CHUNK):
@@ -138,17 +173,23 @@ def _trial_moments(kd: dict, u: np.ndarray, quat: np.ndarray, y: np.ndarray) -> 
         g = g.astype(np.float64)
         gg[sl] = np.einsum("tn,tn->t", g, g)
         ge[sl] = g @ e
-        gy[sl] = np.matmul(g[:, None, :], y[sl])[:, 0]
+        gy[sl] = np.matmul(g[:, None, :], y[rows[sl]])[:, 0]
     return LinearMoments(gg=gg, ge=ge, gy=gy)
 
 
-def _normal_moments(kd: dict, u: np.ndarray, quat: np.ndarray, y: np.ndarray):
-    """``B^T B`` (T, 7, 7) and ``B^T Y`` (T, 7, 3) for ``B = [dG/dtheta (5), G, E]`` (float64)."""
-    rt, sx2, sy2 = _prepare(u, quat)
-    t = rt.shape[0]
-    n = kd["n"]
+def _normal_moments(kd: dict, u: np.ndarray, quat: np.ndarray, y: np.ndarray, rows: np.ndarray | None = None):
+    """``B^T B`` (T, 7, 7) and ``B^T Y`` (T, 7, 3) for ``B = [dG/dtheta (5), G, E]`` (float64); texels as in
+    ``_trial_moments``."""
+    rows = _rows(u, rows)
+    t = len(rows)
     m = np.empty((t, 7, 7))
     by = np.empty((t, 7, 3))
+    if _compiled is not None and "compiled" in kd:
+        rt, sx2, sy2 = _prepare(u, quat, np.float64)
+        _compiled.normal_moments(*kd["compiled"], rt, sx2[:, 0].copy(), sy2[:, 0].copy(), y, rows, m, by)
+        return m, by
+    rt, sx2, sy2 = _prepare(u, quat)
+    n = kd["n"]
     basis = np.empty((CHUNK, n, 7))
     basis[:, :, 6] = kd["e64"]
     for a in range(0, t, CHUNK):
@@ -160,7 +201,7 @@ def _normal_moments(kd: dict, u: np.ndarray, quat: np.ndarray, y: np.ndarray):
         bc[:, :, 5] = g
         bt = bc.transpose(0, 2, 1)
         m[sl] = np.matmul(bt, bc)
-        by[sl] = np.matmul(bt, y[sl])
+        by[sl] = np.matmul(bt, y[rows[sl]])
     return m, by
 
 
@@ -210,20 +251,23 @@ class LmResult:
 
 
 def levenberg_marquardt(s: Samples, values: np.ndarray, quat: np.ndarray, sigma: np.ndarray,
-                        max_iter: int = 40, tol: float = 1e-8, lam0: np.ndarray | None = None) -> LmResult:
+                        max_iter: int = 40, tol: float = 1e-8, lam0: np.ndarray | None = None,
+                        rows: np.ndarray | None = None) -> LmResult:
     """Fit all texels of a tile at once. ``values`` (T, N, 3) stored BTF values; initial ``quat``
-    (T, 4) and ``sigma`` (T, 2). Returns the fitted parameters and eq. 3.18 costs."""
-    y = s.targets(np.asarray(values, dtype=np.float64))
+    (T, 4) and ``sigma`` (T, 2). Returns the fitted parameters and eq. 3.18 costs. With ``rows`` (T,),
+    fitted texel k is row ``rows[k]`` of ``values`` (several starts of one texel share its row)."""
+    y = np.ascontiguousarray(s.targets(np.asarray(values, dtype=np.float64)))
     kd = s.kernel_data()
     e = s.weight / np.pi
     kd["e64"] = e
     ee = float(e @ e)
-    ey = np.einsum("n,tnc->tc", e, y)
-    yy = np.einsum("tnc,tnc->tc", y, y)
-    t = y.shape[0]
+    ey, yy = target_moments(y, e)
+    rows = np.arange(y.shape[0]) if rows is None else np.asarray(rows, dtype=np.int64)
+    ey, yy = ey[rows], yy[rows]
+    t = len(rows)
     quat = np.array(quat, dtype=np.float64)
     u = np.log(np.clip(np.asarray(sigma, dtype=np.float64), 0.011, 9.9))
-    ks, kd_, cost = optimal_albedos(_trial_moments(kd, u, quat, y), ee, ey, yy)
+    ks, kd_, cost = optimal_albedos(_trial_moments(kd, u, quat, y, rows), ee, ey, yy)
     lam = np.full(t, 1e-2) if lam0 is None else np.array(lam0, dtype=np.float64)
     active = np.ones(t, dtype=bool)
     # converged to the float32 precision floor of the model evaluation: nothing left to gain
@@ -236,10 +280,9 @@ def levenberg_marquardt(s: Samples, values: np.ndarray, quat: np.ndarray, sigma:
         idx = np.flatnonzero(active)
         if idx.size == 0:
             break
-        ya = y[idx]
         upd = idx[stale[idx]]
         if upd.size:
-            m_all[upd], by_all[upd] = _normal_moments(kd, u[upd], quat[upd], y[upd])
+            m_all[upd], by_all[upd] = _normal_moments(kd, u[upd], quat[upd], y, rows[upd])
             stale[upd] = False
         m, by = m_all[idx], by_all[idx]
         ksa, kda = ks[idx], kd_[idx]
@@ -264,7 +307,7 @@ def levenberg_marquardt(s: Samples, values: np.ndarray, quat: np.ndarray, sigma:
         step[:, 2:] *= np.minimum(1.0, 0.5 / np.maximum(rn, 1e-300))
         u_new = np.clip(u[idx] + step[:, :2], LOG_SIGMA_MIN, LOG_SIGMA_MAX)
         q_new = quat_multiply(quat[idx], quat_from_rotvec(step[:, 2:]))
-        ks_new, kd_new, cost_new = optimal_albedos(_trial_moments(kd, u_new, q_new, ya), ee, ey[idx], yy[idx])
+        ks_new, kd_new, cost_new = optimal_albedos(_trial_moments(kd, u_new, q_new, y, rows[idx]), ee, ey[idx], yy[idx])
         old = cost[idx]
         acc = cost_new < old
         ai = idx[acc]

@@ -14,6 +14,7 @@ from .levenberg_marquardt import (
     _trial_moments,
     levenberg_marquardt,
     optimal_albedos,
+    target_moments,
 )
 from .ndf_extraction import NdfOperator
 from .quaternion import quat_from_axis_angle, quat_multiply
@@ -53,17 +54,17 @@ def fit_tile(values: np.ndarray, samples: Samples, op: NdfOperator, options: Fit
     values = np.asarray(values, dtype=np.float64)
     t, n, _ = values.shape
     # eq. 3.11 on the luminance of the BRDF values
-    f = values.mean(axis=2) / samples.wi[None, :, 2]
+    f = (values @ np.full(3, 1.0 / 3.0)) / samples.wi[None, :, 2]
     ndf = op.apply(f.T)  # (cells, T)
     q0, s0 = initial_basis(ndf, op)
     sub = _subset(n, opt.coarse_samples, opt.seed)
     ss = samples.subset(sub)
-    vs = values[:, sub]
-    y = ss.targets(vs)
+    vs = np.ascontiguousarray(values[:, sub])
+    y = np.ascontiguousarray(ss.targets(vs))
     kd = ss.kernel_data()
     e = ss.weight / np.pi
     kd["e64"] = e
-    ee, ey, yy = float(e @ e), np.einsum("n,tnc->tc", e, y), np.einsum("tnc,tnc->tc", y, y)
+    ee, (ey, yy) = float(e @ e), target_moments(y, e)
     best_cost = np.full(t, np.inf)
     best_q, best_s = q0.copy(), s0.copy()
     for qc, sc in initial_candidates(q0, s0):
@@ -83,8 +84,8 @@ def fit_tile(values: np.ndarray, samples: Samples, op: NdfOperator, options: Fit
         ang = np.pi * j / k
         qs.append(quat_multiply(best_q, quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), np.array(ang))))
         sgs.append(np.stack([0.7 * gm, np.minimum(1.4 * gm, 1.0)], -1))
-    res = levenberg_marquardt(ss, np.concatenate([vs] * k), np.concatenate(qs), np.concatenate(sgs),
-                              max_iter=opt.start_iter)
+    res = levenberg_marquardt(ss, vs, np.concatenate(qs), np.concatenate(sgs), max_iter=opt.start_iter,
+                              rows=np.tile(np.arange(t), k))
     pick = np.argmin(res.cost.reshape(k, t), axis=0) * t + np.arange(t)
     n_start = res.iterations
     res = levenberg_marquardt(ss, vs, res.quat[pick], res.sigma[pick], max_iter=opt.coarse_iter,

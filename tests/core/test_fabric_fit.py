@@ -205,6 +205,44 @@ def test_lm_analytic_derivatives_match_finite_differences():
         assert np.allclose(dl[..., j], fd, atol=2e-5 * max(1.0, np.abs(fd).max()))
 
 
+def test_compiled_moments_equal_the_numpy_sums_in_float64():
+    """The LM's sums over samples (``specular_moments``, numba) against the same sums built from the numpy
+    model (``specular_terms`` in float64, itself checked against eq. 3.9 and finite differences above), for
+    texels picked out of the targets by ``rows`` (out of order, one twice)."""
+    from material_structures.core.fabric import levenberg_marquardt as LM
+
+    wi, wo = light_view_pairs(16, 16)
+    s = Samples.make(wi, wo)
+    rng = np.random.default_rng(5)
+    t = 12
+    u = np.log(rng.uniform(0.05, 2.0, (t, 2)))
+    q = quat_from_axis_angle(rng.normal(size=(t, 3)), rng.uniform(0, 3, t))
+    y = rng.uniform(0.0, 1.0, (20, len(wi), 3))
+    rows = np.array([3, 0, 19, 7, 7, 11, 2, 15, 8, 1, 4, 13])
+    kd = s.kernel_data()
+    kd["e64"] = s.weight / np.pi
+    assert LM._compiled is not None and "compiled" in kd  # the compiled path is the one under test
+    m, by = LM._normal_moments(kd, u, q, y, rows)
+    mom = LM._trial_moments(kd, u, q, y, rows)
+    g, dl = specular_terms(s, u, q, derivatives=True, dtype=np.float64)
+    basis = np.concatenate([g[..., None] * dl, g[..., None], np.broadcast_to(kd["e64"], g.shape)[..., None]], -1)
+    m_ref = np.einsum("tni,tnj->tij", basis, basis)
+    by_ref = np.einsum("tni,tnc->tic", basis, y[rows])
+    assert np.abs(m - m_ref).max() <= 1e-10 * np.abs(m_ref).max()
+    assert np.abs(by - by_ref).max() <= 1e-10 * np.abs(by_ref).max()
+    np.testing.assert_allclose(mom.gg, np.einsum("tn,tn->t", g, g), rtol=1e-10)
+    np.testing.assert_allclose(mom.ge, g @ kd["e64"], rtol=1e-10)
+    np.testing.assert_allclose(mom.gy, np.einsum("tn,tnc->tc", g, y[rows]), rtol=1e-10)
+    ey, yy = LM.target_moments(y, kd["e64"])
+    np.testing.assert_allclose(ey, np.einsum("n,tnc->tc", kd["e64"], y), rtol=1e-12)
+    np.testing.assert_allclose(yy, np.einsum("tnc,tnc->tc", y, y), rtol=1e-12)
+    # the numpy sums (float32 model) agree to its precision
+    numpy_kd = {k: v for k, v in kd.items() if k != "compiled"}
+    m32, by32 = LM._normal_moments(numpy_kd, u, q, y, rows)
+    assert np.abs(m32 - m_ref).max() <= 1e-5 * np.abs(m_ref).max()
+    assert np.abs(by32 - by_ref).max() <= 1e-5 * np.abs(by_ref).max()
+
+
 def test_lm_recovers_parameters_from_perturbed_start():
     wi, wo = light_view_pairs(24, 24)
     s = Samples.make(wi, wo)
