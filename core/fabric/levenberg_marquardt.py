@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import specular_moments
 from .quaternion import quat_from_rotvec, quat_multiply, quat_to_matrix
+from .specular_moments import specular_term
 
-try:  # the compiled sums (specular_moments); without numba the numpy ones below
-    from . import specular_moments as _compiled
-except ImportError:  # pragma: no cover - numba ships with the extension and every environment
-    _compiled = None
+# the compiled sums; without numba the numpy ones below
+_compiled = specular_moments if specular_moments.HAVE_NUMBA else None
 
 LOG_SIGMA_MIN = np.log(0.01)
 LOG_SIGMA_MAX = np.log(10.0)
@@ -80,40 +80,19 @@ CHUNK = 16  # texels per kernel call: keeps the temporaries in cache
 
 
 def _kernel(kd: dict, rt: np.ndarray, sx2: np.ndarray, sy2: np.ndarray, derivatives: bool):
-    """``G = w g`` (c, N) and ``d ln g / d theta`` (c, N, 5) for a chunk of texels (float32).
+    """``G = w g`` (c, N) and ``d ln g / d theta`` (c, N, 5) for a chunk of texels (float32; ``specular_term``).
 
     ``rt``: (c, 3, 3) transposed basis matrices; ``sx2, sy2``: (c, 1) squared deviations.
-    Derivatives: ``u = log sigma`` gives ``dQ/du_x = -2 h_x^2 / (sigma_x^2 |h|^2)`` and
-    ``d sigma(w) / du_x = sigma_x^2 l_x^2 / sigma(w)``; a local rotation ``r`` moves local vectors by
-    ``dl/dr_j = l x e_j``.
     """
     n = kd["n"]
     loc = np.matmul(rt, kd["dirs"])  # (c, 3, 3N)
-    hx, hy, hz = loc[:, 0, :n], loc[:, 1, :n], loc[:, 2, :n]
-    ix, iy, iz = loc[:, 0, n:2 * n], loc[:, 1, n:2 * n], loc[:, 2, n:2 * n]
-    ox, oy, oz = loc[:, 0, 2 * n:], loc[:, 1, 2 * n:], loc[:, 2, 2 * n:]
-    ci, co, inv_hh = kd["ci"], kd["co"], kd["inv_hh"]
-    ax, ay = 1.0 / sx2, 1.0 / sy2
-    hx2, hy2 = hx * hx, hy * hy
-    q = (hx2 * ax + hy2 * ay + hz * hz) * inv_hh
-    ix2, iy2, ox2, oy2 = ix * ix, iy * iy, ox * ox, oy * oy
-    si = np.sqrt(sx2 * ix2 + sy2 * iy2 + iz * iz)
-    so = np.sqrt(sx2 * ox2 + sy2 * oy2 + oz * oz)
-    b = so * ci + si * co
-    g = kd["wt"] / (np.sqrt(sx2 * sy2) * q * q * b)
+    g, *dlog = specular_term(loc[:, 0, :n], loc[:, 1, :n], loc[:, 2, :n],
+                             loc[:, 0, n:2 * n], loc[:, 1, n:2 * n], loc[:, 2, n:2 * n],
+                             loc[:, 0, 2 * n:], loc[:, 1, 2 * n:], loc[:, 2, 2 * n:],
+                             kd["ci"], kd["co"], kd["inv_hh"], kd["wt"], sx2, sy2)
     if not derivatives:
         return g, None
-    dl = np.empty(g.shape + (5,), dtype=g.dtype)
-    ib = 1.0 / b
-    iq = (4.0 * inv_hh) / q
-    cso = ci / so
-    csi = co / si
-    dl[..., 0] = -1.0 + iq * hx2 * ax - sx2 * (cso * ox2 + csi * ix2) * ib
-    dl[..., 1] = -1.0 + iq * hy2 * ay - sy2 * (cso * oy2 + csi * iy2) * ib
-    dl[..., 2] = -iq * hy * hz * (ay - 1.0) - (sy2 - 1.0) * (cso * oy * oz + csi * iy * iz) * ib
-    dl[..., 3] = -iq * hx * hz * (1.0 - ax) - (1.0 - sx2) * (cso * ox * oz + csi * ix * iz) * ib
-    dl[..., 4] = -iq * hx * hy * (ax - ay) - (sx2 - sy2) * (cso * ox * oy + csi * ix * iy) * ib
-    return g, dl
+    return g, np.stack(dlog, axis=-1)
 
 
 def _prepare(log_sigma: np.ndarray, quat: np.ndarray, dtype=np.float32):

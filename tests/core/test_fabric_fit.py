@@ -179,13 +179,18 @@ def test_ndf_extraction_finds_tilted_peak():
 # ---------------------------------------------------------------- Levenberg-Marquardt
 
 
-def test_lm_analytic_derivatives_match_finite_differences():
-    wi, wo = light_view_pairs(8, 8)
-    s = Samples.make(wi, wo)
-    rng = np.random.default_rng(1)
-    t = 20
-    u = np.log(rng.uniform(0.1, 1.2, (t, 2)))
+def _random_texels(pairs: int, t: int, seed: int, sigma_range: tuple[float, float]):
+    """Samples of ``pairs`` x ``pairs`` light/view pairs and ``t`` texels of random deviations and bases."""
+    wi, wo = light_view_pairs(pairs, pairs)
+    rng = np.random.default_rng(seed)
+    u = np.log(rng.uniform(*sigma_range, (t, 2)))
     q = quat_from_axis_angle(rng.normal(size=(t, 3)), rng.uniform(0, 3, t))
+    return wi, wo, Samples.make(wi, wo), u, q, rng
+
+
+def test_lm_analytic_derivatives_match_finite_differences():
+    t = 20
+    wi, wo, s, u, q, _ = _random_texels(8, t, 1, (0.1, 1.2))
     g, dl = specular_terms(s, u, q, derivatives=True)
     ref = sggx_specular(wi[None], wo[None], np.exp(u)[:, None], q[:, None]) * wi[:, 2]
     assert np.allclose(g, ref, rtol=1e-12)
@@ -211,12 +216,7 @@ def test_compiled_moments_equal_the_numpy_sums_in_float64():
     texels picked out of the targets by ``rows`` (out of order, one twice)."""
     from material_structures.core.fabric import levenberg_marquardt as LM
 
-    wi, wo = light_view_pairs(16, 16)
-    s = Samples.make(wi, wo)
-    rng = np.random.default_rng(5)
-    t = 12
-    u = np.log(rng.uniform(0.05, 2.0, (t, 2)))
-    q = quat_from_axis_angle(rng.normal(size=(t, 3)), rng.uniform(0, 3, t))
+    wi, _, s, u, q, rng = _random_texels(16, 12, 5, (0.05, 2.0))
     y = rng.uniform(0.0, 1.0, (20, len(wi), 3))
     rows = np.array([3, 0, 19, 7, 7, 11, 2, 15, 8, 1, 4, 13])
     kd = s.kernel_data()
