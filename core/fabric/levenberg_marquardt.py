@@ -249,7 +249,8 @@ def levenberg_marquardt(s: Samples, values: np.ndarray, quat: np.ndarray, sigma:
     ks, kd_, cost = optimal_albedos(_trial_moments(kd, u, quat, y, rows), ee, ey, yy)
     lam = np.full(t, 1e-2) if lam0 is None else np.array(lam0, dtype=np.float64)
     active = np.ones(t, dtype=bool)
-    # converged to the float32 precision floor of the model evaluation: nothing left to gain
+    # converged to the precision floor of the float32 model (the numpy sums'; the compiled float64 ones stop there
+    # too, so that both paths stop alike)
     floor = 1e-12 * yy.sum(axis=1)
     # B^T B and B^T Y only change where a step was accepted: cache them per texel
     m_all, by_all = np.empty((t, 7, 7)), np.empty((t, 7, 3))
