@@ -60,6 +60,14 @@ def write_catalogs(folder: str, paths: list[str]) -> str:
     return out
 
 
+def _with_progress(names: list[str], progress: bool):
+    if not progress:
+        return names
+    from tqdm import tqdm  # not in a desktop Blender: only for the progress bar
+
+    return tqdm(names, desc="library previews", unit="material", file=sys.stderr)
+
+
 def preview_file_name(name: str) -> str:
     return f"{_slug(name)}.png"
 
@@ -89,14 +97,9 @@ def store_previews(folder: str = STORED_PREVIEWS, progress: bool = True) -> list
     a build copies); returns the paths."""
     os.makedirs(folder, exist_ok=True)
     work = os.path.join(folder, ".work")
-    names = available_materials()
-    iterator = names
-    if progress:
-        from tqdm import tqdm  # not in a desktop Blender: only for the progress bar
-
-        iterator = tqdm(names, desc="library previews", unit="material", file=sys.stderr)
     try:
-        return [render_preview_png(n, work, os.path.join(folder, preview_file_name(n))) for n in iterator]
+        return [render_preview_png(n, work, os.path.join(folder, preview_file_name(n)))
+                for n in _with_progress(available_materials(), progress)]
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -109,12 +112,7 @@ def build_asset_library(folder: str, preview_size: int = PREVIEW_SIZE, samples: 
     work = os.path.join(folder, ".work")
     names = available_materials()
     previews = {}
-    iterator = names
-    if progress:
-        from tqdm import tqdm  # not in a desktop Blender: only for the progress bar
-
-        iterator = tqdm(names, desc="library previews", unit="material", file=sys.stderr)
-    for name in iterator:
+    for name in _with_progress(names, progress):
         path = os.path.join(folder, "previews", preview_file_name(name))
         stored = None if render_previews else stored_preview(name, preview_size, samples)
         if stored is not None:
