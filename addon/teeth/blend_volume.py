@@ -1,19 +1,16 @@
 """The enamel/dentin sigmoid blend of the fit's model (eq. 5.15-5.21) as a Cycles volume: a "Blend Volume"
 object per tooth.
 
-The model (``core.teeth.scene``, ``core.teeth.path_tracer``): transmittance uses the sharp sigma_t of the
-enamel and dentin regions; at a scattering point at signed distance q from the dentin surface (q < 0 in the
-dentin) the scattering coefficient is sigma_s = a_mix sigma_t,mix and the phase function is the two-lobe HG
-of the mixed g1, g2, beta, where x_mix = l x_enamel + (1 - l) x_dentin and l = 1 / (1 + exp(-q / s)) (spread
-s, default 1 / ln 19 mm). Near the dentin this sigma_s exceeds the enamel's own sigma_t (dentin's sigma_t is
-the larger): the blended medium scatters more than it attenuates there.
+The model (``core.teeth.scene``, ``core.teeth.path_tracer``): the extinction is the sharp sigma_t of the enamel
+and dentin regions; at a scattering point at signed distance q from the dentin surface (q < 0 in the dentin) the
+albedo and the two-lobe HG parameters g1, g2, beta are blended, x_mix = l x_enamel + (1 - l) x_dentin with
+l = 1 / (1 + exp(-q / s)) (spread s, default 1 / ln 19 mm), and sigma_s = a_mix sigma_t (the thesis' vertex:
+sigma_s never exceeds sigma_t).
 
 In Cycles:
 
-* the tooth's Enamel material keeps its surface and gives up its volume (group input ``BLEND_INPUT`` = 1);
-  the Dentin material's volume becomes the sharp step of the extinction, a Volume Absorption of
-  sigma_t,dentin - sigma_t,enamel inside the dentin mesh (group input ``STEP_INPUT``, driven by the enamel
-  material's sigma_t; negative where the enamel's is the larger). The mesh gives the step its exact place;
+* the tooth's Enamel and Dentin materials keep their surfaces and give up their volumes (group input
+  ``BLEND_INPUT`` = 1): their meshes only bound the medium;
 * a mesh object parented to the enamel shell carries a geometry-nodes modifier (its own ``FIELD_GROUP``) that builds
   from the *evaluated* dentin core (its shape keys stay live) and the enamel's outer surface a volume with
   three grids, in the tooth's millimetre frame:
@@ -23,24 +20,19 @@ In Cycles:
   volume bounds cover the whole tooth);
 * that volume's material (node group ``BLEND_GROUP``) is, in 1/mm (Cycles takes a volume object's density in
   its object space, the tooth's millimetre frame, whatever the scene's unit), inside the tooth (ms_o < 0), the
-  scattering sigma_s = a_mix sigma_t,mix through two Volume Scatter (Henyey-Greenstein) lobes with the mixed g1, g2,
-  beta, plus a Volume Absorption of sigma_t,enamel - sigma_s, so that its extinction is the enamel's and, with
-  the dentin's step, the sharp sigma_t of either region. Where sigma_s > sigma_t that absorption is negative,
-  which Cycles takes as it is when the colour is linked (a colour *value* is clamped to [0, 1]; measured on
-  4.5 and 5.2);
+  extinction sigma_t of the region the sign of ``ms_q`` names, its scattering sigma_s = a_mix sigma_t through two
+  Volume Scatter (Henyey-Greenstein) lobes with the mixed g1, g2, beta, and a Volume Absorption of
+  sigma_t - sigma_s;
 * the blend material's parameters are drivers on the tooth's Enamel and Dentin group nodes, so editing those
   materials or applying a fit changes the blend with them; its spread is ``Spread (mm)`` of its group node.
 
-Why the step is the mesh's: the blended medium scatters more than it attenuates near the dentin, so the image
-is sensitive to where the step lies (0.05 mm outwards: 17 % darker). Taken from the sign of the interpolated
-``ms_q``, Cycles 5.2 rendered the teeth 3.2-4.6 % too dark at 0.1 mm voxels (8.5 % at 0.2 mm, 2 % at 0.05 mm);
-with the mesh's step, 1.2-2.8 % (1024 spp, the core at 3072 spp).
+Why the step comes from the grid, not the dentin mesh: the extinction and the scattering at a point must come
+from the same place, or a sliver where the grid says dentin and the mesh says enamel scatters more than it
+attenuates (albedo above 1), which Cycles estimates with a heavy tail.
 
 Approximation: q and the tooth's outline are trilinearly interpolated from grids of ``VOXEL_MM`` voxels (the
 enamel surface's reflection and a_t stay the mesh's); below ``SHARP_SPREAD_MM`` the meshes render the sharp
-model instead. Measured in ``bench teeth-cycles`` (``default_spread_*``): worst tooth-channel mean colour
-2.4 %, per-pixel median 2.2 %. Where sigma_s exceeds sigma_t a path's weight grows at each scattering, and
-Cycles' estimate has a heavy tail: at another seed of the same 1024-spp render one tooth channel's mean was 35x.
+model instead. Measured in ``bench teeth-cycles`` (``default_spread_*``, docs/accuracy.md).
 """
 
 from __future__ import annotations
@@ -53,7 +45,6 @@ from ..common import add_group_input
 from .materials import INNER_ATTRIBUTE, MARKER, describe_teeth_sockets, group_node
 
 BLEND_INPUT = "Blend Volume"  # Enamel/Dentin group input: 1 = the Blend Volume carries the medium
-STEP_INPUT = "Enamel Sigma_t"  # Dentin group input: the enamel's sigma_t, for the dentin's sharp step
 BLEND_GROUP = "Tooth Blend"
 FIELD_GROUP = "Tooth Blend Field"
 MODIFIER = "Tooth Blend Field"
@@ -65,11 +56,12 @@ SHARP_SPREAD_MM = 0.01
 Q_BAND_MIN_MM = 2.5
 Q_BAND_SPREADS = 8.0
 GRID_Q, GRID_O, GRID_M = "ms_q", "ms_o", "ms_m"
-# the Blend group's node layout: 3 = coefficients per mm of the object's own frame (2: scaled by "mm per Unit",
-# which Cycles applied twice in a scene in metres), 2 = the sharp sigma_t step is the Dentin mesh's (1: the q
-# grid's sign)
+# the Blend group's node layout: 4 = the thesis' vertex, sigma_s = a_mix sigma_t with the region's own sigma_t,
+# the whole medium from the q grid's sign; 3 = coefficients per mm of the object's own frame (2: scaled by
+# "mm per Unit", which Cycles applied twice in a scene in metres); 2 = sigma_s = a_mix sigma_t,mix, the sharp
+# sigma_t step the Dentin mesh's (1: the q grid's sign)
 VERSION_KEY = "ms_volume_version"
-BLEND_VERSION = 3
+BLEND_VERSION = 4
 UNIT = "mm per Unit"  # an input of layouts 1-2, removed
 MEDIA = ("Enamel", "Dentin")
 PARAMS = (("Sigma_t", 3), ("Albedo", 3), ("G1", 0), ("G2", 0), ("Beta", 0))  # (socket, components or 0)
@@ -209,8 +201,8 @@ def ensure_blend_group() -> bpy.types.ShaderNodeTree:
 
 
 def _blend_nodes(group) -> None:
-    """The Blend Volume medium inside the tooth's outline: extinction the enamel's sigma_t (the Dentin mesh
-    adds its sharp step), scattering sigma_s = a_mix sigma_t,mix through the mixed two-lobe HG."""
+    """The Blend Volume medium inside the tooth's outline: extinction the sharp sigma_t of the region the q grid's
+    sign names (dentin where q < 0), scattering sigma_s = a_mix sigma_t through the mixed two-lobe HG."""
     group[VERSION_KEY] = BLEND_VERSION
     nodes, links = group.nodes, group.links
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
@@ -246,10 +238,14 @@ def _blend_nodes(group) -> None:
     # coefficients per millimetre: Cycles takes a volume object's density in its object space, here the tooth's
     # millimetre frame, whatever the scene's unit (measured: x 1000 in a scene in metres gave 1e24 pixels)
     scale = inside
-    sigma_s = _vec(nodes, links, "MULTIPLY", mixed_vec("Albedo"), mixed_vec("Sigma_t"))
+    # the region's own sigma_t: the dentin's where q < 0 (eq. 5.30), the enamel's elsewhere
+    in_dentin = _math(nodes, links, "LESS_THAN", attrs[GRID_Q], 0.0)
+    step = _vec(nodes, links, "SUBTRACT", gin.outputs["Dentin Sigma_t"], gin.outputs["Enamel Sigma_t"])
+    step = _vec(nodes, links, "SCALE", step, scale=in_dentin)
+    sigma_t = _vec(nodes, links, "ADD", step, gin.outputs["Enamel Sigma_t"])
+    sigma_s = _vec(nodes, links, "MULTIPLY", mixed_vec("Albedo"), sigma_t)
     sigma_s = _vec(nodes, links, "SCALE", sigma_s, scale=scale)
-    # the enamel's sigma_t over the whole tooth; the Dentin mesh's volume adds the sharp step to the dentin's
-    sigma_t = _vec(nodes, links, "SCALE", gin.outputs["Enamel Sigma_t"], scale=scale)
+    sigma_t = _vec(nodes, links, "SCALE", sigma_t, scale=scale)
     lobes = []
     for gname in ("G1", "G2"):
         sc = nodes.new("ShaderNodeVolumeScatter")
@@ -311,15 +307,6 @@ def link_materials(blend_mat, enamel_mat, dentin_mat) -> None:
             bnode.inputs[di].default_value = snode.inputs[si].default_value
             for k in range(n) if n else (-1,):
                 _add_driver(blend_mat.node_tree, dst, k, src, srcp if k < 0 else f"{srcp}[{k}]")
-    enode = group_node(enamel_mat)
-    dnode = group_node(dentin_mat)
-    if enode is not None and dnode is not None and STEP_INPUT in dnode.inputs:
-        # the dentin's sharp step sigma_t,dentin - sigma_t,enamel needs the enamel's sigma_t
-        di, si = _input_index(dnode, STEP_INPUT), _input_index(enode, "Sigma_t")
-        dnode.inputs[di].default_value = enode.inputs[si].default_value
-        for k in range(3):
-            _add_driver(dentin_mat.node_tree, f'nodes["{dnode.name}"].inputs[{di}].default_value', k, enamel_mat,
-                        f'node_tree.nodes["{enode.name}"].inputs[{si}].default_value[{k}]')
 
 
 def new_blend_material(name: str, spread: float) -> bpy.types.Material:
@@ -405,7 +392,7 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
 
 def upgrade_after_load() -> None:
     """Teeth of a file made by an older version: the Enamel/Dentin groups and the Blend group get the current
-    node layouts, and every tooth with a Blend Volume its materials linked again (the dentin's step driver).
+    node layouts, and every tooth with a Blend Volume its materials linked again (their drivers made anew).
     A file of the current layouts is left as it was opened (nothing rebuilt, no driver made again)."""
     from .materials import ensure_blend_input
 

@@ -42,12 +42,13 @@ SURFACE_GROUPS = ("Enamel", "Gingiva")
 BLENDED_GROUPS = ("Enamel", "Dentin")  # blended by a tooth's Blend Volume (blend_volume.py)
 # 1: the material only attenuates (Volume Absorption of sigma_t); its tooth's Blend Volume scatters
 BLEND_ROW = ("Blend Volume", "NodeSocketFloat", 0.0, 0.0, 1.0)
-# Dentin only: with the Blend Volume on, the dentin mesh's volume is the sharp step sigma_t,dentin - sigma_t,enamel
-# of the extinction (eq. 5.30) on top of the Blend Volume's enamel sigma_t (a driver on the enamel's Sigma_t)
+# Layout 2 only: the Dentin's input for the sharp step of the extinction its mesh carried (removed on upgrade)
 STEP_ROW = ("Enamel Sigma_t", "NodeSocketVector", DEFAULTS["Enamel"]["sigma_t"], 1e-3, 1e3)
-# the volume subgraph's layout: 2 = the Dentin's sharp step (1: Enamel/Dentin gave the Blend Volume everything)
+# the volume subgraph's layout: 3 = under Blend Volume, Enamel and Dentin only bound the medium (the Blend
+# Volume carries it whole, its extinction step included); 2 = the Dentin's mesh carried the step; 1 = as 3,
+# before the step input existed
 VOLUME_VERSION_KEY = "ms_volume_version"
-VOLUME_VERSION = 2
+VOLUME_VERSION = 3
 
 # What each socket of the teeth groups means, by name (a medium's name, "Enamel " or "Dentin ", may lead it).
 SOCKET_WORDS = {
@@ -62,8 +63,6 @@ SOCKET_WORDS = {
     "mm per Unit": "Millimetres per Blender unit (1000: the scene is in metres; 1: a unit is a millimetre)",
     "Blend Volume": "On (1): the tooth's Blend Volume object carries the medium with the blended enamel/dentin "
                     "boundary and this mesh only bounds it; off (0): this mesh's homogeneous medium",
-    "Enamel Sigma_t": "The enamel's extinction coefficient (R, G, B) in 1/mm, set by the tooth's enamel material: "
-                      "with Blend Volume on, the dentin adds the step from it to its own",
     "Spread (mm)": "Width of the enamel/dentin transition in millimetres (the sigmoid's spread)",
     "Surface": "The boundary's surface shader (connect to the material output's Surface)",
     "Volume": "The medium (connect to the material output's Volume)",
@@ -100,8 +99,6 @@ def _group_inputs(kind: str) -> list[tuple]:
     rows.append(("mm per Unit", "NodeSocketFloat", 1000.0, 1e-6, 1e9))
     if kind in BLENDED_GROUPS:
         rows.append(BLEND_ROW)
-    if kind == "Dentin":
-        rows.append(STEP_ROW)
     return rows
 
 
@@ -113,9 +110,8 @@ def _load_boundary_script(tree, scene):
 def _volume_subgraph(group, gin):
     """sigma_t, albedo, g1, g2, beta -> two-lobe HG scattering + absorption (returns the shader socket).
 
-    With the input ``Blend Volume`` on, the tooth's Blend Volume object carries the scattering and the enamel's
-    extinction over the whole tooth: the Enamel's volume is empty and the Dentin's absorbs the sharp step
-    sigma_t,dentin - sigma_t,enamel (negative where the enamel's is larger: a linked colour is not clamped).
+    With the input ``Blend Volume`` on, the tooth's Blend Volume object carries the whole medium over the tooth
+    (``blend_volume``): the Enamel's and the Dentin's volumes are empty, their meshes only bound it.
     """
     nodes, links = group.nodes, group.links
     group[VOLUME_VERSION_KEY] = VOLUME_VERSION
@@ -127,13 +123,11 @@ def _volume_subgraph(group, gin):
     ss.operation = "MULTIPLY"
     links.new(gin.outputs["Albedo"], ss.inputs[0])
     links.new(st.outputs[0], ss.inputs[1])
-    step = None
     if BLEND_ROW[0] in gin.outputs:
         keep = nodes.new("ShaderNodeMath")
         keep.operation = "SUBTRACT"
         keep.inputs[0].default_value = 1.0
         links.new(gin.outputs[BLEND_ROW[0]], keep.inputs[1])
-        sigma_t = st
         for i, name in enumerate(("st", "ss")):
             own = nodes.new("ShaderNodeVectorMath")
             own.operation = "SCALE"
@@ -145,31 +139,10 @@ def _volume_subgraph(group, gin):
             else:
                 ss = own
         keep.location = (-300, -500)
-        if STEP_ROW[0] in gin.outputs:  # (sigma_t - Enamel Sigma_t) mm per Unit x Blend Volume
-            enamel_st = nodes.new("ShaderNodeVectorMath")
-            enamel_st.operation = "SCALE"
-            links.new(gin.outputs[STEP_ROW[0]], enamel_st.inputs[0])
-            links.new(gin.outputs["mm per Unit"], enamel_st.inputs["Scale"])
-            diff = nodes.new("ShaderNodeVectorMath")
-            diff.operation = "SUBTRACT"
-            links.new(sigma_t.outputs[0], diff.inputs[0])
-            links.new(enamel_st.outputs[0], diff.inputs[1])
-            step = nodes.new("ShaderNodeVectorMath")
-            step.operation = "SCALE"
-            links.new(diff.outputs[0], step.inputs[0])
-            links.new(gin.outputs[BLEND_ROW[0]], step.inputs["Scale"])
-            for i, n in enumerate((enamel_st, diff, step)):
-                n.location = (-120 + 180 * i, -800)
     sa = nodes.new("ShaderNodeVectorMath")
     sa.operation = "SUBTRACT"
     links.new(st.outputs[0], sa.inputs[0])
     links.new(ss.outputs[0], sa.inputs[1])
-    if step is not None:
-        with_step = nodes.new("ShaderNodeVectorMath")
-        with_step.operation = "ADD"
-        links.new(sa.outputs[0], with_step.inputs[0])
-        links.new(step.outputs[0], with_step.inputs[1])
-        sa = with_step
     one_minus = nodes.new("ShaderNodeVectorMath")
     one_minus.operation = "SUBTRACT"
     one_minus.inputs[0].default_value = (1.0, 1.0, 1.0)
@@ -255,19 +228,19 @@ def _native_boundary(group, gin, inner_attr):
 
 
 def ensure_blend_input(group) -> bool:
-    """Give an Enamel/Dentin group from an older file the ``Blend Volume`` input (and the Dentin its
-    ``Enamel Sigma_t``), its volume rebuilt to the current :data:`VOLUME_VERSION`. Returns whether it changed
-    the group (a current one is left untouched)."""
+    """Give an Enamel/Dentin group from an older file the ``Blend Volume`` input, its volume rebuilt to the current
+    :data:`VOLUME_VERSION` (a Dentin of layout 2 loses its step input ``Enamel Sigma_t`` and the drivers that fed
+    it). Returns whether it changed the group (a current one is left untouched)."""
     kind = group.get(MARKER)
     if kind not in BLENDED_GROUPS:
         return False
     have = {s.name for s in group.interface.items_tree if s.item_type == "SOCKET" and s.in_out == "INPUT"}
-    rows = [BLEND_ROW] + ([STEP_ROW] if kind == "Dentin" else [])
-    if all(r[0] in have for r in rows) and group.get(VOLUME_VERSION_KEY, 1) >= VOLUME_VERSION:
+    if BLEND_ROW[0] in have and group.get(VOLUME_VERSION_KEY, 1) >= VOLUME_VERSION:
         return False
-    for row in rows:
-        if row[0] not in have:
-            add_group_input(group, *row)
+    if BLEND_ROW[0] not in have:
+        add_group_input(group, *BLEND_ROW)
+    if STEP_ROW[0] in have:
+        _remove_step_input(group)
     keep = {"GROUP_INPUT", "GROUP_OUTPUT", "SCRIPT", "ATTRIBUTE"}
     gout = next(n for n in group.nodes if n.type == "GROUP_OUTPUT")
     volume_nodes = _upstream(gout.inputs["Volume"])
@@ -277,6 +250,22 @@ def ensure_blend_input(group) -> bool:
     group.links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
     describe_teeth_sockets(group)
     return True
+
+
+def _remove_step_input(group) -> None:
+    """Remove layout 2's ``Enamel Sigma_t`` input from ``group`` and, first, the drivers on it in every material
+    that uses the group (they would otherwise point at a socket that is gone)."""
+    for mat in bpy.data.materials:
+        tree = mat.node_tree
+        if tree is None or mat.library is not None:
+            continue
+        for node in tree.nodes:
+            if node.type == "GROUP" and node.node_tree == group and STEP_ROW[0] in node.inputs:
+                i = next(k for k, sock in enumerate(node.inputs) if sock.name == STEP_ROW[0])
+                for k in range(3):
+                    tree.driver_remove(f'nodes["{node.name}"].inputs[{i}].default_value', k)
+    group.interface.remove(next(s for s in group.interface.items_tree
+                                if s.item_type == "SOCKET" and s.in_out == "INPUT" and s.name == STEP_ROW[0]))
 
 
 def _upstream(socket) -> set:

@@ -16,14 +16,14 @@ p(path; theta_0), see ``RenderSettings``) with a safety cap of ``MAX_PATH_VERTIC
 
 Derivatives. With the path and its discrete structure fixed, d/dtheta [f / p] = (f / p) d log f,
 and d log f is the sum of per-interaction terms (eq. 5.8): 1 / a_t (eq. 5.10), phase-function terms
-(eq. 5.11-5.14), blended albedo / phase / sigma_t terms via l(q) (eq. 5.15-5.21), (N - 1) / sigma_t -
+(eq. 5.11-5.14), blended albedo / phase terms via l(q) (eq. 5.15-5.21), (N - 1) / sigma_t -
 sum t_k (eq. 5.23), and the dentin-shape term (S_i - S_e) dt/dc for every dentin crossing
-(eq. 5.25-5.32). Because sigma_s at a vertex is blended with l(q) (see ``scene``), the contribution
-is continuous in the dentin coefficients, so these per-path terms are the complete derivative of
-the expected image (no boundary term is dropped) -- in expectation. The blend term lives within the
-blend's width of the dentin surface: for a sharp boundary (spread 1e-5 mm, as in a photograph) no
-practical number of samples reaches it, and the estimate of the c derivative is then 10-30x off
-(docs/teeth-fit.md); the fit differences c instead (``dentin_shape_gradient``).
+(eq. 5.25-5.32). The extinction at a vertex is its region's own (see ``scene``), so these are the
+thesis' derivatives, complete for every parameter but the dentin shape c: moving the dentin surface
+across a fixed scattering vertex steps its sigma_t, a boundary term that no per-path term holds. The
+fit differences c instead (``dentin_shape_gradient``), which also serves a sharp boundary (spread
+1e-5 mm, as in a photograph), where the blend terms lie too close to the surface for any practical
+number of samples to reach them (docs/teeth-fit.md).
 With ``adjoint`` = d rho / d C (eq. 5.7) the tracer returns grad = sum adjoint * dC/dtheta; terms that
 precede a vertex are weighted by the adjoint-weighted contributions of all later vertices (suffix
 sums), connection terms by the connection's own contribution.
@@ -668,25 +668,19 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                 lw_e[mm] = blend_weight(q_e, cs.spread)
                 dl[mm] = blend_weight_dq(q_e, cs.spread)
                 dqdc[mm] = dq
-            # blended scattering coefficient sigma_s = albedo_mix * sigma_t,mix at the vertex
-            # (eq. 5.17-5.21; sigma_t is blended like the albedo so that the estimator is continuous
-            # in the dentin shape and its path-space derivative has no boundary term)
-            mE, mD = cs.med_E[mv], cs.med_D[mv]
-            sE, sD = cs.sigma_e[mE], cs.sigma_e[mD]
-            s_mix = sE * lw_e[:, None] + sD * (1 - lw_e[:, None])
+            # scattering coefficient sigma_s = albedo_mix * sigma_t at the vertex (eq. 5.17-5.21): the albedo is
+            # blended, the extinction is the region's own (piecewise constant), so sigma_s <= sigma_t everywhere
+            s_loc = cs.sigma_e[mv]
             aE, aD = cs.alb["Ee"][mv], cs.alb["De"][mv]
             a_mix = aE * lw_e[:, None] + aD * (1 - lw_e[:, None])
-            logf[vs] += np.log(s_mix) + np.log(a_mix)
+            logf[vs] += np.log(s_loc) + np.log(a_mix)
             if roulette:
                 ls = lw_s[:, None]
-                logfs[vs] += (np.log(cs.sigma_s[mE] * ls + cs.sigma_s[mD] * (1 - ls))
+                logfs[vs] += (np.log(cs.sigma_s[mv])
                               + np.log(cs.alb["Es"][mv] * ls + cs.alb["Ds"][mv] * (1 - ls)))
             if want:
                 rows = pid[vs]
-                cols = np.concatenate([cs.col_sigma[mE][:, None] + np.arange(3),
-                                       cs.col_sigma[mD][:, None] + np.arange(3)], axis=1)
-                vals = np.concatenate([_diag(lw_e[:, None] / s_mix), _diag((1 - lw_e[:, None]) / s_mix)], axis=1)
-                push(b, rows, cols, vals)  # (N - 1) / sigma_t term of eq. 5.23, blended
+                push(b, rows, cs.col_sigma[mv][:, None] + np.arange(3), _diag(1.0 / s_loc))  # (N - 1) / sigma_t
                 cols = np.concatenate([cs.col_alb["E"][mv][:, None] + np.arange(3),
                                        cs.col_alb["D"][mv][:, None] + np.arange(3)], axis=1)
                 vals = np.concatenate([_diag(lw_e[:, None] / a_mix), _diag((1 - lw_e[:, None]) / a_mix)], axis=1)
@@ -694,7 +688,7 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
                 ht = tooth >= 0
                 if np.any(ht):
                     cols = cs.c_col[tooth[ht]][:, None] + np.arange(3)
-                    dlog = (aE - aD)[ht] / a_mix[ht] + (sE - sD)[ht] / s_mix[ht]
+                    dlog = (aE - aD)[ht] / a_mix[ht]
                     vals = dlog[:, None, :] * (dl[ht, None] * dqdc[ht])[:, :, None]
                     push(b, rows[ht], cols, vals)  # eq. 5.21 via dl/dq dq/dc
             pe_e, pd_e, mix_e = tr.vertex_phase(mv, lw_e, "e")

@@ -116,15 +116,14 @@ class Geometry(NamedTuple):
 class Media(NamedTuple):
     """Per medium m (``compiled_scene``: 0 air, then enamel and dentin of each tooth, then the gums): the
     coefficients of the sampling (s) and evaluation (e) scenes, and the parameter columns (``col_*``) their
-    derivatives go to. E / D: a medium's enamel-side and dentin-side material (the blend of eq. 5.15-5.21)."""
+    derivatives go to. E / D: a medium's enamel-side and dentin-side albedo and phase function (the blend of
+    eq. 5.15-5.21; sigma_t is the medium's own)."""
 
     sigma_s: np.ndarray  # (M, 3) sigma_t of the sampling scene
     sigma_e: np.ndarray  # (M, 3) sigma_t of the evaluation scene
     kind: np.ndarray  # (M,) int64 MED_*
     tooth: np.ndarray  # (M,) int64, -1 for air and gums
     col_sigma: np.ndarray  # (M,) int64
-    enamel_of: np.ndarray  # (M,) int64: the medium whose sigma_t is the enamel side of m's blend
-    dentin_of: np.ndarray  # (M,) int64: ... the dentin side
     alb_es: np.ndarray  # (M, 3) albedo, enamel side, sampling scene
     alb_ds: np.ndarray  # (M, 3) dentin side, sampling
     alb_ee: np.ndarray  # (M, 3) enamel side, evaluation
@@ -339,8 +338,8 @@ def pack_scene(cs: CompiledScene) -> tuple[Geometry, Media, Textures]:
     # the kernels' own log so that a table entry equals the log the vertex would compute
     logs = tuple(_log_table(np.ascontiguousarray(v, dtype=np.float64)) for v in (
         cs.sigma_s, cs.sigma_e, cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], rho_s, rho_e))
-    med = Media(cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.med_E, cs.med_D,
-                cs.alb["Es"], cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"],
+    med = Media(cs.sigma_s, cs.sigma_e, cs.med_kind, cs.med_tooth, cs.col_sigma, cs.alb["Es"],
+                cs.alb["Ds"], cs.alb["Ee"], cs.alb["De"], cs.ph["Es"], cs.ph["Ds"], cs.ph["Ee"],
                 cs.ph["De"], cs.col_alb["E"], cs.col_alb["D"], cs.col_ph["E"], cs.col_ph["D"], cs.c_col, rho_s, rho_e,
                 int(cs.col_rho) if has_cavity else -1, float(cs.spread), *logs)
     return geo, med, tex
@@ -864,7 +863,6 @@ def _trace_path(geo, med, tex, job, o0, d0, seed_path, row, cam, pix, img_on, gr
     without reference counting."""
     seed, depth_cap, roulette, rr_depth, jmap = job.seed, job.depth_cap, job.roulette, job.rr_depth, job.jmap
     sigma_s, sigma_e, med_kind, med_tooth, col_sigma = med.sigma_s, med.sigma_e, med.kind, med.tooth, med.col_sigma
-    med_e_of, med_d_of = med.enamel_of, med.dentin_of
     alb_es, alb_ds, alb_ee, alb_de = med.alb_es, med.alb_ds, med.alb_ee, med.alb_de
     ph_es, ph_ds, ph_ee, ph_de = med.ph_es, med.ph_ds, med.ph_ee, med.ph_de
     col_alb_e, col_alb_d, c_col, rho_e, col_rho, spread = med.col_alb_e, med.col_alb_d, med.c_col, med.rho_e, \
@@ -969,24 +967,22 @@ def _trace_path(geo, med, tex, job, o0, d0, seed_path, row, cam, pix, img_on, gr
                 lw_s = _blend(q_s, spread)
                 lw_e = _blend(q_e, spread)
                 dl = lw_e * (1.0 - lw_e) / spread
-            me_, md_ = med_e_of[mv], med_d_of[mv]
+            # sigma_s = albedo_mix * sigma_t (eq. 5.17-5.21): the albedo blended, the extinction the region's own
             for c in range(3):
-                logf[c] += (_log_mix(sigma_e[me_, c], sigma_e[md_, c], ln_sigma_e[me_, c], ln_sigma_e[md_, c], lw_e)
-                            + _log_mix(alb_ee[mv, c], alb_de[mv, c], ln_alb_ee[mv, c], ln_alb_de[mv, c], lw_e))
+                logf[c] += ln_sigma_e[mv, c] + _log_mix(alb_ee[mv, c], alb_de[mv, c], ln_alb_ee[mv, c],
+                                                        ln_alb_de[mv, c], lw_e)
                 if roulette:
-                    logfs[c] += (_log_mix(sigma_s[me_, c], sigma_s[md_, c], ln_sigma_s[me_, c], ln_sigma_s[md_, c],
-                                          lw_s)
-                                 + _log_mix(alb_es[mv, c], alb_ds[mv, c], ln_alb_es[mv, c], ln_alb_ds[mv, c], lw_s))
+                    logfs[c] += ln_sigma_s[mv, c] + _log_mix(alb_es[mv, c], alb_ds[mv, c], ln_alb_es[mv, c],
+                                                             ln_alb_ds[mv, c], lw_s)
             if use_g or use_s:
-                _emit_blend(col_sigma[me_], col_sigma[md_], sigma_e, me_, sigma_e, md_, lw_e, tmp, ab[b], g_lvl, sx_lvl,
-                            jmap)
+                for c in range(3):
+                    tmp[c] = 1.0 / sigma_e[mv, c]
+                _emit_diag(col_sigma[mv], tmp, ab[b], g_lvl, sx_lvl, jmap)
                 _emit_blend(col_alb_e[mv], col_alb_d[mv], alb_ee, mv, alb_de, mv, lw_e, tmp, ab[b], g_lvl, sx_lvl, jmap)
                 if tooth >= 0:
                     for c in range(3):
-                        s_mix = sigma_e[me_, c] * lw_e + sigma_e[md_, c] * (1 - lw_e)
                         a_mix = alb_ee[mv, c] * lw_e + alb_de[mv, c] * (1 - lw_e)
-                        tmp[c] = ((alb_ee[mv, c] - alb_de[mv, c]) / a_mix
-                                  + (sigma_e[me_, c] - sigma_e[md_, c]) / s_mix)
+                        tmp[c] = (alb_ee[mv, c] - alb_de[mv, c]) / a_mix
                     for mm in range(3):
                         f_ = dl * dqdc[mm]
                         _emit(c_col[tooth] + mm, tmp[0] * f_, tmp[1] * f_, tmp[2] * f_, ab[b], g_lvl, sx_lvl,

@@ -4,12 +4,11 @@ core, gums and a diffuse oral-cavity proxy. Units: millimetres, sigma_t in 1/mm,
 * enamel boundary: thin dielectric, reflection F and non-bending transmission a_t (1 - F)
   (eq. 5.1-5.2), eta = 1.631; a_t is a UV texture (1 x 1 = homogeneous).
 * enamel and dentin volumes: sigma_t, RGB single-scattering albedo, two-lobe HG phase (eq. 5.3-5.4).
-  Transmittance uses the sharp, piecewise-constant sigma_t of the enamel/dentin regions (eq. 5.30).
-  At scattering vertices the albedo, the phase parameters *and* sigma_t (in sigma_s = albedo
-  sigma_t) are blended with the logistic weight l(q) of the signed distance q to the dentin
-  (eq. 5.15-5.21), which makes every path contribution continuous in the dentin shape so that the
-  per-path derivatives (eq. 5.25-5.32) need no boundary term. Within about 1 mm of the dentin
-  surface this makes sigma_s differ from albedo x (sharp sigma_t), a deliberate smoothing.
+  The extinction is piecewise constant: the sharp sigma_t of the enamel/dentin regions, in the
+  transmittance (eq. 5.30) and at scattering vertices alike. At a scattering vertex the albedo and the
+  phase parameters are blended with the logistic weight l(q) of the signed distance q to the dentin
+  (eq. 5.15-5.21): sigma_s = albedo_mix sigma_t, so sigma_s <= sigma_t everywhere (a valid medium, which
+  Cycles renders without a heavy tail: ``addon/teeth/blend_volume.py``).
 * enamel/dentin interface: index-matched, geometry from the blend shapes V = B0 + c (B - B0) (eq. 5.5).
 * gums: same parameter types as enamel, eta = 1.33 (Sec. 5.5.3).
 * oral cavity: opaque Lambertian proxy with RGB albedo.

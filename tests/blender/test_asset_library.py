@@ -61,8 +61,8 @@ def test_a_default_build_copies_the_stored_previews(built_library):
 def test_stored_previews_are_what_the_materials_render(addon_module, tmp_path):
     """Nightly (about 100 s): each stored preview is its material's render now, so a material edited without
     ``make previews`` is caught: image means within 5 % per channel and the median 8 x 8 block within 10 %
-    (16 spp: another CPU's kernel gives other noise). The dentin previews of a library built before the
-    Blend Volume's mesh step differ by 16-94 % in their channel means."""
+    (16 spp: another CPU's kernel gives other noise). Dentin previews rendered with a Blend Volume of another node
+    layout differed by 16-94 % in their channel means."""
     import numpy as np
     from PIL import Image
 

@@ -97,7 +97,10 @@ def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
     table = json.loads(out.read_text())
     names = list(table["chi2"])
     assert "tooth0.enamel.sigma_s[0]" in names and "tooth0.c[2]" in names and table["noise_variance"] > 0
-    assert table["chi2"]["tooth0.enamel.sigma_s[1]"] > 0
+    # chi2 is estimated without bias from pairs of passes and can come out below 0 where the image change is small
+    # against the passes' noise: enamel sigma_s's (about 0.05 here) ranged -0.04 to 0.13 over 3-40 passes, while
+    # the blue absorption's stayed within 0.020-0.030
+    assert table["chi2"]["tooth0.enamel.sigma_a[2]"] > 0
     assert set(table["best_std"]) == set(names) and all(v > 0 for v in table["best_std"].values())
     assert "chi2 of each change" in capsys.readouterr().out
     capsys.readouterr()

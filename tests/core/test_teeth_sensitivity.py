@@ -47,7 +47,7 @@ def test_chi2_matches_brute_force_from_crn_central_differences(problem):
     sc, cap = problem
     layout = ParamLayout(sc)
     names, D = default_directions(sc, layout)
-    pick = [names.index(n) for n in ("tooth0.dentin.sigma_s[1]", "tooth0.enamel.sigma_a[2]", "tooth0.c[0]")]
+    pick = [names.index(n) for n in ("tooth0.dentin.sigma_a[1]", "tooth0.enamel.sigma_a[0]", "tooth0.c[0]")]
     D = np.vstack([D[pick], np.zeros(layout.size)])  # plus a direction that changes nothing
     passes, block, nv = 4, 4, 2e-5
     out = capture_sensitivity(sc, cap, D, passes=passes, block=block, noise_variance=nv, max_depth=5, seed=3)
@@ -85,17 +85,19 @@ def test_chi2_matches_brute_force_from_crn_central_differences(problem):
     assert out["tiles"] == len(tiles[0])
     np.testing.assert_allclose(out["chi2"][:-1], ref, rtol=2e-3)
     assert out["chi2"][-1] == 0.0
-    assert out["chi2"][0] > 100 * abs(out["chi2"][1])  # sigma_s is far better constrained than sigma_a
+    # the dentin's green absorption shows far more than the enamel's red one (0.40 against 0.036 here)
+    assert out["chi2"][0] > 3 * abs(out["chi2"][1])
 
 
 def test_chi2_does_not_depend_on_the_number_of_passes_and_scales_with_the_capture_noise(problem):
     """The pair estimator is unbiased for any number of passes: the mean of eight 4-pass estimates equals
-    a 32-pass estimate on other seeds. A plain square of the mean Jacobian would be biased by Var / passes:
-    here (per pixel) about +120 % at 4 passes and +15 % at 32; the unbiased estimates measured within
-    23 % of each other over three seed sets, hence the 35 % tolerance."""
+    a 32-pass estimate on other seeds. A plain square of the mean Jacobian would be biased by Var / passes;
+    the unbiased estimates of these two directions measured within 19 % of each other over three seed sets,
+    hence the 35 % tolerance. (Directions whose image change is small against the per-pass noise, such as
+    sigma_s at fixed sigma_a on this scene, need far more passes for that.)"""
     sc, cap = problem
     names, D = default_directions(sc)
-    D = D[[names.index(n) for n in ("tooth0.dentin.sigma_s[1]", "tooth0.enamel.sigma_s[0]")]]
+    D = D[[names.index(n) for n in ("tooth0.enamel.sigma_a[2]", "tooth0.enamel.sigma_a[0]")]]
 
     def chi2(passes, seed, **kw):
         kw = kw or {"noise_variance": 1e-5}
@@ -142,7 +144,7 @@ def test_information_off_diagonal_is_the_chi2_of_summed_directions(problem):
     sc, cap = problem
     layout = ParamLayout(sc)
     names, D = default_directions(sc, layout)
-    d1, d2 = D[names.index("tooth0.dentin.sigma_s[1]")], D[names.index("tooth0.enamel.sigma_a[1]")]
+    d1, d2 = D[names.index("tooth0.dentin.sigma_a[1]")], D[names.index("tooth0.enamel.sigma_a[1]")]
     out = capture_sensitivity(sc, cap, np.vstack([d1, d2, d1 + d2]), passes=4, block=4, noise_variance=2e-5,
                               max_depth=5, seed=3)
     F = out["information"]
