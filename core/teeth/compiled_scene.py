@@ -79,9 +79,6 @@ class CompiledScene:
         self.med_kind = np.zeros(n_media, dtype=np.int64)
         self.med_tooth = np.full(n_media, -1, dtype=np.int64)
         self.col_sigma = np.full(n_media, -1, dtype=np.int64)
-        # media whose sigma_t is blended at scattering vertices (enamel side E, dentin side D)
-        self.med_E = np.zeros(n_media, dtype=np.int64)
-        self.med_D = np.zeros(n_media, dtype=np.int64)
         # enamel-side (E) and dentin-side (D) material per medium, sampling (s) and evaluation (e)
         self.alb = {k: np.zeros((n_media, 3)) for k in ("Es", "Ds", "Ee", "De")}
         self.ph = {k: np.zeros((n_media, 3)) for k in ("Es", "Ds", "Ee", "De")}  # g1, g2, beta
@@ -114,8 +111,6 @@ class CompiledScene:
                        ts.enamel.sigma_t, te.enamel.sigma_t, pe)
             set_medium(md, MED_DENTIN, i, pe, pd, ts.enamel, ts.dentin, te.enamel, te.dentin,
                        ts.dentin.sigma_t, te.dentin.sigma_t, pd)
-            self.med_E[[me, md]] = me
-            self.med_D[[me, md]] = md
             em = te.enamel_mesh
             nf = len(em.faces)
             tris_s.append(ts.enamel_mesh.triangles())
@@ -152,8 +147,6 @@ class CompiledScene:
             gs, ge = sampling.gums, scene.gums
             set_medium(mg, MED_GUMS, -1, "gums", "gums", gs.material, gs.material, ge.material, ge.material,
                        gs.material.sigma_t, ge.material.sigma_t, "gums")
-            self.med_E[mg] = mg
-            self.med_D[mg] = mg
             nf = len(ge.mesh.faces)
             tris_s.append(gs.mesh.triangles())
             tris_e.append(ge.mesh.triangles())
