@@ -347,7 +347,7 @@ def _sah_split(cen: np.ndarray, tlo: np.ndarray, thi: np.ndarray) -> np.ndarray 
     return best[1]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _inverse(d) -> tuple[float, float, float, int, int, int]:
     """Inverse direction of a ray and, per axis, the box row of its near plane (0-2: lo where the direction is
     positive, 3-5: hi), the far plane being the other one."""
@@ -357,7 +357,7 @@ def _inverse(d) -> tuple[float, float, float, int, int, int]:
     return ix, iy, iz, 0 if ix >= 0.0 else 3, 1 if iy >= 0.0 else 4, 2 if iz >= 0.0 else 5
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _leaf_triangle(tblk, blk, lane, o, d) -> tuple[float, float, float]:
     """(t, u, v) of the ray with the plane of the triangle in lane ``lane`` of leaf block ``blk``, as
     ``ray_triangle`` (the same operations on the stored edges, so the same numbers); u is returned as 2
@@ -692,7 +692,7 @@ def _packet_leaf_hits(typingctx, tblk, blk, ox, oy, oz, dirs, r0, rays, tmin, pm
     return sig, codegen
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _wide_slabs(wbox, i, nx, ny, nz, ox, oy, oz, ix, iy, iz, tmin, tmax, dist) -> None:
     """Slab test of the ray against the WIDTH child boxes of wide node i (nx, ny, nz: near-plane rows from
     ``_inverse``): entry distances into dist, inf where the ray misses a box within (tmin, tmax). With
@@ -745,7 +745,7 @@ def packet_box_masks_scalar(wbox, i, ox, oy, oz, pinv, live, tmin, diff, cmask) 
 # The traversal loops index their stacks with np.uint64: numba then leaves out the negative-index wraparound
 # (a sign test and an add per access), which a signed index gets even where it is never negative (2.5 % of the
 # forward work, paired)
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
     """Push the children of wide node i in the bit mask ``mask`` (from ``_slab_mask``), the nearest by entry
     distance ``dist`` on top; new sp. A stack of the tree's ``RayTree.stack_size`` holds them all; the test
@@ -768,7 +768,7 @@ def _push_masked(wchild, i, mask, dist, stack, sp) -> int:
     return sp
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _push_unsorted(wchild, i, mask, stack, sp) -> int:
     """Push the children of wide node i in the bit mask ``mask`` in column order; new sp (stack size as
     ``_push_masked``)."""
@@ -782,7 +782,7 @@ def _push_unsorted(wchild, i, mask, stack, sp) -> int:
     return sp
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def ray_triangle(tris, k, o, d) -> tuple[float, float, float]:
     """(t, u, v) of the ray o + t d with the plane of triangle k; barycentrics (1 - u - v, u, v)."""
     e1x, e1y, e1z = tris[k, 1, 0] - tris[k, 0, 0], tris[k, 1, 1] - tris[k, 0, 1], tris[k, 1, 2] - tris[k, 0, 2]
@@ -832,7 +832,7 @@ def first_hit(ray_nodes, o, d, tmin, tmax, stack, dist) -> tuple[int, float]:
 # ``first_hit`` compiled into its caller: for the free flights, one call per path vertex, where a call passes every
 # field of the tree's arrays on the stack. Not cached itself (it would share ``first_hit``'s cache file); its cached
 # callers are recompiled after an edit of this module (``numba_kernels``: the cache stamp covers every kernel module)
-first_hit_inlined = njit(cache=False, inline="always", error_model="numpy")(first_hit.py_func)
+first_hit_inlined = njit(cache=False, forceinline=True, error_model="numpy")(first_hit.py_func)
 
 
 @njit(cache=True, _nrt=False, error_model="numpy")
@@ -879,7 +879,7 @@ def closest_point_triangle(tris, k, p, out) -> float:
     return np.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _box_dist2(lo, hi, i, p) -> float:
     s = 0.0
     for a in range(3):
@@ -922,7 +922,7 @@ def closest_triangle(nodes, root, tris, p, stack, bary, max_dist=np.inf) -> tupl
     return best, best_d
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def hits_until_stop(ray_nodes, stops, o, d, tmin, tmax, stack, dist, buf_tri, buf_t, nearest_first) -> int:
     """Every triangle hit by o + t d with tmin < t < tmax up to the nearest one with ``stops[k]``, in one
     traversal (boxes beyond the nearest stopping hit found so far are skipped). Hits go unsorted into

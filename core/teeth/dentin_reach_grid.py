@@ -91,7 +91,7 @@ def _mark(tris, ids, lo, h, dim, radius, flags) -> None:
                         flags[base + m] = 1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def may_be_within_reach(grid, tooth, p) -> bool:
     """False only where no dentin triangle of ``tooth`` lies within the grid's reach of point p."""
     lo, inv, dims, offs, flags = grid

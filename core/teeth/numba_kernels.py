@@ -50,8 +50,9 @@ _HERE = os.path.dirname(os.path.abspath(__file__))
 def numba_callable(fn: Callable | None = None, *, inline: str = "never") -> Callable:
     """Make the numpy function ``fn`` callable from numba-compiled code too (module docstring); returns ``fn``
     unchanged. Compiled with numba's numpy error model (a division by zero gives inf or NaN, as in numpy).
-    ``inline="always"`` inlines it into its callers in numba's IR (for the few-operation helpers of the
-    traversal loops). Where numba is not installed this does nothing."""
+    ``inline="always"`` has LLVM inline it into its callers (``forceinline``; for the few-operation helpers of the
+    traversal loops: inlining in numba's IR would copy it into every call site and double the tracer's compile).
+    Where numba is not installed this does nothing."""
     if fn is None:
         return functools.partial(numba_callable, inline=inline)
     _PENDING.append((fn, inline))
@@ -80,7 +81,8 @@ def activate() -> bool:
             return _fn
 
         typer.__signature__ = inspect.signature(fn)  # numba checks that the implementation's signature matches
-        overload(fn, jit_options={"error_model": "numpy"}, inline=inline)(typer)
+        options = {"error_model": "numpy", "forceinline": inline == "always"}
+        overload(fn, jit_options=options)(typer)
     return True
 
 
@@ -148,6 +150,8 @@ def _install_locator() -> None:
             self._inner = inner
             self._folder = folder
             self._shared = shared
+            # numba names the source file in its "cannot cache" warning (CacheImpl.check_cachable)
+            self._py_file = getattr(inner, "_py_file", os.path.join(folder, "numba_kernels.py"))
 
         def ensure_cache_path(self):
             if self._shared is None:

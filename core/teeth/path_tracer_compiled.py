@@ -25,9 +25,8 @@ result that is not finite, which is where such a division would show.
 
 The kernels read named tuples (numba compiles a field access to the same load as a tuple index):
 ``Geometry``, ``Media`` and ``Textures`` (``pack_scene``), the cameras and settings of one call (``Job``), and
-each thread's scratch arrays (``Scratch``, ``PacketScratch``, ``PathVectors``). What the parallel region reads
-from outside it is flat (numba's parfors take a tuple of arrays and scalars, not a tuple holding a tuple): the
-trees' arrays are fields of ``Geometry``, gathered into ``bvh.RayTree`` / ``bvh.BinaryNodes`` / the reach grid by
+each thread's scratch arrays (``Scratch``, ``PacketScratch``, ``PathVectors``). The trees' arrays are fields of
+``Geometry``, gathered into ``bvh.RayTree`` / ``bvh.BinaryNodes`` / the reach grid by
 ``_ray_tree``, ``_dentin_nodes``, ``_reach_grid`` where a query takes them. The physics is that of ``fresnel``,
 ``phase_function`` and ``sigmoid_blend``, whose functions compile into these kernels.
 """
@@ -35,10 +34,11 @@ trees' arrays are fields of ``Geometry``, gathered into ``bvh.RayTree`` / ``bvh.
 from __future__ import annotations
 
 import hashlib
+import threading
 from typing import NamedTuple
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, njit
 
 from . import numba_kernels as _numba_kernels
 from .bvh import (
@@ -249,20 +249,20 @@ class PathVectors(NamedTuple):
     ones: np.ndarray
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _ray_tree(geo) -> RayTree:
     """The scene's ``bvh.RayTree`` from its fields of ``geo``."""
     return RayTree(geo.wbox, geo.wchild, geo.tblk, geo.tord, geo.stack_size)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _dentin_nodes(geo) -> BinaryNodes:
     """The dentin trees' ``bvh.BinaryNodes`` from their fields of ``geo``."""
     return BinaryNodes(geo.dentin_lo, geo.dentin_hi, geo.dentin_left, geo.dentin_start, geo.dentin_count,
                        geo.dentin_order)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _reach_grid(geo) -> tuple:
     """``dentin_reach_grid``'s (lo, inverse cell size, cells, offsets, flags) from their fields of ``geo``."""
     return geo.grid_lo, geo.grid_inv, geo.grid_cells, geo.grid_offsets, geo.grid_flags
@@ -350,7 +350,7 @@ def _log_table(a):
     return np.log(a)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _log_mix(a, b, log_a, log_b, w) -> float:
     """log(w a + (1 - w) b), the log of a blended coefficient (eq. 5.17); from the tables where w is 0 or 1."""
     if w == 1.0:
@@ -401,7 +401,7 @@ def _blend(q, spread) -> float:
 
 
 # ------------------------------------------------------------------------------------------ score sinks
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _emit(col, v0, v1, v2, w, g, sx, jmap) -> None:
     """One d log f record: g[col] += v . w (reverse mode), sx[jmap[col]] += v (forward mode)."""
     if col < 0:
@@ -416,7 +416,7 @@ def _emit(col, v0, v1, v2, w, g, sx, jmap) -> None:
             sx[j, 2] += v2
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _emit_diag(col0, v, w, g, sx, jmap) -> None:
     """Records col0 + c with value v[c] on channel c only."""
     if col0 < 0:
@@ -426,7 +426,7 @@ def _emit_diag(col0, v, w, g, sx, jmap) -> None:
     _emit(col0 + 2, 0.0, 0.0, v[2], w, g, sx, jmap)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _emit_blend(col_e, col_d, v_e, row_e, v_d, row_d, w, tmp, ab_b, g, sx, jmap) -> None:
     """Derivatives of log(w a + (1 - w) b), the log of a blended coefficient (eq. 5.17-5.21), with
     a = v_e[row_e], b = v_d[row_d] per channel: w / mix by a (on columns ``col_e``), (1 - w) / mix by b
@@ -440,7 +440,7 @@ def _emit_blend(col_e, col_d, v_e, row_e, v_d, row_d, w, tmp, ab_b, g, sx, jmap)
 
 
 # ------------------------------------------------------------------------------------------ ray walks
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds) -> int:
     """Record crossing k of triangle tri at t and the medium beyond it; returns k + 1."""
     tri_x[k] = tri
@@ -450,7 +450,7 @@ def _cross(tri, t, k, d, normal_s, inside, outside, tri_x, t_x, meds) -> int:
     return k + 1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, wdist, buf_tri, buf_t):
     """Crossings along o + t d (see ``path_tracer._Tracer.through``): path mode passes index-matched
     surfaces and stops at the first other one; shadow mode passes every non-opaque surface up to tmax.
@@ -463,7 +463,7 @@ def _walk(geo, o, d, med0, shadow, tmax, tri_x, t_x, meds, stack, wdist, buf_tri
     return _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, meds, stack, wdist):
     """``_walk`` from the n hits gathered by ``hits_until_stop`` (or ``packet_hits``) in buf_tri, buf_t."""
     normal_s, kind, inside, outside = geo.normal_s, geo.kind, geo.inside, geo.outside
@@ -515,7 +515,7 @@ def _walk_hits(geo, o, d, med0, shadow, tmax, n, buf_tri, buf_t, tri_x, t_x, med
         tcur = t
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _walk_to_flight(geo, o, d, med0, sigma_s, hero, tau_star, tri_x, t_x, meds, tau_cum, stack, wdist):
     """The free flight of a path in a medium, walked lazily: the crossings of index-matched surfaces along
     o + t d up to the distance where the hero channel's optical depth reaches ``tau_star`` (a scattering
@@ -673,7 +673,7 @@ def _phase_records(med, mv, mu, mix, lw, dl, dqdc, w, g, sx, jmap) -> None:
             _emit(c_col[tooth] + m, val, val, val, w, g, sx, jmap)
 
 
-@njit(cache=True, _nrt=False, inline="always", error_model="numpy")
+@njit(cache=True, _nrt=False, forceinline=True, error_model="numpy")
 def _dentin_query(geo, tooth, p, sign, dqdc, stack, bary, reach):
     """Signed distance to the tooth's dentin on the sampling and evaluation geometry, dq_e/dc into dqdc
     (eq. 5.33-5.41): (q_s, q_e). Where no dentin triangle is nearer than ``reach`` (beyond which l(q) is
@@ -734,7 +734,7 @@ def _light_packets(geo, x, d, lp, is_phase, mix_e, nrm, pk) -> None:
 
 
 # ------------------------------------------------------------------------------------------ one path
-@njit(cache=True, _nrt=False, inline="always", error_model="numpy")
+@njit(cache=True, _nrt=False, forceinline=True, error_model="numpy")
 def _nee(geo, med, tex, job, x, d, mv, wv, nrm, is_phase, mix_e, lw, dl, dqdc, row, cam, pix, b, img_on, gradpass,
          out_rows, ab, grad, jac, s_run, scratch):
     """Connect vertex x to every light; splat, and the connection's own d log f terms (``path_tracer._nee``).
@@ -1154,9 +1154,10 @@ def _trace_part(geo, med, tex, job, r0, r1, s0, s1, out_rows, g, jac, jac_off, a
             counts[3] += cap
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def _trace_rows(geo, med, tex, job, n_j, out_parts, grad_blocks, jac, counters, n_workers):
-    """Trace every row (traced pixel) x spp in parts traced in parallel: part = (sample half, row block),
+@njit(cache=True, nogil=True, error_model="numpy")
+def _trace_worker(geo, med, tex, job, n_j, out_parts, grad_blocks, jac, counters, next_part):
+    """One thread's work (``_trace_rows`` runs it on each thread; ``next_part`` is the shared queue): trace every
+    row (traced pixel) x spp in parts: part = (sample half, row block),
     n_halves = out_parts.shape[0] (1 or 2) halves of the samples of each of the row blocks; half h adds
     into out_parts[h]. Each thread takes the next untaken part until none is left (``work_queue``), so a thread
     slowed by other work takes fewer parts; a part's result and where it goes do not depend on which thread
@@ -1168,44 +1169,70 @@ def _trace_rows(geo, med, tex, job, n_j, out_parts, grad_blocks, jac, counters, 
     n_halves = out_parts.shape[0]
     n_blocks = counters.shape[0] // n_halves
     n_parts = counters.shape[0]
+    packet = PacketScratch(np.empty((n_l, 3)), np.empty(n_l), np.empty(n_l), np.empty(n_l),
+                           np.empty((n_l, HIT_BUFFER), dtype=np.int64), np.empty((n_l, HIT_BUFFER)),
+                           np.empty(n_l, dtype=np.int64), np.empty((PACKET, 4)),
+                           np.empty((stack_size, 2), dtype=np.int64), np.empty(WIDTH, dtype=np.int64),
+                           np.empty(PACKET, dtype=np.int64), np.empty((PACKET, LANES)))
+    scratch = Scratch(np.empty(MAX_CROSSINGS + 1, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
+                      np.empty(MAX_CROSSINGS + 2, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
+                      np.empty(MAX_CROSSINGS + 1, dtype=np.bool_), np.empty(3), np.empty(4, dtype=np.int64),
+                      np.empty(4), np.empty(3), np.empty((n_j, 3)), np.empty((0, 3)), np.empty(0),
+                      np.empty(stack_size, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
+                      np.empty(HIT_BUFFER), np.empty(WIDTH), packet)
+    vecs = np.empty((17, 3))
+    path_vecs = PathVectors(np.empty((n_j, 3)), vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5], vecs[6],
+                            vecs[7], vecs[8], vecs[9], vecs[10], vecs[11], vecs[12], vecs[13], vecs[14], vecs[15],
+                            vecs[16])
+    jac_off = np.empty((0, 1, 3, 1))
+    # the passes (0 image, 1 image + vertex contributions, 2 replay) as run-time values: literal
+    # arguments would compile a copy of _trace_path for each
+    mode = np.arange(3)
+    ab = np.zeros((depth_cap + 2, 3))
+    rs = np.empty(1, dtype=np.uint64)
+    o = np.empty(3)
+    d = np.empty(3)
+    while True:
+        part = take_next(next_part)
+        if part >= n_parts:
+            break
+        half = part // n_blocks
+        blk = part - half * n_blocks
+        r0 = blk * n_rows // n_blocks
+        r1 = (blk + 1) * n_rows // n_blocks
+        s0 = half * spp // n_halves
+        s1 = (half + 1) * spp // n_halves
+        g = grad_blocks[part] if want_grad else np.empty(0)
+        _trace_part(geo, med, tex, job, r0, r1, s0, s1, out_parts[half], g, jac, jac_off, ab, mode, scratch,
+                    path_vecs, rs, o, d, counters[part])
+
+
+def _trace_rows(geo, med, tex, job, n_j: int, out_parts: np.ndarray, grad_blocks: np.ndarray, jac: np.ndarray,
+                counters: np.ndarray, n_workers: int) -> None:
+    """Run ``_trace_worker`` on ``n_workers`` threads (it releases the GIL) sharing one queue of parts. Python
+    threads rather than a numba parfor: the parfor's compile optimises the whole inlined tracer once more (a cold
+    compile 61 s with it, 52-56 s without), and numba's workqueue threading layer refuses parfors launched from two
+    threads at once (a Dask worker's threads)."""
     next_part = np.zeros(1, dtype=np.int64)
-    for _worker in prange(n_workers):  # one per thread (get_num_threads() here would make this uncacheable)
-        packet = PacketScratch(np.empty((n_l, 3)), np.empty(n_l), np.empty(n_l), np.empty(n_l),
-                               np.empty((n_l, HIT_BUFFER), dtype=np.int64), np.empty((n_l, HIT_BUFFER)),
-                               np.empty(n_l, dtype=np.int64), np.empty((PACKET, 4)),
-                               np.empty((stack_size, 2), dtype=np.int64), np.empty(WIDTH, dtype=np.int64),
-                               np.empty(PACKET, dtype=np.int64), np.empty((PACKET, LANES)))
-        scratch = Scratch(np.empty(MAX_CROSSINGS + 1, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
-                          np.empty(MAX_CROSSINGS + 2, dtype=np.int64), np.empty(MAX_CROSSINGS + 1),
-                          np.empty(MAX_CROSSINGS + 1, dtype=np.bool_), np.empty(3), np.empty(4, dtype=np.int64),
-                          np.empty(4), np.empty(3), np.empty((n_j, 3)), np.empty((0, 3)), np.empty(0),
-                          np.empty(stack_size, dtype=np.int64), np.empty((3, 3)), np.empty(HIT_BUFFER, dtype=np.int64),
-                          np.empty(HIT_BUFFER), np.empty(WIDTH), packet)
-        vecs = np.empty((17, 3))
-        path_vecs = PathVectors(np.empty((n_j, 3)), vecs[0], vecs[1], vecs[2], vecs[3], vecs[4], vecs[5], vecs[6],
-                                vecs[7], vecs[8], vecs[9], vecs[10], vecs[11], vecs[12], vecs[13], vecs[14], vecs[15],
-                                vecs[16])
-        jac_off = np.empty((0, 1, 3, 1))
-        # the passes (0 image, 1 image + vertex contributions, 2 replay) as run-time values: literal
-        # arguments would compile a copy of _trace_path for each
-        mode = np.arange(3)
-        ab = np.zeros((depth_cap + 2, 3))
-        rs = np.empty(1, dtype=np.uint64)
-        o = np.empty(3)
-        d = np.empty(3)
-        while True:
-            part = take_next(next_part)
-            if part >= n_parts:
-                break
-            half = part // n_blocks
-            blk = part - half * n_blocks
-            r0 = blk * n_rows // n_blocks
-            r1 = (blk + 1) * n_rows // n_blocks
-            s0 = half * spp // n_halves
-            s1 = (half + 1) * spp // n_halves
-            g = grad_blocks[part] if want_grad else np.empty(0)
-            _trace_part(geo, med, tex, job, r0, r1, s0, s1, out_parts[half], g, jac, jac_off, ab, mode, scratch,
-                        path_vecs, rs, o, d, counters[part])
+    args = (geo, med, tex, job, n_j, out_parts, grad_blocks, jac, counters, next_part)
+    if n_workers <= 1:
+        _trace_worker(*args)
+        return
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            _trace_worker(*args)
+        except BaseException as exc:  # re-raised in the caller's thread
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work, name=f"teeth-tracer-{i}", daemon=True) for i in range(n_workers)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    if errors:
+        raise errors[0]
 
 
 def trace(cs: CompiledScene, packed: tuple, cameras: list, cam_of: np.ndarray, pix_of: np.ndarray, spp: int,

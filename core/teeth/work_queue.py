@@ -4,7 +4,7 @@ numba's ``prange`` gives each thread one contiguous run of the iterations, decid
 core is slowed (another process, a virtual machine's stolen time), its thread finishes last and the other
 threads wait. Instead each of ``get_num_threads()`` workers takes the next untaken part from a counter until
 none is left: ``take_next(counter)`` is an atomic fetch-and-add (LLVM ``atomicrmw add``, monotonic ordering:
-the counter orders nothing else; the parallel region's end makes the parts' results visible). Which thread
+the counter orders nothing else; joining the threads makes the parts' results visible). Which thread
 traces a part then varies from run to run, but what a part computes and where it writes do not, so results
 stay bit-identical.
 """
