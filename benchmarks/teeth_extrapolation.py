@@ -16,7 +16,10 @@ Figures, over every (truth, novel camera, novel light, channel):
 * ``tiles_median_rel_err``: the median over 8 x 8 pixel tiles (at least half tooth pixels) of the same on tile
   means, in the unit of the issue's "points" (per cent);
 * ``truth_*``: the same figures between the truth's two seeds (the floor any fit meets);
-* per truth: the fit's wall time and its parameters against the truth's.
+* per truth: the fit's wall time and its parameters against the truth's;
+* ``calibration_inside_share``: the share of all fitted parameters (over every truth) whose truth lies inside the
+  fit report's 2-sigma interval (an undetermined parameter has none), ``calibration_outside_determined`` those with
+  an interval that misses the truth (``fit_intervals.calibration``).
 
 Environment (a shorter run for checking the benchmark itself): TEETH_EXTRAPOLATION_TRUTHS (how many of the
 truths), TEETH_EXTRAPOLATION_CAPTURE_SPP, TEETH_EXTRAPOLATION_NOVEL_SPP, TEETH_EXTRAPOLATION_FIT_ARGS (extra
@@ -129,6 +132,7 @@ def compare(pred: np.ndarray, ref: np.ndarray, masks: np.ndarray) -> dict:
 
 def teeth_extrapolation() -> dict:
     from ..core.teeth.capture import default_rig
+    from ..core.teeth.fit_intervals import calibration
     from ..core.teeth.mitsuba_capture import render_capture_mitsuba
     from ..core.teeth.scene import load_scene
     from ..core.teeth.synthetic import scene_target, tooth_masks
@@ -141,7 +145,7 @@ def teeth_extrapolation() -> dict:
     out = {"truths": {}, "capture_spp": capture_spp, "novel_spp": novel_spp, "fit_args": fit_args,
            "size": [width, height], "novel_camera_azimuth_deg": NOVEL_CAMERA_AZIMUTH_DEG,
            "novel_light_off_axis_deg": list(NOVEL_LIGHT_OFF_AXIS_DEG), "novel_lights": NOVEL_LIGHTS}
-    fits, floors = [], []
+    fits, floors, calibrations = [], [], []
     with tempfile.TemporaryDirectory() as work:
         for name in names:
             truth = truth_scene(name)
@@ -170,8 +174,11 @@ def teeth_extrapolation() -> dict:
             fit_fig, floor_fig = compare(fa, ta, masks), compare(tb, ta, masks)
             fits.append(fit_fig)
             floors.append(floor_fig)
+            intervals = report.get("intervals", {})
+            calib = calibration(intervals, truth) if "parameters" in intervals else {"error": intervals.get("error")}
+            calibrations.append(calib)
             out["truths"][name] = {
-                "fit": fit_fig, "truth_seed_to_seed": floor_fig, "fit_seconds": fit_s,
+                "fit": fit_fig, "truth_seed_to_seed": floor_fig, "fit_seconds": fit_s, "calibration": calib,
                 "held_out_lights": report.get("held_out", {}).get("rms_relative_tiles"),
                 "fitted": {t.name: {"enamel": t.enamel.to_dict(), "dentin": t.dentin.to_dict(), "c": t.c.tolist()}
                            for t in fitted.teeth},
@@ -184,6 +191,11 @@ def teeth_extrapolation() -> dict:
     out["tooth_mean_rel_err_median"] = float(np.median([f["tooth_mean_rel_err_median"] for f in fits]))
     out["truth_tooth_mean_rel_err_median"] = float(np.median([f["tooth_mean_rel_err_median"] for f in floors]))
     out["fit_seconds_max"] = max(v["fit_seconds"] for v in out["truths"].values())
+    # calibration over every truth's parameters: inside their 2-sigma interval, and the determined ones outside
+    counted = [c for c in calibrations if "parameters" in c]
+    if counted:
+        out["calibration_inside_share"] = sum(c["inside"] for c in counted) / sum(c["parameters"] for c in counted)
+        out["calibration_outside_determined"] = [n for c in counted for n in c["outside_determined"]]
     return out
 
 

@@ -158,6 +158,28 @@ def intervals_from_information(information: np.ndarray, names: list[str], steps:
             "determined_count": int(sum(p["determined"] for p in params))}
 
 
+def calibration(report: dict, truth: TeethScene) -> dict:
+    """How the intervals of ``report`` (``parameter_intervals``' output for a fit) hold the true values of a
+    capture whose truth is known: ``inside_share`` of all parameters (an undetermined one has no interval: not
+    inside), and ``outside_determined``, the parameters that have an interval the truth lies outside (each a
+    parameter the report should have named as undetermined); per parameter, its truth beside its interval."""
+    layout = ParamLayout(truth)
+    rows, inside, missed = [], 0, []
+    for p in report["parameters"]:
+        value = _value(truth, layout, p["name"])
+        lo_hi = p["interval_2sigma"]
+        hit = lo_hi is not None and min(lo_hi) <= value <= max(lo_hi)
+        inside += hit
+        if lo_hi is not None and not hit:
+            missed.append(p["name"])
+        rows.append({"name": p["name"], "truth": value, "fitted": p["value"], "interval_2sigma": lo_hi,
+                     "inside": bool(hit)})
+    n = len(rows)
+    return {"inside_share": inside / n if n else float("nan"), "parameters": n, "inside": int(inside),
+            "undetermined": [p["name"] for p in report["parameters"] if p["interval_2sigma"] is None],
+            "outside_determined": missed, "per_parameter": rows}
+
+
 def summary(report: dict, limit: int = 2) -> str:
     """One line for the panel: how many parameters the capture determines, and the first open combinations."""
     n = len(report["parameters"])

@@ -10,6 +10,7 @@ import pytest
 from material_structures.core.teeth.capture import Capture, default_rig
 from material_structures.core.teeth.fit_intervals import (
     OPEN_STEPS,
+    calibration,
     capture_noise_variance,
     intervals_from_information,
     parameter_intervals,
@@ -60,6 +61,25 @@ def test_intervals_and_open_combinations_of_a_known_information_matrix():
     # estimator noise can make F indefinite: a negative eigenvalue is an open combination, not an error
     neg = intervals_from_information(np.diag([25.0, -3.0]), names[1:], [0.1, 0.05], [0.03, 0.6])
     assert [q["determined"] for q in neg["parameters"]] == [True, False]
+
+
+def test_calibration_counts_the_truth_inside_and_names_the_determined_misses():
+    """A report with one interval holding the truth's value (the synthetic scene's enamel g1), one missing it
+    (its red absorption, sigma_t (1 - albedo)) and one undetermined parameter: 1 of 3 inside, the miss named."""
+    from material_structures.core.teeth.synthetic import make_scene
+
+    truth = make_scene(n_teeth=1)
+    g1 = truth.teeth[0].enamel.g1
+    sa = float(truth.teeth[0].enamel.sigma_t[0] * (1.0 - truth.teeth[0].enamel.albedo[0]))
+    report = {"parameters": [
+        {"name": "tooth0.enamel.g1", "value": g1 + 0.01, "interval_2sigma": [g1 - 0.01, g1 + 0.03]},
+        {"name": "tooth0.enamel.sigma_a[0]", "value": 2.0 * sa, "interval_2sigma": [1.5 * sa, 2.5 * sa]},
+        {"name": "tooth0.enamel.sigma_s[0]", "value": 1.0, "interval_2sigma": None}]}
+    cal = calibration(report, truth)
+    assert cal["inside"] == 1 and cal["parameters"] == 3 and cal["inside_share"] == pytest.approx(1 / 3)
+    assert cal["outside_determined"] == ["tooth0.enamel.sigma_a[0]"]
+    assert cal["undetermined"] == ["tooth0.enamel.sigma_s[0]"]
+    assert cal["per_parameter"][1]["truth"] == pytest.approx(sa, rel=1e-12)
 
 
 def test_the_report_on_a_small_capture():
