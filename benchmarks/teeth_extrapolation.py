@@ -23,12 +23,15 @@ Figures, over every (truth, novel camera, novel light, channel):
 
 Environment (a shorter run for checking the benchmark itself): TEETH_EXTRAPOLATION_TRUTHS (how many of the
 truths), TEETH_EXTRAPOLATION_CAPTURE_SPP, TEETH_EXTRAPOLATION_NOVEL_SPP, TEETH_EXTRAPOLATION_FIT_ARGS (extra
-``teeth fit`` arguments, e.g. "--iterations 2"), TEETH_EXTRAPOLATION_SIZE ("W,H" of every camera). Progress goes to
-stderr. The full run takes about 2 hours on 2 cores (three default fits of 20-30 minutes, the Mitsuba renders).
+``teeth fit`` arguments, e.g. "--iterations 2"), TEETH_EXTRAPOLATION_SIZE ("W,H" of every camera),
+TEETH_EXTRAPOLATION_KEEP (a folder that keeps every truth's capture and fit, instead of a temporary one).
+Progress goes to stderr. The full run takes about 2 hours on 2 cores (three default fits of 20-30 minutes, the
+Mitsuba renders).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shlex
@@ -130,6 +133,11 @@ def compare(pred: np.ndarray, ref: np.ndarray, masks: np.ndarray) -> dict:
             "tiles_median_rel_err": float(np.median(t))}
 
 
+@contextlib.contextmanager
+def _kept(folder: str):
+    yield folder
+
+
 def teeth_extrapolation() -> dict:
     from ..core.teeth.capture import default_rig
     from ..core.teeth.fit_intervals import calibration
@@ -146,7 +154,10 @@ def teeth_extrapolation() -> dict:
            "size": [width, height], "novel_camera_azimuth_deg": NOVEL_CAMERA_AZIMUTH_DEG,
            "novel_light_off_axis_deg": list(NOVEL_LIGHT_OFF_AXIS_DEG), "novel_lights": NOVEL_LIGHTS}
     fits, floors, calibrations = [], [], []
-    with tempfile.TemporaryDirectory() as work:
+    keep = os.environ.get("TEETH_EXTRAPOLATION_KEEP")
+    if keep:
+        os.makedirs(keep, exist_ok=True)
+    with tempfile.TemporaryDirectory() if not keep else _kept(keep) as work:
         for name in names:
             truth = truth_scene(name)
             cams, lights = default_rig(scene_target(truth), width=width, height=height)

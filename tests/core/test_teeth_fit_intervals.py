@@ -59,8 +59,27 @@ def test_intervals_and_open_combinations_of_a_known_information_matrix():
         one = intervals_from_information(np.array([[w]]), names[2:], [0.05], [0.6])
         assert one["parameters"][0]["determined"] is det
     # estimator noise can make F indefinite: a negative eigenvalue is an open combination, not an error
-    neg = intervals_from_information(np.diag([25.0, -3.0]), names[1:], [0.1, 0.05], [0.03, 0.6])
+    neg = intervals_from_information(np.diag([25.0, -3.0]), ["tooth0.c[0]", names[2]], [0.05, 0.05], [0.1, 0.6])
     assert [q["determined"] for q in neg["parameters"]] == [True, False]
+
+
+def test_a_tissue_with_an_open_phase_function_has_no_scattering_or_absorption_interval():
+    """The similarity relation: the enamel's g1 open (information 1e-4), its sigma_s and sigma_a determined by the
+    local bound alone (400 each): both lose their intervals and the trade-off is named; the dentin, whose g1 is
+    determined, keeps its scattering interval."""
+    names = ["tooth0.enamel.sigma_s[0]", "tooth0.enamel.sigma_a[0]", "tooth0.enamel.g1", "tooth0.dentin.sigma_s[0]",
+             "tooth0.dentin.g1"]
+    info = np.diag([400.0, 400.0, 1e-4, 400.0, 25.0])
+    rep = intervals_from_information(info, names, [0.1, 0.1, 0.05, 0.1, 0.05], [0.8, 0.03, 0.6, 1.5, 0.4])
+    p = {q["name"]: q for q in rep["parameters"]}
+    assert [p[n]["determined"] for n in names] == [False, False, False, True, True]
+    assert p[names[0]]["interval_2sigma"] is None and p[names[1]]["interval_2sigma"] is None
+    assert p[names[3]]["interval_2sigma"] == pytest.approx([1.5 * 0.99, 1.5 * 1.01], rel=1e-12)
+    assert rep["determined_count"] == 2
+    (alone, similarity) = rep["undetermined"]
+    assert alone["parameters"] == ["tooth0.enamel.g1"]
+    assert similarity["parameters"] == ["tooth0.enamel.sigma_s", "tooth0.enamel.g1"]
+    assert "tooth0 enamel scattering and its phase function trade off" in similarity["text"]
 
 
 def test_calibration_counts_the_truth_inside_and_names_the_determined_misses():
