@@ -75,7 +75,7 @@ def plush_material(scene, workdir: str = ""):
     coarse = np.radians(rng.uniform(0.0, 360.0, size=(8, 8)))
     c, s = (zoom(f(coarse), MAP_SIZE / 8, order=1, mode="grid-wrap", grid_mode=True) for f in (np.cos, np.sin))
     az = np.degrees(np.arctan2(s, c))
-    quats = np.stack([tilted_quat(30.0, a) for a in az.ravel()]).reshape(MAP_SIZE, MAP_SIZE, 4)
+    quats = tilted_quat(30.0, az)
     maps = make_maps(kd=maps.kd, ks=maps.ks, sigma=maps.sigma, basis=quats)
     return _mapped_material(maps, "Plush", scene)
 

@@ -26,10 +26,13 @@ CORDUROY_WALES = 24  # ridges across the map
 MAP_SIZE = 256
 
 
-def tilted_quat(tilt_deg: float, azimuth_deg: float) -> np.ndarray:
-    """Fibre basis whose z axis leans ``tilt`` degrees from the normal towards ``azimuth`` (from +x)."""
-    yaw = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), np.array(math.radians(azimuth_deg)))
-    lean = quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), np.array(math.radians(tilt_deg)))
+def tilted_quat(tilt_deg: float | np.ndarray, azimuth_deg: float | np.ndarray) -> np.ndarray:
+    """Fibre basis whose z axis leans ``tilt`` degrees from the normal towards ``azimuth`` (from +x); arrays of
+    angles (broadcast together) give an array of quaternions (..., 4)."""
+    tilt, azimuth = np.broadcast_arrays(np.asarray(tilt_deg, dtype=np.float64),
+                                        np.asarray(azimuth_deg, dtype=np.float64))
+    yaw = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), azimuth * (math.pi / 180.0))
+    lean = quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), tilt * (math.pi / 180.0))
     return quat_multiply(yaw, lean)
 
 
@@ -48,7 +51,7 @@ def preset_maps(preset: str, size: int = MAP_SIZE, seed: int = 0) -> FabricMaps:
     if preset == "CORDUROY":
         phase = ((np.arange(size) + 0.5) / size * CORDUROY_WALES) % 1.0
         lean = np.where(phase < 0.5, 1.0, -1.0) * 25.0 * np.abs(np.sin(np.pi * phase * 2.0))
-        quats = np.stack([tilted_quat(abs(a), 0.0 if a >= 0 else 180.0) for a in lean])
+        quats = tilted_quat(np.abs(lean), np.where(lean >= 0, 0.0, 180.0))
         basis = np.broadcast_to(quats[None, :, :], (size, size, 4))
         kd = np.where((np.abs(phase - 0.5) > 0.42)[None, :, None], kd * 0.5, kd)
     return make_maps(kd=kd, ks=ks, sigma=sigma, basis=basis)

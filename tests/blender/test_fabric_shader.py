@@ -104,7 +104,7 @@ def _varying_maps(h=4, w=4, seed=5):
     rng = np.random.default_rng(seed)
     tilt = rng.uniform(0.0, 30.0, size=(h, w))
     azim = rng.uniform(0.0, 360.0, size=(h, w))
-    basis = np.stack([tilted_quat(t, a) for t, a in zip(tilt.ravel(), azim.ravel(), strict=True)]).reshape(h, w, 4)
+    basis = tilted_quat(tilt, azim)
     basis[0, 0] *= -1.0  # a quaternion with w < 0 (same rotation) must work as well
     return make_maps(
         kd=rng.uniform(0.01, 0.2, size=(h, w, 3)),
