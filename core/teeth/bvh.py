@@ -90,7 +90,7 @@ class RayTree(NamedTuple):
     stack_size: int  # the most stack entries a traversal of this tree holds
 
 
-@numba_callable(inline="always")
+@numba_callable(inline=True)
 def encode_leaf(first, count):
     """The wide-child code of a leaf whose triangles start at block (or slot) ``first``, ``count`` of them:
     ~(first 2^LEAF_COUNT_BITS + count), negative (an inner child is its node index, >= 0). count <=
@@ -98,7 +98,7 @@ def encode_leaf(first, count):
     return ~((first << LEAF_COUNT_BITS) | count)
 
 
-@numba_callable(inline="always")
+@numba_callable(inline=True)
 def decode_leaf(code):
     """(first, count) of the leaf code ``code`` (``encode_leaf``'s inverse). Integers or int64 arrays; callable
     from numba code."""
@@ -106,7 +106,7 @@ def decode_leaf(code):
     return s >> LEAF_COUNT_BITS, s & MAX_LEAF_COUNT
 
 
-@numba_callable(inline="always")
+@numba_callable(inline=True)
 def leaf_blocks(code):
     """(first block, end block) of the leaf code ``code`` of a ray tree: its count triangles fill the blocks
     first .. first + ceil(count / LANES) - 1. Callable from numba code."""

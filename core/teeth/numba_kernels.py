@@ -36,7 +36,7 @@ from collections.abc import Callable
 
 SHARED_CACHE_ENV = "MATERIAL_STRUCTURES_NUMBA_CACHE"
 
-_PENDING: list[tuple[Callable, str]] = []  # numba_callable functions not yet registered with numba
+_PENDING: list[tuple[Callable, bool]] = []  # numba_callable functions not yet registered with numba
 _ACTIVE = False
 
 # the modules whose code or constants the compiled tracer is built from: its numba functions, the
@@ -47,10 +47,10 @@ KERNEL_MODULES = ("blend_spread", "bvh", "compiled_scene", "dentin_reach_grid", 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def numba_callable(fn: Callable | None = None, *, inline: str = "never") -> Callable:
+def numba_callable(fn: Callable | None = None, *, inline: bool = False) -> Callable:
     """Make the numpy function ``fn`` callable from numba-compiled code too (module docstring); returns ``fn``
     unchanged. Compiled with numba's numpy error model (a division by zero gives inf or NaN, as in numpy).
-    ``inline="always"`` has LLVM inline it into its callers (``forceinline``; for the few-operation helpers of the
+    ``inline=True`` has LLVM inline it into its callers (``forceinline``; for the few-operation helpers of the
     traversal loops: inlining in numba's IR would copy it into every call site and double the tracer's compile).
     Where numba is not installed this does nothing."""
     if fn is None:
@@ -81,8 +81,7 @@ def activate() -> bool:
             return _fn
 
         typer.__signature__ = inspect.signature(fn)  # numba checks that the implementation's signature matches
-        options = {"error_model": "numpy", "forceinline": inline == "always"}
-        overload(fn, jit_options=options)(typer)
+        overload(fn, jit_options={"error_model": "numpy", "forceinline": inline})(typer)
     return True
 
 
