@@ -133,11 +133,6 @@ def compare(pred: np.ndarray, ref: np.ndarray, masks: np.ndarray) -> dict:
             "tiles_median_rel_err": float(np.median(t))}
 
 
-@contextlib.contextmanager
-def _kept(folder: str):
-    yield folder
-
-
 def teeth_extrapolation() -> dict:
     from ..core.teeth.capture import default_rig
     from ..core.teeth.fit_intervals import calibration
@@ -157,7 +152,7 @@ def teeth_extrapolation() -> dict:
     keep = os.environ.get("TEETH_EXTRAPOLATION_KEEP")
     if keep:
         os.makedirs(keep, exist_ok=True)
-    with tempfile.TemporaryDirectory() if not keep else _kept(keep) as work:
+    with contextlib.nullcontext(keep) if keep else tempfile.TemporaryDirectory() as work:
         for name in names:
             truth = truth_scene(name)
             cams, lights = default_rig(scene_target(truth), width=width, height=height)
