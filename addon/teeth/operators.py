@@ -21,6 +21,7 @@ from .scene_build import (
     capture_tooth_names,
     fill_tooth_map,
     fit_targets,
+    map_teeth_by_position,
     no_mapping_message,
 )
 
@@ -239,6 +240,27 @@ class MS_OT_teeth_read_capture_teeth(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class MS_OT_teeth_map_by_position(bpy.types.Operator):
+    """Map every capture tooth to the tooth of this scene that stands at its place (both sets of teeth moved so
+    that their centres coincide; the pairing with the least total distance). For teeth whose names differ from
+    the capture's, e.g. a smile made with Add Tooth"""
+
+    bl_idname = "material_structures.teeth_map_by_position"
+    bl_label = "Map by Position"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        capture = bpy.path.abspath(context.scene.ms_teeth_fit.capture_dir)
+        try:
+            mapped = map_teeth_by_position(context.scene, capture, _mm_per_unit(context.scene))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.report({"ERROR"}, f"cannot read the capture's teeth: {exc}")
+            return {"CANCELLED"}
+        n = len(context.scene.ms_teeth_fit.tooth_map)
+        self.report({"INFO"}, f"{n} capture teeth, {mapped} mapped to teeth of this scene by position")
+        return {"FINISHED"}
+
+
 class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
     """Write a fitted scene (scene_fit.json) into the teeth materials and dentin shape keys of the teeth chosen
     under Fit to capture (a tooth not listed there: the tooth of the same name)"""
@@ -429,6 +451,7 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
 
 
 CLASSES: list[type] = [MS_OT_teeth_add_tooth, MS_OT_teeth_set_dentin, MS_OT_teeth_apply_fitted,
-                       *GROUP_OPERATORS, MS_OT_teeth_read_capture_teeth, MS_OT_teeth_apply_fit_file,
+                       *GROUP_OPERATORS, MS_OT_teeth_read_capture_teeth, MS_OT_teeth_map_by_position,
+                       MS_OT_teeth_apply_fit_file,
                        MS_OT_teeth_fit, MS_OT_teeth_fit_cancel,
                        MS_OT_teeth_import_scene]

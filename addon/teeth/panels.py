@@ -56,6 +56,7 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
                 col.label(text="No capture tooth is mapped to a tooth of this scene", icon="ERROR")
         row = box.row(align=True)
         row.operator("material_structures.teeth_read_capture_teeth", icon="FILE_REFRESH")
+        row.operator("material_structures.teeth_map_by_position", icon="ORIENTATION_GLOBAL")
         row.operator("material_structures.use_sample", text="Open Sample", icon="FILE_FOLDER").sample = "CAPTURE"
         box.prop(fs, "out_dir")
         box.prop(fs, "iterations")

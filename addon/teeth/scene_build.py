@@ -123,6 +123,56 @@ def capture_tooth_names(capture_dir: str) -> list[str]:
         return [str(t["name"]) for t in json.load(f)["teeth"]]
 
 
+def capture_tooth_centres(capture_dir: str) -> tuple[list[str], np.ndarray]:
+    """(names, ``(n, 3)`` centres in mm) of a capture folder's teeth: each tooth's enamel vertex mean in its
+    ``scene.json``."""
+    import json
+    import os
+
+    path = os.path.join(capture_dir, "scene.json")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"no scene.json in {capture_dir!r}")
+    with open(path, encoding="utf-8") as f:
+        teeth = json.load(f)["teeth"]
+    names, centres = [], []
+    for t in teeth:
+        v = np.asarray(t["enamel_mesh"]["vertices"], dtype=np.float64).reshape(-1, 3)
+        if len(v) == 0 or not np.all(np.isfinite(v)):
+            raise ValueError(f"tooth {t['name']!r} has no (finite) enamel vertices")
+        names.append(str(t["name"]))
+        centres.append(v.mean(axis=0))
+    return names, np.array(centres).reshape(-1, 3)
+
+
+def scene_tooth_centre(obj, mm_per_unit: float) -> np.ndarray:
+    """The world-space centre (mm) of the enamel object ``obj``: its vertex mean through its world matrix."""
+    mw = np.array(obj.matrix_world, dtype=np.float64)
+    n = len(obj.data.vertices)
+    if n == 0:
+        return mw[:3, 3] * mm_per_unit
+    co = np.empty(3 * n, dtype=np.float64)
+    obj.data.vertices.foreach_get("co", co)
+    return (co.reshape(-1, 3).mean(axis=0) @ mw[:3, :3].T + mw[:3, 3]) * mm_per_unit
+
+
+def map_teeth_by_position(scene, capture_dir: str, mm_per_unit: float) -> int:
+    """Fill ``scene.ms_teeth_fit.tooth_map`` with every capture tooth mapped to the tooth of ``scene`` at its place
+    (``core.teeth.tooth_matching.match_by_position``: both sets' centres of mass moved together, the least total
+    distance). Replaces what the mapping held. Returns how many capture teeth are mapped."""
+    from ...core.teeth.tooth_matching import match_by_position
+
+    names, centres = capture_tooth_centres(capture_dir)
+    teeth = sorted(tooth_objects(scene).values(), key=lambda o: o.name)
+    pairing = match_by_position(centres, np.array([scene_tooth_centre(o, mm_per_unit) for o in teeth]).reshape(-1, 3))
+    tm = scene.ms_teeth_fit.tooth_map
+    tm.clear()
+    for name, j in zip(names, pairing, strict=True):
+        m = tm.add()
+        m.capture_tooth = name
+        m.enamel = None if j is None else teeth[j]
+    return sum(j is not None for j in pairing)
+
+
 def is_scene_tooth(obj, scene) -> bool:
     """``obj`` is an enamel shell (a tooth's settings owner) linked into ``scene``."""
     return (obj is not None and getattr(obj, "ms_tooth", None) is not None and obj.ms_tooth.role == "ENAMEL"

@@ -298,6 +298,8 @@ def use(zip_path: str, work: str) -> None:
     capture = samples.sample_path("CAPTURE")
     assert fs.capture_dir == capture and len(scene.objects) > n_objects, (fs.capture_dir, capture)
     assert fs.out_dir.startswith(work), fs.out_dir
+    op("teeth_map_by_position")  # the sample's one tooth to a tooth of this scene; reading again keeps that choice
+    assert fs.tooth_map[0].enamel is not None, "Map by Position mapped no tooth"
     op("teeth_read_capture_teeth")
     target = fs.tooth_map[0].enamel
     assert target is not None, "Read Capture Teeth mapped no tooth"

@@ -281,3 +281,36 @@ def test_mapping_is_prefilled_where_names_match(addon_module, capture_dir):
     fs.tooth_map[0].enamel = molar
     assert bpy.ops.material_structures.teeth_read_capture_teeth() == {"FINISHED"}
     assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [("tooth0", molar)]
+
+
+def test_map_by_position_finds_each_capture_tooth_in_a_moved_renamed_set(addon_module, tmp_path):
+    """Three capture teeth built into the scene, renamed in another order and moved 30 mm as a set: Map by Position
+    maps every capture tooth to the tooth built from it (Read Capture Teeth, by name, maps none), in one undo step."""
+    from material_structures.addon.teeth.scene_build import build_teeth_scene
+    from material_structures.core.teeth.scene import save_scene
+    from material_structures.core.teeth.synthetic import make_scene
+
+    ts = make_scene(n_teeth=3, resolution=8)
+    save_scene(ts, str(tmp_path / "scene.json"))
+    out = build_teeth_scene(ts, bpy.context.scene.collection, mm_per_unit=1000.0)
+    built = {t.name: enamel for t, (enamel, _) in zip(ts.teeth, out["teeth"], strict=True)}
+    for i, (_name, enamel) in enumerate(sorted(built.items(), reverse=True)):
+        enamel.ms_tooth.tooth_name = f"Renamed {i}"  # no name matches the capture's
+        enamel.location.x += 0.03
+        enamel.location.z -= 0.01
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir = str(tmp_path)
+    assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [(t.name, None) for t in ts.teeth]
+    bpy.context.view_layer.objects.active = built[ts.teeth[0].name]
+    bpy.ops.ed.undo_push(message="before mapping")
+    assert bpy.ops.material_structures.teeth_map_by_position("EXEC_DEFAULT", True) == {"FINISHED"}  # as the UI
+    assert [(m.capture_tooth, m.enamel) for m in fs.tooth_map] == [(t.name, built[t.name]) for t in ts.teeth]
+    bpy.ops.ed.undo()
+    fs = bpy.context.scene.ms_teeth_fit
+    assert all(m.enamel is None for m in fs.tooth_map)
+
+
+def test_map_by_position_without_a_capture_is_one_line(addon_module, tmp_path):
+    bpy.context.scene.ms_teeth_fit.capture_dir = str(tmp_path)  # no scene.json
+    with pytest.raises(RuntimeError, match="cannot read the capture's teeth: no scene.json"):
+        bpy.ops.material_structures.teeth_map_by_position()
