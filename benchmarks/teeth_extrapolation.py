@@ -24,7 +24,8 @@ Figures, over every (truth, novel camera, novel light, channel):
 Environment (a shorter run for checking the benchmark itself): TEETH_EXTRAPOLATION_TRUTHS (how many of the
 truths), TEETH_EXTRAPOLATION_CAPTURE_SPP, TEETH_EXTRAPOLATION_NOVEL_SPP, TEETH_EXTRAPOLATION_FIT_ARGS (extra
 ``teeth fit`` arguments, e.g. "--iterations 2"), TEETH_EXTRAPOLATION_SIZE ("W,H" of every camera),
-TEETH_EXTRAPOLATION_KEEP (a folder that keeps every truth's capture and fit, instead of a temporary one).
+TEETH_EXTRAPOLATION_KEEP (a folder that keeps every truth's capture and fit, instead of a temporary one; a later
+run with the same folder reuses a capture rendered from the same truth, samples, size and seed, and fits again).
 Progress goes to stderr. The full run takes about 2 hours on 2 cores (three default fits of 20-30 minutes, the
 Mitsuba renders).
 """
@@ -35,6 +36,7 @@ import contextlib
 import json
 import os
 import shlex
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -133,6 +135,19 @@ def compare(pred: np.ndarray, ref: np.ndarray, masks: np.ndarray) -> dict:
             "tiles_median_rel_err": float(np.median(t))}
 
 
+CAPTURE_SEED = 101
+CAPTURE_IDENTITY = "bench_capture.json"  # what a kept capture was rendered from: truth, spp, size, seed
+
+
+def _kept_capture(cap_dir: str) -> dict | None:
+    """The identity of the capture kept in ``cap_dir`` (None: none, or an unreadable one)."""
+    try:
+        with open(os.path.join(cap_dir, CAPTURE_IDENTITY)) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
 def teeth_extrapolation() -> dict:
     from ..core.teeth.capture import default_rig
     from ..core.teeth.fit_intervals import calibration
@@ -156,10 +171,18 @@ def teeth_extrapolation() -> dict:
         for name in names:
             truth = truth_scene(name)
             cams, lights = default_rig(scene_target(truth), width=width, height=height)
-            _log(f"{name}: Mitsuba capture, {len(cams)} cameras x {len(lights)} lights at {capture_spp} spp")
-            cap = render_capture_mitsuba(truth, cams, lights, spp=capture_spp, seed=101)
             cap_dir, fit_dir = os.path.join(work, name, "capture"), os.path.join(work, name, "fit")
-            cap.save(cap_dir, truth.to_dict())
+            identity = {"truth": TRUTHS[name], "spp": capture_spp, "size": [width, height], "seed": CAPTURE_SEED}
+            if keep and _kept_capture(cap_dir) == json.loads(json.dumps(identity)):
+                _log(f"{name}: the kept Mitsuba capture in {cap_dir}")
+            else:
+                _log(f"{name}: Mitsuba capture, {len(cams)} cameras x {len(lights)} lights at {capture_spp} spp")
+                cap = render_capture_mitsuba(truth, cams, lights, spp=capture_spp, seed=CAPTURE_SEED)
+                cap.save(cap_dir, truth.to_dict())
+                with open(os.path.join(cap_dir, CAPTURE_IDENTITY), "w") as f:
+                    json.dump(identity, f)
+            if os.path.isdir(fit_dir):  # a kept folder's earlier fit: this run fits afresh
+                shutil.rmtree(fit_dir)
             _log(f"{name}: teeth fit with its defaults {' '.join(fit_args)}")
             t0 = time.perf_counter()
             proc = subprocess.run([sys.executable, "-m", "material_structures", "teeth", "fit", cap_dir, "--out",

@@ -46,15 +46,33 @@ def test_compare_reports_relative_errors_of_tooth_means_and_tiles():
 
 
 @pytest.mark.slow
-def test_a_short_run_end_to_end(monkeypatch):
+def test_a_short_run_end_to_end(monkeypatch, tmp_path):
     """Nightly: one truth, 4-spp capture of 24 x 16 pixels, a 2-iteration fit from the scene's values, 8-spp
-    novel renders (about a minute): every figure is there and finite."""
+    novel renders (about a minute): every figure is there and finite. Run again in the same kept folder, it
+    reuses the capture (3 Mitsuba renders instead of 4: the novel ones) and gives the same figures; with other
+    capture samples it renders the capture again."""
     pytest.importorskip("mitsuba")
+    from material_structures.core.teeth import mitsuba_capture
+
     for key, value in (("TRUTHS", "1"), ("CAPTURE_SPP", "4"), ("NOVEL_SPP", "8"), ("SIZE", "24,16"),
-                       ("FIT_ARGS", "--init scene --iterations 2")):
+                       ("FIT_ARGS", "--init scene --iterations 2"), ("KEEP", str(tmp_path / "kept"))):
         monkeypatch.setenv(f"TEETH_EXTRAPOLATION_{key}", value)
+    renders = []
+    original = mitsuba_capture.render_capture_mitsuba
+
+    def counted(*args, **kwargs):
+        renders.append(kwargs)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(mitsuba_capture, "render_capture_mitsuba", counted)
     out = bench.teeth_extrapolation()
-    assert list(out["truths"]) == ["translucent-forward"]
+    assert list(out["truths"]) == ["translucent-forward"] and len(renders) == 4
     for key in ("tooth_mean_rel_err_worst", "tooth_mean_rel_err_median", "tiles_median_rel_err",
                 "truth_tooth_mean_rel_err_worst", "fit_seconds_max"):
         assert np.isfinite(out[key]) and out[key] > 0, key
+    again = bench.teeth_extrapolation()
+    assert len(renders) == 7
+    assert again["tooth_mean_rel_err_worst"] == out["tooth_mean_rel_err_worst"]  # the same capture, fit, renders
+    monkeypatch.setenv("TEETH_EXTRAPOLATION_CAPTURE_SPP", "2")
+    bench.teeth_extrapolation()
+    assert len(renders) == 11
