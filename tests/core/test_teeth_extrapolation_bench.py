@@ -76,3 +76,12 @@ def test_a_short_run_end_to_end(monkeypatch, tmp_path):
     monkeypatch.setenv("TEETH_EXTRAPOLATION_CAPTURE_SPP", "2")
     bench.teeth_extrapolation()
     assert len(renders) == 11
+
+
+def test_start_trials_bench_refuses_an_unknown_truth(monkeypatch):
+    """``bench teeth-start-trials`` names its truths before any render."""
+    from material_structures.benchmarks import teeth_start_trials
+
+    monkeypatch.setenv("TEETH_START_TRIALS_TRUTHS", "translucent-forward,chalky")
+    with pytest.raises(ValueError, match=r"unknown truth\(s\) \['chalky'\]"):
+        teeth_start_trials.teeth_start_trials()
