@@ -65,6 +65,36 @@ def _needs_numba(item: pytest.Item) -> bool:
             or nodeid.startswith("tests/scaleout/") or item.get_closest_marker("numba") is not None)
 
 
+_RUN_TMP_ENV = "MS_TEST_RUN_TMP"  # the run's temporary folder, set by the controlling process
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """One temporary folder per run (``TMPDIR``, inherited by the xdist workers, Blender and every subprocess),
+    removed when the run passes and kept, named, when it fails: the runs' Blender user folders, extension
+    repositories, compiled OSL shaders (Blender's script nodes leave their .oso files in the temporary folder) and
+    Dask scratch space stay out of the machine's /tmp."""
+    if hasattr(config, "workerinput") or os.environ.get(_RUN_TMP_ENV):
+        return
+    import tempfile
+
+    run_tmp = tempfile.mkdtemp(prefix="ms-test-run-")
+    os.environ[_RUN_TMP_ENV] = os.environ["TMPDIR"] = tempfile.tempdir = run_tmp
+    config._ms_run_tmp = run_tmp  # type: ignore[attr-defined]
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    run_tmp = getattr(config, "_ms_run_tmp", None)
+    if run_tmp is None:
+        return
+    import shutil
+
+    if getattr(config, "_ms_exitstatus", 0) == 0:
+        shutil.rmtree(run_tmp, ignore_errors=True)
+    else:
+        print(f"\nthe run's temporary files are kept in {run_tmp}", file=sys.stderr)
+
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's own sessionstart spawns the workers: they inherit the variable
 def pytest_sessionstart(session: pytest.Session) -> None:
     config = session.config
@@ -96,7 +126,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         items.sort(key=lambda item: item.nodeid.split("::", 1)[0] in late)
 
 
-def pytest_sessionfinish(session: pytest.Session) -> None:
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    session.config._ms_exitstatus = int(exitstatus)  # type: ignore[attr-defined]  (pytest_unconfigure reads it)
     proc = getattr(session.config, "_ms_numba_warm", None)
     if proc is not None and proc.poll() is None:
         proc.kill()
