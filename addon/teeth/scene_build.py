@@ -162,7 +162,8 @@ def map_teeth_by_position(scene, capture_dir: str, mm_per_unit: float) -> int:
     from ...core.teeth.tooth_matching import match_by_position
 
     names, centres = capture_tooth_centres(capture_dir)
-    teeth = sorted(tooth_objects(scene).values(), key=lambda o: o.name)
+    # every enamel shell, also teeth that share a tooth name (Shift+D copies keep it)
+    teeth = sorted((o for o in scene.objects if o.ms_tooth.role == "ENAMEL"), key=lambda o: o.name)
     pairing = match_by_position(centres, np.array([scene_tooth_centre(o, mm_per_unit) for o in teeth]).reshape(-1, 3))
     tm = scene.ms_teeth_fit.tooth_map
     tm.clear()

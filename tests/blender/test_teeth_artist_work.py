@@ -284,7 +284,7 @@ def test_mapping_is_prefilled_where_names_match(addon_module, capture_dir):
 
 
 def test_map_by_position_finds_each_capture_tooth_in_a_moved_renamed_set(addon_module, tmp_path):
-    """Three capture teeth built into the scene, renamed in another order and moved 30 mm as a set: Map by Position
+    """Three capture teeth built into the scene, all renamed "Incisor" and moved 30 mm as a set: Map by Position
     maps every capture tooth to the tooth built from it (Read Capture Teeth, by name, maps none), in one undo step."""
     from material_structures.addon.teeth.scene_build import build_teeth_scene
     from material_structures.core.teeth.scene import save_scene
@@ -294,8 +294,8 @@ def test_map_by_position_finds_each_capture_tooth_in_a_moved_renamed_set(addon_m
     save_scene(ts, str(tmp_path / "scene.json"))
     out = build_teeth_scene(ts, bpy.context.scene.collection, mm_per_unit=1000.0)
     built = {t.name: enamel for t, (enamel, _) in zip(ts.teeth, out["teeth"], strict=True)}
-    for i, (_name, enamel) in enumerate(sorted(built.items(), reverse=True)):
-        enamel.ms_tooth.tooth_name = f"Renamed {i}"  # no name matches the capture's
+    for enamel in built.values():
+        enamel.ms_tooth.tooth_name = "Incisor"  # no name matches the capture's, and all three share one
         enamel.location.x += 0.03
         enamel.location.z -= 0.01
     fs = bpy.context.scene.ms_teeth_fit
