@@ -414,6 +414,10 @@ def main(argv: list[str]) -> int:
 
     shutil.rmtree(work, ignore_errors=True)
     os.makedirs(work)
+    # the Blender processes' temporary files (their user folders, the .oso files Blender's OSL script nodes
+    # compile and never delete) stay in the work folder, not the machine's /tmp
+    os.makedirs(os.path.join(work, "tmp"))
+    os.environ["TMPDIR"] = os.path.join(work, "tmp")
     t0 = time.perf_counter()
     # a process per part: bpy imports once per process, and the reopened file must not see this one's state
     r = subprocess.run([sys.executable, __file__, "--use", zip_path, work])

@@ -123,6 +123,12 @@ def _publish(release: str, served: str) -> None:
 def main(argv: list[str]) -> int:
     release, newer, work = argv
     os.makedirs(work, exist_ok=True)
+    # Blender's temporary files (the .oso files its OSL script nodes compile and never delete) stay in the work
+    # folder, emptied on every run, not in the machine's /tmp
+    tmp = os.path.join(work, "tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    os.makedirs(tmp)
+    os.environ["TMPDIR"] = tempfile.tempdir = tmp
     served = tempfile.mkdtemp(prefix="served-", dir=work)
     user = tempfile.mkdtemp(prefix="user-", dir=work)
     blend = os.path.join(work, "before_upgrade.blend")
