@@ -88,11 +88,10 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         return
     import shutil
 
-    if getattr(config, "_ms_exitstatus", 0) == 0:
+    if getattr(config, "_ms_exitstatus", 0) in (pytest.ExitCode.OK, pytest.ExitCode.NO_TESTS_COLLECTED):
         shutil.rmtree(run_tmp, ignore_errors=True)
     else:
         print(f"\nthe run's temporary files are kept in {run_tmp}", file=sys.stderr)
-
 
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's own sessionstart spawns the workers: they inherit the variable
