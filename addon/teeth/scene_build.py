@@ -111,8 +111,8 @@ def tooth_objects(scene=None) -> dict:
 # with Add Tooth ("Incisor") or renamed does not share: the fit settings keep an explicit mapping
 # (``Scene.ms_teeth_fit.tooth_map``), read from the capture and pre-filled where the names match.
 
-def capture_tooth_names(capture_dir: str) -> list[str]:
-    """The tooth names of a capture folder's ``scene.json`` (in its order)."""
+def _capture_teeth(capture_dir: str) -> list[dict]:
+    """The ``teeth`` entries of a capture folder's ``scene.json``."""
     import json
     import os
 
@@ -120,20 +120,18 @@ def capture_tooth_names(capture_dir: str) -> list[str]:
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no scene.json in {capture_dir!r}")
     with open(path, encoding="utf-8") as f:
-        return [str(t["name"]) for t in json.load(f)["teeth"]]
+        return json.load(f)["teeth"]
+
+
+def capture_tooth_names(capture_dir: str) -> list[str]:
+    """The tooth names of a capture folder's ``scene.json`` (in its order)."""
+    return [str(t["name"]) for t in _capture_teeth(capture_dir)]
 
 
 def capture_tooth_centres(capture_dir: str) -> tuple[list[str], np.ndarray]:
     """(names, ``(n, 3)`` centres in mm) of a capture folder's teeth: each tooth's enamel vertex mean in its
     ``scene.json``."""
-    import json
-    import os
-
-    path = os.path.join(capture_dir, "scene.json")
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"no scene.json in {capture_dir!r}")
-    with open(path, encoding="utf-8") as f:
-        teeth = json.load(f)["teeth"]
+    teeth = _capture_teeth(capture_dir)
     names, centres = [], []
     for t in teeth:
         v = np.asarray(t["enamel_mesh"]["vertices"], dtype=np.float64).reshape(-1, 3)
