@@ -18,8 +18,9 @@ Figures, over every (truth, novel camera, novel light, channel):
 * ``truth_*``: the same figures between the truth's two seeds (the floor any fit meets);
 * per truth: the fit's wall time and its parameters against the truth's;
 * ``calibration_inside_share``: the share of all fitted parameters (over every truth) whose truth lies inside the
-  fit report's 2-sigma interval (an undetermined parameter has none), ``calibration_outside_determined`` those with
-  an interval that misses the truth (``fit_intervals.calibration``).
+  fit report's 2-sigma interval; of those outside it, ``calibration_outside_determined`` the ones the report names
+  as determined (each a defect of the report) and ``calibration_outside_undetermined`` the ones it names as left
+  open (``fit_intervals.calibration``); ``calibration_determined`` how many the reports name as determined.
 
 Environment (a shorter run for checking the benchmark itself): TEETH_EXTRAPOLATION_TRUTHS (how many of the
 truths), TEETH_EXTRAPOLATION_CAPTURE_SPP, TEETH_EXTRAPOLATION_NOVEL_SPP, TEETH_EXTRAPOLATION_FIT_ARGS (extra
@@ -225,6 +226,8 @@ def teeth_extrapolation() -> dict:
     if counted:
         out["calibration_inside_share"] = sum(c["inside"] for c in counted) / sum(c["parameters"] for c in counted)
         out["calibration_outside_determined"] = [n for c in counted for n in c["outside_determined"]]
+        out["calibration_outside_undetermined"] = [n for c in counted for n in c.get("outside_undetermined", [])]
+        out["calibration_determined"] = sum(c["parameters"] - len(c["undetermined"]) for c in counted)
     return out
 
 

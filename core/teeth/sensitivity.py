@@ -15,6 +15,11 @@ i != j of (J_i d)(J_j d) (which can come out negative when the signal is below t
 Pixels are pooled into ``block`` x ``block`` tiles first (a lower bound on the per-pixel chi2, with
 far less estimator noise). The fit needs a direction's chi2 to stand out of its own gradient noise to
 move along it, so directions with chi2 orders of magnitude below the others converge far more slowly.
+
+The same passes tell how well the scene fits the capture. With T_i a pass's tile sums and C the capture's, the
+mean over pairs i != j of (T_i - C)(T_j - C) estimates (E T - E C)^2 + var C without the passes' own noise;
+divided by var C = tile pixels * noise variance and averaged over tiles, lights and channels it is the reduced
+chi-square of the fit, 1 where the scene renders the capture to within its noise (``reduced_chi2``).
 """
 
 from __future__ import annotations
@@ -94,6 +99,9 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     s1 = None
     s2 = np.zeros((k, k))  # sum over passes of the pass's own information, the bias of s1 s1^T
     img_sum = img_sq = 0.0
+    cap_tiles = None if capture.images is None else _tile_sums(traced_values(capture.images, pixels), tile_of,
+                                                               n_tiles)
+    res_sum, res_sq = 0.0, 0.0  # sums over passes of (T_i - C) and its square, for the reduced chi-square
     for i in range(passes):
         st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + i)
         if len(cols):
@@ -114,14 +122,28 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
         vals = traced_values(r.images, pixels)
         img_sum = img_sum + vals
         img_sq = img_sq + vals * vals
+        if cap_tiles is not None:
+            res = _tile_sums(vals, tile_of, n_tiles) - cap_tiles
+            res_sum, res_sq = res_sum + res, res_sq + res * res
     if noise_variance is None:
         var1 = np.mean((img_sq - img_sum * img_sum / passes) / (passes - 1))  # pooled 1-spp variance
         noise_variance = float(var1 / capture_spp)
     # unbiased sum over tiles, lights, channels of (E[J] d_k)(E[J] d_j) / tile pixels
     info = (np.einsum("tlck,tlcj,t->kj", s1, s1, wt) - s2) / (passes * (passes - 1)) / max(noise_variance, 1e-300)
     info = 0.5 * (info + info.T)
+    reduced = float("nan")
+    if cap_tiles is not None:  # sum over pairs i != j of res_i res_j = (sum res)^2 - sum res^2
+        pair_mean = (res_sum * res_sum - res_sq) / (passes * (passes - 1))
+        reduced = float(np.mean(pair_mean / (tile_pixels[None, :, None] * max(noise_variance, 1e-300))))
     return {"chi2": np.diag(info).copy(), "information": info, "noise_variance": float(noise_variance),
-            "tiles": int(n_tiles)}
+            "tiles": int(n_tiles), "reduced_chi2": reduced}
+
+
+def _tile_sums(values: np.ndarray, tile_of: np.ndarray, n_tiles: int) -> np.ndarray:
+    """(n_light, rows, 3) traced values summed per tile: (n_light, n_tiles, 3)."""
+    out = np.zeros((values.shape[0], n_tiles, values.shape[2]))
+    np.add.at(out, (slice(None), tile_of), values)
+    return out
 
 
 def cramer_rao_std(information: np.ndarray) -> np.ndarray:

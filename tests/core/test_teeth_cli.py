@@ -131,11 +131,11 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     report = json.loads((fit_dir / "fit_report.json").read_text())
     assert report["start_trials"] == trials and trials["iterations"] == [1, 1, 1] and report["iterations"] == 1
     assert json_schema.errors(report, "teeth-fit-report") is None  # core/schemas/teeth-fit-report.schema.json
-    # what the capture determines: an entry per parameter, an interval exactly where it is determined
+    # what the capture determines: an entry per parameter, an interval from the capture exactly where determined
     iv = report["intervals"]
     # enamel, dentin, gums: 6 sigma_s/sigma_a and 3 phase parameters each; 3 dentin coefficients
     assert iv["noise_variance"] > 0 and len(iv["parameters"]) == 30
-    assert all((p["interval_2sigma"] is not None) == p["determined"] for p in iv["parameters"])
+    assert all((p["interval_from"] == "capture") == p["determined"] for p in iv["parameters"])
     assert iv["determined_count"] == sum(p["determined"] for p in iv["parameters"])
     assert not (fit_dir / "start_trials").exists() and (fit_dir / "checkpoint.json").is_file()
     fitted = load_scene(fit_dir / "scene_fit.json")  # only c is free: the materials are the chosen start's

@@ -157,3 +157,26 @@ def test_information_off_diagonal_is_the_chi2_of_summed_directions(problem):
                             max_depth=5, seed=3)["information"]
     assert F[2, 2] == pytest.approx(F[0, 0] + F[1, 1] + 2 * F[0, 1], rel=1e-9)
     assert F[1, 1] != 0.0 and F[0, 1] != 0.0  # the coefficient's part is in (its sign is the pairs' noise here)
+
+
+def test_reduced_chi2_is_one_at_the_truth_and_grows_with_the_misfit(problem):
+    """A capture rendered from the scene itself at 4 samples per pixel (capture_spp: its noise from the passes):
+    the reduced chi-square at that scene is 1 within the estimator's noise (16 passes, 4 x 4 tiles: 0.55-1.32
+    over seeds 0-40 of the passes, mean of three 0.7-1.0), and a capture 15 % brighter than the scene renders
+    measures 4-6.4. Leaving out the passes' own noise (the pairs i = j) would read about 5 at the truth."""
+    sc, cap = problem
+    spp = 4
+    images = render(sc, cap.cameras, cap.lights, RenderSettings(spp=spp, max_depth=5, seed=99)).images
+    names, D = default_directions(sc)
+    D = D[[names.index("tooth0.enamel.sigma_a[0]")]]
+
+    def reduced(scale, seed):
+        shot = Capture(cap.cameras, cap.lights, scale * images, cap.masks)
+        return capture_sensitivity(sc, shot, D, passes=16, block=4, max_depth=5, seed=seed,
+                                   capture_spp=spp)["reduced_chi2"]
+    at_truth = np.mean([reduced(1.0, 10 * s) for s in range(3)])
+    assert 0.5 < at_truth < 1.6
+    assert reduced(1.15, 0) > 2.5
+    # a capture without images has no residual to measure
+    assert np.isnan(capture_sensitivity(sc, cap, D, passes=2, block=2, max_depth=5,
+                                        capture_spp=spp)["reduced_chi2"])
