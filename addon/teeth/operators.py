@@ -42,9 +42,10 @@ def show_fit_check(fs, out_dir: str) -> None:
     as the Image datablock ``CHECK_IMAGE_NAME``, packed into the .blend (a new fit's check replaces it)."""
     import json
 
-    from ...core.teeth.fit_intervals import summary
+    from ...core.teeth.fit_intervals import parameter_lines, summary
 
     fs.check_error, fs.check_image, fs.check_intervals = "", "", ""
+    fs.check_parameters, fs.check_open = "", ""
     try:
         with open(os.path.join(out_dir, "fit_report.json")) as f:
             report = json.load(f)
@@ -60,6 +61,8 @@ def show_fit_check(fs, out_dir: str) -> None:
     intervals = report.get("intervals", {})
     if intervals.get("parameters"):
         fs.check_intervals = summary(intervals)
+        fs.check_parameters = "\n".join(parameter_lines(intervals))
+        fs.check_open = "\n".join(u["text"] for u in intervals.get("undetermined", []))
     png = os.path.join(out_dir, "check.png")
     if os.path.isfile(png):
         fs.check_image = png

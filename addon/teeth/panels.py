@@ -76,6 +76,8 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
             box.label(text=fs.check_error, icon="CHECKMARK")
         if fs.check_intervals:
             box.label(text=fs.check_intervals, icon="INFO")
+        if fs.check_parameters:
+            draw_parameters(context, box, fs)
         img = bpy.data.images.get(CHECK_IMAGE_NAME) if fs.check_image else None
         if img is not None and img.preview is None:  # packed in the .blend; its preview is made again on reopen
             try:
@@ -85,6 +87,30 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
         if img is not None and img.preview is not None:
             box.label(text="Capture | Fit | Difference x4")
             box.template_icon(icon_value=img.preview.icon_id, scale=10.0)
+
+
+def draw_parameters(context, box, fs) -> None:
+    """The fit's parameters and intervals, and what the capture leaves open: a fold-out list, each line wrapped
+    to the panel's width."""
+    import textwrap
+
+    row = box.row()
+    row.prop(fs, "show_check_parameters", emboss=False,
+             icon="TRIA_DOWN" if fs.show_check_parameters else "TRIA_RIGHT")
+    if not fs.show_check_parameters:
+        return
+    region = getattr(context, "region", None)
+    width = max(30, int(region.width / 7)) if region is not None else 60
+    col = box.column(align=True)
+    for line in fs.check_parameters.splitlines():
+        for i, part in enumerate(textwrap.wrap(line, width)):
+            col.label(text=part if i == 0 else "    " + part)
+    if fs.check_open:
+        col.separator()
+        col.label(text="Left open by the capture:")
+        for line in fs.check_open.splitlines():
+            for i, part in enumerate(textwrap.wrap(line, width)):
+                col.label(text=part, icon="DOT" if i == 0 else "BLANK1")
 
 
 CLASSES: list[type] = [VIEW3D_PT_material_structures_teeth]

@@ -170,8 +170,16 @@ class MS_TeethFitSettings(bpy.types.PropertyGroup):
                                           description="The last fit's error on lights it never used")
     check_intervals: bpy.props.StringProperty(
         name="What the Capture Determines", default="",
-        description="The last fit's parameters that the capture determines (each with a 2-sigma interval in "
-                    "fit_report.json) and the combinations it leaves open")
+        description="How many of the last fit's parameters the capture determines (fit_report.json)")
+    check_parameters: bpy.props.StringProperty(
+        name="Fitted Parameters", default="",
+        description="The last fit's parameters, one per line: value and 2-sigma interval, measured or open")
+    check_open: bpy.props.StringProperty(
+        name="Left Open", default="",
+        description="What the last fit's capture leaves open, one trade-off per line, in words")
+    show_check_parameters: bpy.props.BoolProperty(
+        name="Parameters and Intervals", default=False,
+        description="Show each fitted parameter with its interval, and what the capture leaves open")
     # Job state: read from this Blender session's background fit, never stored in the .blend (a file saved
     # while a fit ran reopens idle). ``last_result`` is what became of the last fit, kept with the file.
     running: bpy.props.BoolProperty(name="Running", get=_get_running,

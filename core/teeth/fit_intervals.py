@@ -316,11 +316,26 @@ def calibration(report: dict, truth: TeethScene) -> dict:
             "outside_undetermined": open_missed, "outside_determined": missed, "per_parameter": rows}
 
 
-def summary(report: dict, limit: int = 2) -> str:
-    """One line for the panel: how many parameters the capture determines, and the first open combinations."""
+def summary(report: dict) -> str:
+    """One line for the panel: how many parameters the capture determines."""
     n = len(report["parameters"])
-    text = f"{report['determined_count']} of {n} parameters determined (2-sigma intervals in fit_report.json)"
-    opened = report["undetermined"][:limit]
-    if opened:
-        text += "; open: " + "; ".join(" with ".join(o["parameters"]) for o in opened)
+    k = report["determined_count"]
+    text = f"The capture determines {k} of {n} parameters"
+    if k < n:
+        text += f"; {n - k} it leaves open span the literature's range"
     return text
+
+
+def _unit(name: str) -> str:
+    return " /mm" if ".sigma_" in name else ""
+
+
+def parameter_lines(report: dict) -> list[str]:
+    """One line per parameter for the panel, in words: 'tooth0 enamel scattering (red): 0.79 /mm, 0.7-0.9
+    (measured)' or '... 0.79 /mm, open: 0.15-30 (literature)'."""
+    lines = []
+    for p in report["parameters"]:
+        lo, hi = p["interval_2sigma"]
+        where = "measured" if p["determined"] else "open: the literature's range"
+        lines.append(f"{p['words']}: {p['value']:.3g}{_unit(p['name'])}, {lo:.3g} to {hi:.3g} ({where})")
+    return lines

@@ -422,3 +422,49 @@ def test_apply_fit_result_renders_what_teeth_render_renders(addon_module, tmp_pa
             for i in range(len(fit.teeth))]
     print("Apply Fit Result vs teeth render, per tooth and channel:", np.round(errs, 4).tolist())
     assert max(e.max() for e in errs) <= 0.03, errs
+
+
+def test_panel_lists_each_parameter_with_its_interval_in_words(addon_module, tmp_path):
+    """A fit report with intervals: the panel's fold-out lists every parameter in words with its value, unit and
+    interval, measured or open, then what the capture leaves open; folded, it draws none of them."""
+    import json
+    from types import SimpleNamespace
+
+    from material_structures.addon.teeth.operators import show_fit_check
+    from material_structures.core.teeth.fit_intervals import intervals_from_information
+
+    names = ["tooth0.enamel.sigma_s[0]", "tooth0.enamel.sigma_a[0]", "tooth0.enamel.g1"]
+    intervals = intervals_from_information(np.diag([400.0, 400.0, 1e-4]), names, [0.1, 0.1, 0.05], [0.8, 0.03, 0.6])
+    out = str(tmp_path / "fit")
+    os.makedirs(out)
+    with open(os.path.join(out, "fit_report.json"), "w") as f:
+        json.dump({"held_out": {"lights": []}, "intervals": intervals}, f)
+    fs = bpy.context.scene.ms_teeth_fit
+    show_fit_check(fs, out)
+    assert fs.check_intervals == ("The capture determines 0 of 3 parameters; 3 it leaves open span the "
+                                  "literature's range")
+    lines = fs.check_parameters.splitlines()
+    assert lines[0].startswith("tooth0 enamel scattering (red): 0.8 /mm, 0.15 to ")
+    assert lines[2].startswith("tooth0 enamel forward phase lobe g1: 0.6, 0.254 to 0.946")  # 0.6 +- 2 sd0
+    assert all(line.endswith("(open: the literature's range)") for line in lines)
+    assert "tooth0 enamel scattering and its phase function trade off" in fs.check_open
+
+    class Layout:  # records the labels the Teeth panel draws
+        def __init__(self):
+            self.labels = []
+
+        def label(self, text="", **kw):
+            self.labels.append(text)
+
+        def __getattr__(self, name):
+            return lambda *a, **kw: self
+
+    drawn = {}
+    for shown in (False, True):
+        fs.show_check_parameters = shown
+        layout = Layout()
+        bpy.types.VIEW3D_PT_material_structures_teeth.draw(SimpleNamespace(layout=layout), bpy.context)
+        drawn[shown] = " ".join(layout.labels)
+    assert "scattering (red)" not in drawn[False] and fs.check_intervals in drawn[False]
+    assert "tooth0 enamel scattering (red): 0.8 /mm" in drawn[True] and "Left open by the capture:" in drawn[True]
+    assert "phase function trade off" in drawn[True]

@@ -17,6 +17,7 @@ from material_structures.core.teeth.fit_intervals import (
     intervals_from_information,
     literature_range,
     parameter_intervals,
+    parameter_lines,
     prior_covariance,
     summary,
 )
@@ -205,4 +206,10 @@ def test_the_report_on_a_small_capture():
         assert p["interval_from"] == "capture" if p["determined"] else p["interval_from"].startswith("literature")
     assert rep["undetermined"] and all("trade off" in u["text"] or "not measured" in u["text"]
                                        for u in rep["undetermined"])
-    assert summary(rep).startswith(f"{rep['determined_count']} of {len(rep['parameters'])} parameters determined")
+    assert summary(rep).startswith(f"The capture determines {rep['determined_count']} of {len(rep['parameters'])} "
+                                   "parameters")
+    lines = parameter_lines(rep)  # the panel's list, in words, with the unit and where each interval comes from
+    assert len(lines) == len(rep["parameters"])
+    first = rep["parameters"][0]
+    assert lines[0].startswith(f"{first['words']}: ") and " /mm, " in lines[0]
+    assert lines[0].endswith("(measured)" if first["determined"] else "(open: the literature's range)")
