@@ -39,6 +39,7 @@ def _log(msg: str) -> None:
 def _capture(name: str, work: str):
     """The truth's capture as ``bench teeth-extrapolation`` renders it (reused from a kept folder)."""
     from ..core.teeth.capture import Capture, default_rig
+    from ..core.teeth.capture_outliers import clamp_bright_outliers
     from ..core.teeth.mitsuba_capture import render_capture_mitsuba
     from ..core.teeth.synthetic import scene_target
     from . import teeth_extrapolation as T
@@ -53,7 +54,7 @@ def _capture(name: str, work: str):
         cap.save(cap_dir, truth.to_dict())
         with open(os.path.join(cap_dir, T.CAPTURE_IDENTITY), "w") as f:
             json.dump(identity, f)
-    return truth, Capture.load(cap_dir)
+    return truth, clamp_bright_outliers(Capture.load(cap_dir))[0]  # the capture as ``teeth fit`` reads it
 
 
 def teeth_start_trials() -> dict:

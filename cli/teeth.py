@@ -432,6 +432,7 @@ def run_fit(args: argparse.Namespace) -> int:
     from ..core.folder_lock import FolderLock
     from ..core.json_io import save_json
     from ..core.teeth.capture import Capture, split_camera
+    from ..core.teeth.capture_outliers import clamp_bright_outliers
     from ..core.teeth.fit_checkpoint import load_state
     from ..core.teeth.fit_report import held_out_check, plot_loss
     from ..core.teeth.optimise import fit, held_out_light_ids, light_angles_deg
@@ -439,7 +440,7 @@ def run_fit(args: argparse.Namespace) -> int:
     from ..core.teeth.synthetic import perturbed_start, scene_target
 
     t_start = time.perf_counter()
-    cap = Capture.load(args.capture)
+    cap, outliers = clamp_bright_outliers(Capture.load(args.capture))  # the fit's capture model: no frozen spikes
     scene_path = args.scene or os.path.join(args.capture, "scene.json")
     scene = load_scene(scene_path)
     if len(cap.cameras) == 0 or len(cap.lights) == 0:
@@ -545,7 +546,7 @@ def run_fit(args: argparse.Namespace) -> int:
         check["light_angles_deg"] = [round(float(a), 2) for a in angles[held_out]]
         check["training_cone_deg"] = round(float(np.delete(angles, held_out).max()), 2)
     report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,
-              "held_out": check}
+              "held_out": check, "capture_outliers": outliers}
     if cam_cap is not None:
         if as_json:
             _event(progress="status", message=f"checking the fit from the held-out camera {fs.held_out_camera}")

@@ -131,6 +131,7 @@ def test_fit_starts_from_the_literature_search(tmp_path):
     report = json.loads((fit_dir / "fit_report.json").read_text())
     assert report["start_trials"] == trials and trials["iterations"] == [1, 1, 1] and report["iterations"] == 1
     assert json_schema.errors(report, "teeth-fit-report") is None  # core/schemas/teeth-fit-report.schema.json
+    assert report["capture_outliers"]["values"] >= 0 and report["capture_outliers"]["noise_sd"] > 0
     # what the capture determines: an entry per parameter, an interval from the capture exactly where determined
     iv = report["intervals"]
     # enamel, dentin, gums: 6 sigma_s/sigma_a and 3 phase parameters each; 3 dentin coefficients
