@@ -19,7 +19,7 @@ scattering sigma_s and the absorption sigma_a 10 % up (a step of 0.1 in their lo
 is not the photographs' renderer, a stochastic fit short of its minimum), the residual is evidence the noise
 alone understates: F is divided by the fit's reduced chi-square b = max(1, chi2 / values) (the Birge ratio,
 ``sensitivity.capture_sensitivity``'s ``reduced_chi2``). On the Mitsuba captures of ``bench
-teeth-extrapolation`` b is 4-13.
+teeth-extrapolation`` b is 1.4-4.8 (4-13 before ``teeth fit`` clamped their isolated bright values).
 
 **The literature's range as the prior.** F alone has no bound along the combinations the capture leaves open.
 The values reported for enamel and dentin span sigma_t 0.3-30 / mm, albedo 0.5-0.999 and g 0.3-0.9 (thesis
