@@ -53,14 +53,15 @@ def clamp_bright_outliers(capture: Capture) -> tuple[Capture, dict]:
     out = np.array(images, copy=True)
     clamped = 0
     removed = 0.0
-    for c in range(images.shape[0]):  # one camera at a time: the nine shifted copies of one camera's images
-        im = images[c].astype(np.float64)
-        med = median3x3(im)
-        bound = (med + OUTLIER_SIGMAS * sd + OUTLIER_RELATIVE * med).astype(images.dtype)  # in the images' type
-        over = images[c] > bound
-        clamped += int(over.sum())
-        removed += float((im - bound)[over].sum())
-        out[c] = np.where(over, bound, images[c])
+    for c in range(images.shape[0]):  # one image at a time: its nine shifted copies, whatever the capture's size
+        for li in range(images.shape[1]):
+            im = images[c, li].astype(np.float64)
+            med = median3x3(im)
+            bound = (med + OUTLIER_SIGMAS * sd + OUTLIER_RELATIVE * med).astype(images.dtype)  # the images' type
+            over = images[c, li] > bound
+            clamped += int(over.sum())
+            removed += float((im - bound)[over].sum())
+            out[c, li] = np.where(over, bound, images[c, li])
     total = float(np.sum(images, dtype=np.float64))
     report = {"values": clamped, "share": clamped / images.size, "light_share": removed / total if total > 0 else 0.0,
               "noise_sd": sd}
