@@ -34,7 +34,7 @@ from ..errors import UserError
 from .capture import Capture
 from .compiled_scene import CompiledScene
 from .parameterisation import albedo_from_kappa
-from .path_tracer import RenderSettings, render, traced_tiles, traced_values
+from .path_tracer import RenderSettings, render, traced_tile_sums, traced_tiles, traced_values
 from .scene import TeethScene, VolumeMaterial
 
 SIGMA_RANGE_MM = (0.3, 30.0)
@@ -79,9 +79,7 @@ def paired_table_errors(r1: np.ndarray, r2: np.ndarray, f: np.ndarray, scale_inv
 
 def _tile_sums(values: np.ndarray, tile_of: np.ndarray, n_tiles: int) -> np.ndarray:
     """(n_light, n_rows, 3) traced values summed per tile (``path_tracer.traced_tiles``): (n_light * n_tiles, 3)."""
-    out = np.zeros((values.shape[0], n_tiles, 3))
-    np.add.at(out, (slice(None), tile_of), values)
-    return out.reshape(-1, 3)
+    return traced_tile_sums(values, tile_of, n_tiles).reshape(-1, 3)
 
 
 # the model's own surface transmission (the literature tabulates it no more than the second phase lobe,

@@ -147,6 +147,14 @@ def traced_tiles(pixels: list[np.ndarray], height: int, width: int, block: int) 
     return tile_of, len(tiles)
 
 
+def traced_tile_sums(values: np.ndarray, tile_of: np.ndarray, n_tiles: int) -> np.ndarray:
+    """(n_light, rows, C) traced values (``traced_values``) summed per tile of ``traced_tiles``:
+    (n_light, n_tiles, C)."""
+    out = np.zeros((values.shape[0], n_tiles, values.shape[2]))
+    np.add.at(out, (slice(None), tile_of), values)
+    return out
+
+
 def _accumulate(g: np.ndarray, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, w: np.ndarray) -> None:
     """g[cols[k, j]] += sum_c vals[k, j, c] * w[rows[k], c]."""
     if len(rows) == 0:

@@ -31,7 +31,7 @@ from .capture import Capture
 from .compiled_scene import CompiledScene
 from .dentin_shape_gradient import shape_columns, shape_ends
 from .param_vector import ParamLayout, scene_to_vector, volume_pairs
-from .path_tracer import RenderSettings, render, traced_tiles, traced_values
+from .path_tracer import RenderSettings, render, traced_tile_sums, traced_tiles, traced_values
 from .scene import TeethScene
 
 
@@ -99,7 +99,7 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     s1 = None
     s2 = np.zeros((k, k))  # sum over passes of the pass's own information, the bias of s1 s1^T
     img_sum = img_sq = 0.0
-    cap_tiles = None if capture.images is None else _tile_sums(traced_values(capture.images, pixels), tile_of,
+    cap_tiles = None if capture.images is None else traced_tile_sums(traced_values(capture.images, pixels), tile_of,
                                                                n_tiles)
     res_sum, res_sq = 0.0, 0.0  # sums over passes of (T_i - C) and its square, for the reduced chi-square
     for i in range(passes):
@@ -123,7 +123,7 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
         img_sum = img_sum + vals
         img_sq = img_sq + vals * vals
         if cap_tiles is not None:
-            res = _tile_sums(vals, tile_of, n_tiles) - cap_tiles
+            res = traced_tile_sums(vals, tile_of, n_tiles) - cap_tiles
             res_sum, res_sq = res_sum + res, res_sq + res * res
     if noise_variance is None:
         var1 = np.mean((img_sq - img_sum * img_sum / passes) / (passes - 1))  # pooled 1-spp variance
@@ -138,12 +138,6 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     return {"chi2": np.diag(info).copy(), "information": info, "noise_variance": float(noise_variance),
             "tiles": int(n_tiles), "reduced_chi2": reduced}
 
-
-def _tile_sums(values: np.ndarray, tile_of: np.ndarray, n_tiles: int) -> np.ndarray:
-    """(n_light, rows, 3) traced values summed per tile: (n_light, n_tiles, 3)."""
-    out = np.zeros((values.shape[0], n_tiles, values.shape[2]))
-    np.add.at(out, (slice(None), tile_of), values)
-    return out
 
 
 def cramer_rao_std(information: np.ndarray) -> np.ndarray:
