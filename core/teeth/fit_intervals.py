@@ -303,16 +303,16 @@ def calibration(report: dict, truth: TeethScene) -> dict:
     for p in report["parameters"]:
         value = _value(truth, layout, p["name"])
         lo_hi = p["interval_2sigma"]
+        determined = bool(p.get("determined", lo_hi is not None))  # an older report: determined = has an interval
         hit = lo_hi is not None and min(lo_hi) <= value <= max(lo_hi)
         inside += hit
         if not hit:
-            (missed if p.get("determined", lo_hi is not None) else open_missed).append(p["name"])
+            (missed if determined else open_missed).append(p["name"])
         rows.append({"name": p["name"], "truth": value, "fitted": p["value"], "interval_2sigma": lo_hi,
-                     "determined": bool(p.get("determined", lo_hi is not None)), "inside": bool(hit)})
+                     "determined": determined, "inside": bool(hit)})
     n = len(rows)
     return {"inside_share": inside / n if n else float("nan"), "parameters": n, "inside": int(inside),
-            "undetermined": [p["name"] for p in report["parameters"] if not p.get("determined", p["interval_2sigma"]
-                                                                                  is not None)],
+            "undetermined": [r["name"] for r in rows if not r["determined"]],
             "outside_undetermined": open_missed, "outside_determined": missed, "per_parameter": rows}
 
 
