@@ -88,7 +88,7 @@ def _directions(scene: TeethScene, layout: ParamLayout) -> tuple[list[str], np.n
     steps = [0.1 if (".sigma_s[" in n or ".sigma_a[" in n) else G_STEP for n in names]
     rows = list(rows)
     for e in layout.entries:
-        if e.kind in ("g", "beta"):
+        if e.kind in ("g", "tooth_g1", "beta"):
             d = np.zeros(layout.size)
             d[e.start] = G_STEP
             names.append(e.name)
@@ -183,6 +183,8 @@ def _valid_range(name: str) -> tuple[float, float]:
     """Where an interval is clipped: the parameter's valid values."""
     if ".sigma_" in name:
         return 0.0, float("inf")
+    if name.endswith(".g1") and not name.startswith("gums."):
+        return RANGES["tooth_g1"]  # the fit keeps a tooth's forward lobe within the literature's range
     return RANGES["beta"] if name.endswith(".beta") else RANGES["c"] if ".c[" in name else RANGES["g"]
 
 

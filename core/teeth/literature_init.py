@@ -33,6 +33,7 @@ import numpy as np
 from ..errors import UserError
 from .capture import Capture
 from .compiled_scene import CompiledScene
+from .param_vector import TOOTH_G1_RANGE
 from .parameterisation import albedo_from_kappa
 from .path_tracer import RenderSettings, render, traced_tile_sums, traced_tiles, traced_values
 from .scene import TeethScene, VolumeMaterial
@@ -41,7 +42,7 @@ SIGMA_RANGE_MM = (0.3, 30.0)
 REFINE_KEEP = 3  # table points per g and channel rendered again (``literature_starts``)
 REFINE_LIGHTS = 12
 ALBEDO_RANGE = (0.5, 0.999)
-G_VALUES = (0.3, 0.6, 0.9)
+G_VALUES = (TOOTH_G1_RANGE[0], 0.6, TOOTH_G1_RANGE[1])
 
 
 def literature_table(n_sigma: int = 10, n_albedo: int = 8) -> tuple[np.ndarray, np.ndarray]:

@@ -80,10 +80,12 @@ def test_intervals_of_a_known_information_matrix():
         rep = intervals_from_information(np.array([[f * 8.0 / sd0 ** 2]]), names, steps, [0.6])
         assert rep["parameters"][0]["determined"] is det
         assert rep["parameters"][0]["narrowing"] == pytest.approx(1 / np.sqrt(f * 8 + 1), rel=1e-12)
-    # nothing measured: the literature's range (the hull with value +- 2 sd0, clipped to the valid range)
-    (p,) = intervals_from_information(np.zeros((1, 1)), names, steps, [0.8])["parameters"]
-    assert not p["determined"] and p["interval_from"].startswith("literature range")
-    assert p["interval_2sigma"] == pytest.approx([0.3, min(0.8 + 2 * 0.6 / np.sqrt(12), 0.95)], abs=1e-12)
+    # nothing measured: the literature's range (the hull with value +- 2 sd0, clipped to the valid range, for a
+    # tooth's g1 the literature's 0.3-0.9 the fit keeps to; the gums' g1 the phase function's -0.9-0.95)
+    for name, top in (("tooth0.enamel.g1", 0.9), ("gums.g1", 0.95)):
+        (p,) = intervals_from_information(np.zeros((1, 1)), [name], steps, [0.8])["parameters"]
+        assert not p["determined"] and p["interval_from"].startswith("literature range")
+        assert p["interval_2sigma"] == pytest.approx([0.3, min(0.8 + 2 * 0.6 / np.sqrt(12), top)], abs=1e-12)
     # a relative step: sigma_s and sigma_a intervals are value * exp(+-2 sd LOG_STEP)
     pair = ["tooth0.enamel.sigma_s[0]", "tooth0.enamel.sigma_a[0]"]
     info = np.diag([400.0, 100.0])

@@ -139,3 +139,37 @@ def test_optimiser_bounds_are_the_valid_ranges():
     assert np.any(yc != y)
     np.testing.assert_allclose(from_optimiser(yc, lay), from_optimiser(y, lay), rtol=1e-12)
     np.testing.assert_allclose(to_optimiser(from_optimiser(yc, lay), lay), yc, rtol=1e-9, atol=1e-9)
+
+
+def test_tooth_forward_lobe_keeps_to_the_literature_range():
+    """g1 of enamel and dentin is bounded by the literature's range (0.3-0.9, the span of the literature
+    search's g values); the gums' g1 keeps the phase function's range. A step past the bound lands on it."""
+    from material_structures.core.teeth.literature_init import G_VALUES
+    from material_structures.core.teeth.param_vector import (
+        RANGES,
+        TOOTH_G1_RANGE,
+        ParamLayout,
+        from_optimiser,
+        optimiser_bounds,
+        scene_to_vector,
+        to_optimiser,
+    )
+
+    scene = make_scene(n_teeth=2, resolution=8)
+    lay = ParamLayout(scene)
+    assert TOOTH_G1_RANGE == (0.3, 0.9)
+    assert (min(G_VALUES), max(G_VALUES)) == TOOTH_G1_RANGE
+    lo, hi = optimiser_bounds(lay)
+    for t in scene.teeth:
+        for part in ("enamel", "dentin"):
+            e = lay[f"{t.name}.{part}.g1"]
+            assert e.kind == "tooth_g1"
+            assert (lo[e.start], hi[e.start]) == TOOTH_G1_RANGE
+    if scene.gums is not None:
+        e = lay["gums.g1"]
+        assert (lo[e.start], hi[e.start]) == RANGES["g"] and RANGES["g"][0] < 0.0
+    x = scene_to_vector(scene, lay)
+    y = to_optimiser(x, lay)
+    i = lay["tooth0.dentin.g1"].start
+    y[i] = 0.1  # a step below the literature's range
+    assert from_optimiser(y, lay)[i] == 0.3
