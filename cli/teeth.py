@@ -1,6 +1,6 @@
 """``teeth``: synthetic captures, appearance fitting and rendering of the teeth model (chapter 5).
 
-    python -m material_structures teeth synth --out DIR [--teeth 2] [--width 96 --height 64] [--samples 16]
+    python -m material_structures teeth synth --out DIR [--teeth 2 | --smile] [--width 96 --height 64] [--samples 16]
     python -m material_structures teeth fit CAPTURE_DIR --out FIT_DIR [--iterations 300] [--resume]
     python -m material_structures teeth render SCENE_JSON CAPTURE_DIR --out DIR [--samples 16]
     python -m material_structures teeth sensitivity CAPTURE_DIR (--capture-samples N | --noise-variance V)
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 
 from ..core.errors import MissingFileError, UserError
@@ -46,8 +47,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="render this scene JSON (your own ground truth) instead of the built-in jaw section")
     s.add_argument("--teeth", type=between(1, 32, int), default=2,
                    help="number of teeth of the built-in jaw section (incisor, canine, premolar, molar)")
-    s.add_argument("--width", type=between(4, 16384, int), default=96, help="image width in pixels")
-    s.add_argument("--height", type=between(4, 16384, int), default=64, help="image height in pixels")
+    s.add_argument("--smile", action="store_true",
+                   help="render the built-in smile instead of the jaw section: 8 upper and 8 lower front teeth, "
+                        "gums and the oral cavity, every tooth with its own materials and dentin shape "
+                        "(--truth-seed); the cameras frame the arches")
+    s.add_argument("--truth-seed", type=seed, default=None,
+                   help="with --smile: the seed the teeth's materials and dentin shapes are drawn from "
+                        "(default 69)")
+    s.add_argument("--width", type=between(4, 16384, int), default=None,
+                   help="image width in pixels (default 96; with --smile 208, an upper central incisor about "
+                        "31 pixels across)")
+    s.add_argument("--height", type=between(4, 16384, int), default=None,
+                   help="image height in pixels (default 64; with --smile 128)")
     s.add_argument("--lights", type=between(1, 4096, int), default=54, help="number of lights (one image each)")
     s.add_argument("--cameras", type=between(1, 256, int), default=3, help="number of cameras")
     s.add_argument("--samples", type=between(1, 1 << 24, int), default=16,
@@ -143,6 +154,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run_synth(args: argparse.Namespace) -> int:
     from ..core.teeth.capture import default_rig
     from ..core.teeth.scene import load_scene
+    from ..core.teeth.smile import SMILE_CAPTURE_SIZE, SMILE_TRUTH_SEED, smile_framing, smile_scene, smile_truth
     from ..core.teeth.synthetic import make_scene, render_capture, scene_target
 
     if args.out_positional is not None:
@@ -155,16 +167,27 @@ def run_synth(args: argparse.Namespace) -> int:
     if args.out is None:
         raise UsageError("teeth synth: the following arguments are required: --out")
     refuse_unwritable_folder(args.out)
-    if args.scene is not None:
-        scene = load_scene(args.scene)
-        if not scene.teeth:
-            raise UserError(f"{args.scene} has no teeth to render")
+    if args.smile and args.scene is not None:
+        raise UsageError("teeth synth: give --smile or --scene, not both")
+    if args.truth_seed is not None and not args.smile:
+        raise UsageError("teeth synth: --truth-seed chooses the teeth of --smile; add --smile")
+    size = SMILE_CAPTURE_SIZE if args.smile else (96, 64)
+    width, height = args.width or size[0], args.height or size[1]
+    if args.smile:
+        truth_seed = SMILE_TRUTH_SEED if args.truth_seed is None else args.truth_seed
+        scene = smile_truth(smile_scene(resolution=args.mesh_resolution), seed=truth_seed)
+        target, fov = smile_framing(scene)
     else:
-        scene = make_scene(n_teeth=args.teeth, resolution=args.mesh_resolution)
-    span = max(12.0, 8.6 * len(scene.teeth) + 6.0)
-    fov = 2.0 * __import__("math").degrees(__import__("math").atan(0.5 * span / 300.0))
-    cams, lights = default_rig(target=scene_target(scene), width=args.width, height=args.height,
-                               n_lights=args.lights, n_cameras=args.cameras, fov_x_deg=fov)
+        if args.scene is not None:
+            scene = load_scene(args.scene)
+            if not scene.teeth:
+                raise UserError(f"{args.scene} has no teeth to render")
+        else:
+            scene = make_scene(n_teeth=args.teeth, resolution=args.mesh_resolution)
+        span = max(12.0, 8.6 * len(scene.teeth) + 6.0)
+        target, fov = scene_target(scene), 2.0 * math.degrees(math.atan(0.5 * span / 300.0))
+    cams, lights = default_rig(target=target, width=width, height=height, n_lights=args.lights,
+                               n_cameras=args.cameras, fov_x_deg=fov)
     if args.renderer == "mitsuba":
         from ..core.teeth.mitsuba_capture import import_mitsuba, render_capture_mitsuba
 

@@ -18,10 +18,10 @@ from .. import addon
 from ..addon.teeth.materials import group_node, new_teeth_material
 from ..addon.teeth.scene_build import add_camera, add_point_light, build_teeth_scene, configure_teeth_cycles
 from ..core.teeth.anatomy import make_anatomical_tooth
-from ..core.teeth.arch import build_arch, cavity_dome, gum_mesh, merge_meshes
 from ..core.teeth.capture import Camera, PointLight, default_rig
 from ..core.teeth.optimise import FitSettings, fit, plot_loss
-from ..core.teeth.scene import Gums, OralCavity, TeethScene, Tooth, VolumeMaterial
+from ..core.teeth.scene import TeethScene, Tooth, VolumeMaterial
+from ..core.teeth.smile import SMILE_LOWER_EDGE, SMILE_UPPER_EDGE, smile_scene
 from ..core.teeth.synthetic import (
     GROUND_TRUTH,
     make_scene,
@@ -31,27 +31,6 @@ from ..core.teeth.synthetic import (
 )
 from ..render import add_lamp
 from .registry import LibraryMaterial, LibraryScene, register_material, register_scene
-
-SMILE_UPPER_EDGE, SMILE_LOWER_EDGE = 0.0, -3.2  # incisal edges (mm): the mouth slightly open, as in the
-SMILE_OVERJET = 2.6  # thesis' captures (the volunteer bites on a rigid object); lower arch behind the upper
-
-
-def smile_scene(resolution: int = 40, lower: bool = True) -> TeethScene:
-    """The upper front teeth (central and lateral incisors, canines, first premolars, both sides) and, with
-    ``lower``, the lower ones, from ``core.teeth.anatomy`` on parabolic arches (``core.teeth.arch``), with
-    scalloped gums and papillae and a dark-red oral-cavity dome behind. Scene: mm, mouth facing +y, z up."""
-    jaws = [build_arch("upper", resolution=resolution, edge_z=SMILE_UPPER_EDGE)]
-    if lower:
-        jaws.append(build_arch("lower", resolution=resolution, edge_z=SMILE_LOWER_EDGE, y0=-SMILE_OVERJET))
-    teeth, gum_meshes = [], []
-    for placed, arch in jaws:
-        for t in placed:
-            teeth.append(Tooth(t.name, t.geometry.enamel, t.geometry.dentin, GROUND_TRUTH["enamel"],
-                               GROUND_TRUTH["dentin"], np.full((1, 1, 3), 0.95), np.zeros(3), kind=t.spec.kind))
-        gum_meshes.append(gum_mesh(placed, arch))
-    gums = Gums(merge_meshes(gum_meshes), GROUND_TRUTH["gums"], np.full((1, 1, 3), 0.9))
-    cavity = OralCavity(cavity_dome(), GROUND_TRUTH["cavity_albedo"])
-    return TeethScene(teeth, gums, cavity)
 
 
 def _light_and_camera(scene, target, width, height, span, lights):

@@ -27,9 +27,9 @@ RENDERS = {"render", "demo", "library", "fabric material", "teeth synth", "teeth
 # options where a negative value means something (coordinates, signed angles)
 NEGATIVE_OK = {"--light", "--angle-deg", "--rotation-deg", "--rotation"}
 # options where 0 means something (none of it, no tilt, seed 0, the first texel, ...)
-ZERO_OK = NEGATIVE_OK | {"--seed", "--noise", "--samples-background", "--spp-background", "--textured-iterations",
-                         "--held-out-lights", "--held-out-camera", "--texel", "--max-tilt-deg", "--max-tilt",
-                         "--view-deg"}
+ZERO_OK = NEGATIVE_OK | {"--seed", "--truth-seed", "--noise", "--samples-background", "--spp-background",
+                         "--textured-iterations", "--held-out-lights", "--held-out-camera", "--texel", "--max-tilt-deg",
+                         "--max-tilt", "--view-deg"}
 
 
 def _subparsers(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.ArgumentParser]]:
