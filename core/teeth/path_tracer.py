@@ -616,7 +616,9 @@ def _trace_chunk(tr: _Tracer, cameras, cam, pix, rng, lp, li, st: RenderSettings
         tri_x, t_x, cnt, end_tri, end_t, _ = tr.through(o, d, None, shadow=False)
         mseq = tr.media_sequence(med, d, tri_x)
         k = tri_x.shape[1]
-        in_medium = med != MED_AIR
+        # a flight from the air that crossed an index-matched surface entered a medium (only where volumes overlap:
+        # a tooth's root inside the gums, entered and left through the gums' surface): it is a flight in a medium
+        in_medium = (med != MED_AIR) | (np.any(tri_x >= 0, axis=1) if k else False)
         end_f = np.where(np.isfinite(end_t), end_t, 0.0)
         tb_s = np.concatenate([np.zeros((m_, 1)), np.where(tri_x >= 0, t_x, end_f[:, None]), end_f[:, None]], 1)
         lens_s = np.diff(tb_s, axis=1)

@@ -901,15 +901,20 @@ def _trace_path(geo, med, tex, job, o0, d0, seed_path, row, cam, pix, img_on, gr
         in_medium = m != MED_AIR
         # ---- free flight on the sampling scene (hero channel, balance heuristic over channels)
         tau_star = -np.log1p(-u0)
-        if in_medium:  # tau_cum: the optical depth before piece kstar
-            k, end_tri, end_t, scatter, nc = _walk_to_flight(geo, o, d, m, sigma_s, hero, tau_star, tri_x, t_x,
-                                                             meds, tau_cum, stack, wdist)
-        else:
+        scatter = False
+        nc = 0
+        if not in_medium:
             k, end_tri, end_t, _, nc = _walk(geo, o, d, m, False, np.inf, tri_x, t_x, meds, stack, wdist, buf_tri,
                                              buf_t)
-            scatter = False
             for c in range(3):
                 tau_cum[c] = 0.0
+            # an index-matched surface crossed from the air: only where volumes overlap (a tooth's root inside
+            # the gums, entered and left through the gums' surface), the flight entered a medium and is one
+            in_medium = k > 0
+        if in_medium:  # tau_cum: the optical depth before piece kstar
+            k, end_tri, end_t, scatter, nc_f = _walk_to_flight(geo, o, d, m, sigma_s, hero, tau_star, tri_x, t_x,
+                                                               meds, tau_cum, stack, wdist)
+            nc += nc_f
         casts += nc
         end_f = end_t if end_t < np.inf else 0.0
         kstar = k
