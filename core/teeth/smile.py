@@ -7,7 +7,8 @@
   behind. Scene: millimetres, mouth facing +y, z up. Every tooth has the given materials.
 * ``smile_truth``: that scene with each tooth's own enamel, dentin and dentin shape, drawn from ``seed``:
   translucency (sigma_t a factor 0.6-1.6 of the base, per tissue), shade (log10(1 - albedo) shifted by
-  -0.3..0.3 per channel: whiter or more yellow), phase functions (g1 0.4-0.8, inside the literature's range the
+  -0.2..0.2 in every channel, brighter or darker, plus -0.1..0.3 times (0, 0.5, 1) in red, green, blue: whiter
+  or more yellow), phase functions (g1 0.4-0.8, inside the literature's range the
   fit keeps to; g2 -0.35..0.05; beta 0.6-0.9) and dentin shape (each coefficient -0.3..0.3). The gums and the
   cavity keep the base's.
 * ``smile_framing``: the capture rig's target and horizontal field of view for the arches' width, and
@@ -54,9 +55,12 @@ def smile_scene(resolution: int = 40, lower: bool = True, materials: dict | None
     return TeethScene(teeth, gums, cavity)
 
 
+YELLOW = np.array([0.0, 0.5, 1.0])  # a yellower shade absorbs more blue than green, and no more red
+
+
 def _varied(base: VolumeMaterial, rng: np.random.Generator) -> VolumeMaterial:
     sigma_t = base.sigma_t * rng.uniform(0.6, 1.6)
-    kappa = kappa_from_albedo(base.albedo) + rng.uniform(-0.3, 0.3, 3)
+    kappa = kappa_from_albedo(base.albedo) + rng.uniform(-0.2, 0.2) + rng.uniform(-0.1, 0.3) * YELLOW
     albedo = np.clip(albedo_from_kappa(kappa), 0.5, 0.995)
     return VolumeMaterial(sigma_t, albedo, rng.uniform(0.4, 0.8), rng.uniform(-0.35, 0.05), rng.uniform(0.6, 0.9))
 

@@ -47,6 +47,10 @@ def test_smile_truth_gives_every_tooth_its_own_materials_and_shape(smile):
             assert np.allclose(ratio, ratio[0]) and 0.6 <= ratio[0] <= 1.6  # translucency, hue kept
             assert TOOTH_G1_RANGE[0] <= m.g1 <= TOOTH_G1_RANGE[1]
             assert np.all((m.albedo >= 0.5) & (m.albedo <= 0.995))
+            # the shade moves between white and yellow (never green): blue's shift - green's = green's - red's
+            d = np.log10(1 - m.albedo) - np.log10(1 - base.albedo)
+            if np.all((m.albedo > 0.5) & (m.albedo < 0.995)):
+                assert d[2] - d[1] == pytest.approx(d[1] - d[0], abs=1e-9) and -0.1 <= 2 * (d[1] - d[0]) <= 0.3
         assert np.all(np.abs(t.c) <= 0.3)
     # the gums and the cavity keep the base's; the input scene is left alone; the seed decides
     np.testing.assert_array_equal(truth.gums.material.sigma_t, GROUND_TRUTH["gums"].sigma_t)
