@@ -8,9 +8,8 @@
 * ``smile_truth``: that scene with each tooth's own enamel, dentin and dentin shape, drawn from ``seed``:
   translucency (sigma_t a factor 0.6-1.6 of the base, per tissue), shade (log10(1 - albedo) shifted by
   -0.2..0.2 in every channel, brighter or darker, plus -0.1..0.3 times (0, 0.5, 1) in red, green, blue: whiter
-  or more yellow), phase functions (g1 0.4-0.8, inside the literature's range the
-  fit keeps to; g2 -0.35..0.05; beta 0.6-0.9) and dentin shape (each coefficient -0.3..0.3). The gums and the
-  cavity keep the base's.
+  or more yellow), phase functions (g1 0.4-0.8, inside the literature's range the fit keeps to; g2 -0.35..0.05;
+  beta 0.6-0.9) and dentin shape (each coefficient -0.3..0.3). The gums and the cavity keep the base's.
 * ``smile_framing``: the capture rig's target and horizontal field of view for the arches' width, and
   ``SMILE_CAPTURE_SIZE``, the image size at which an upper central incisor spans at least
   ``INCISOR_MIN_PIXELS`` pixels across in the centre camera.
