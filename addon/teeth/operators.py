@@ -288,8 +288,16 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
         if not done:  # nothing was changed
             self.report({"ERROR"}, no_mapping_message(names))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Applied the fit: {', '.join(done)}")
+        self.report({"INFO"}, applied_message(done))
         return {"FINISHED"}
+
+
+def applied_message(done: list[str]) -> str:
+    """The status line of Apply Fit Result: each "fit tooth -> Blender tooth" up to three, else a count (a smile's 16
+    pairs would not fit the status bar)."""
+    if len(done) <= 3:
+        return f"Applied the fit: {', '.join(done)}"
+    return f"Applied the fit to {len(done)} teeth: {', '.join(done[:2])} and {len(done) - 2} more"
 
 
 class MS_OT_teeth_fit(bpy.types.Operator):

@@ -469,3 +469,14 @@ def test_panel_lists_each_parameter_with_its_interval_in_words(addon_module, tmp
     assert "scattering (red)" not in drawn[False] and fs.check_intervals in drawn[False]
     assert "tooth0 enamel scattering (red): 0.8 /mm" in drawn[True] and "Left open by the capture:" in drawn[True]
     assert "phase function trade off" in drawn[True]
+
+
+def test_apply_fit_result_says_what_it_did_in_one_short_line(addon_module):
+    """Up to three teeth each pair is listed; a smile's 16 become a count and the first two (a status-bar line)."""
+    from material_structures.addon.teeth.operators import applied_message
+
+    two = ["tooth0 -> tooth0 Enamel", "tooth1 -> tooth1 Enamel"]
+    assert applied_message(two) == "Applied the fit: tooth0 -> tooth0 Enamel, tooth1 -> tooth1 Enamel"
+    sixteen = [f"t{i} -> t{i} Enamel" for i in range(16)]
+    msg = applied_message(sixteen)
+    assert msg == "Applied the fit to 16 teeth: t0 -> t0 Enamel, t1 -> t1 Enamel and 14 more" and len(msg) < 100
