@@ -152,10 +152,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run_synth(args: argparse.Namespace) -> int:
-    from ..core.teeth.capture import default_rig
-    from ..core.teeth.scene import load_scene
-    from ..core.teeth.smile import SMILE_CAPTURE_SIZE, SMILE_TRUTH_SEED, smile_framing, smile_scene, smile_truth
-    from ..core.teeth.synthetic import make_scene, render_capture, scene_target
+    from ..core.teeth.synthetic import render_capture
 
     if args.out_positional is not None:
         import sys
@@ -167,6 +164,35 @@ def run_synth(args: argparse.Namespace) -> int:
     if args.out is None:
         raise UsageError("teeth synth: the following arguments are required: --out")
     refuse_unwritable_folder(args.out)
+    scene, cams, lights = synth_scene_and_rig(args)
+    if args.renderer == "mitsuba":
+        from ..core.teeth.mitsuba_capture import import_mitsuba, render_capture_mitsuba
+
+        scene = scene.copy()
+        scene.blend_spread = 1e-5  # Mitsuba's enamel/dentin boundary is sharp
+        _, variant = import_mitsuba()
+        with _bar(len(lights), "synth (mitsuba)", "light") as bar:
+            cap = render_capture_mitsuba(scene, cams, lights, args.samples, args.seed, progress=bar.update,
+                                         variant=variant)
+        how = (f" rendered by Mitsuba 3 {variant} (volpath, all bounces, {args.samples} spp per pixel; blend spread "
+               "1e-5 mm)")
+    else:
+        with _bar(2 * len(lights), "synth", "light-pass") as bar:
+            cap = render_capture(scene, cams, lights, args.samples, args.samples_background, args.seed,
+                                 progress=bar.update)
+        how = ""
+    cap.save(args.out, scene.to_dict())
+    print(f"wrote {len(cams)} x {len(lights)} images and masks{how} to {args.out}")
+    return 0
+
+
+def synth_scene_and_rig(args: argparse.Namespace):
+    """``teeth synth``'s ground truth and rig from its options: (scene, cameras, lights)."""
+    from ..core.teeth.capture import default_rig
+    from ..core.teeth.scene import load_scene
+    from ..core.teeth.smile import SMILE_CAPTURE_SIZE, SMILE_TRUTH_SEED, smile_framing, smile_scene, smile_truth
+    from ..core.teeth.synthetic import make_scene, scene_target
+
     if args.smile and args.scene is not None:
         raise UsageError("teeth synth: give --smile or --scene, not both")
     if args.truth_seed is not None and not args.smile:
@@ -188,25 +214,7 @@ def run_synth(args: argparse.Namespace) -> int:
         target, fov = scene_target(scene), 2.0 * math.degrees(math.atan(0.5 * span / 300.0))
     cams, lights = default_rig(target=target, width=width, height=height, n_lights=args.lights,
                                n_cameras=args.cameras, fov_x_deg=fov)
-    if args.renderer == "mitsuba":
-        from ..core.teeth.mitsuba_capture import import_mitsuba, render_capture_mitsuba
-
-        scene = scene.copy()
-        scene.blend_spread = 1e-5  # Mitsuba's enamel/dentin boundary is sharp
-        _, variant = import_mitsuba()
-        with _bar(len(lights), "synth (mitsuba)", "light") as bar:
-            cap = render_capture_mitsuba(scene, cams, lights, args.samples, args.seed, progress=bar.update,
-                                         variant=variant)
-        how = (f" rendered by Mitsuba 3 {variant} (volpath, all bounces, {args.samples} spp per pixel; blend spread "
-               "1e-5 mm)")
-    else:
-        with _bar(2 * len(lights), "synth", "light-pass") as bar:
-            cap = render_capture(scene, cams, lights, args.samples, args.samples_background, args.seed,
-                                 progress=bar.update)
-        how = ""
-    cap.save(args.out, scene.to_dict())
-    print(f"wrote {len(cams)} x {len(lights)} images and masks{how} to {args.out}")
-    return 0
+    return scene, cams, lights
 
 
 PROGRESS_ENV = "MATERIAL_STRUCTURES_PROGRESS"  # "json": progress as JSON lines on stdout, no bars

@@ -72,14 +72,40 @@ def test_smile_framing_shows_the_arches_and_a_central_incisor_30_pixels_across(s
             assert x.max() - x.min() >= INCISOR_MIN_PIXELS
 
 
-@pytest.mark.heavy
-def test_synth_smile_writes_the_truth_and_masks_every_tooth(tmp_path, capsys):
+def test_synth_smile_options_give_the_smile_truth_and_its_rig(tmp_path, capsys):
+    """``teeth synth --smile``: the truth of --truth-seed, 3 cameras framing the arches at the default 208 x 128;
+    one-line usage errors for --smile with --scene and for --truth-seed without --smile, before any work."""
+    from material_structures.cli import build_parser
+    from material_structures.cli.teeth import synth_scene_and_rig
+
+    args = build_parser().parse_args(["teeth", "synth", "--smile", "--truth-seed", "5", "--out", str(tmp_path / "c"),
+                                      "--mesh-resolution", "8"])
+    scene, cams, lights = synth_scene_and_rig(args)
+    truth = smile_truth(smile_scene(resolution=8), seed=5)
+    assert [t.name for t in scene.teeth] == [t.name for t in truth.teeth]
+    for w, t in zip(scene.teeth, truth.teeth, strict=True):
+        np.testing.assert_array_equal(w.enamel.sigma_t, t.enamel.sigma_t)
+        np.testing.assert_array_equal(w.c, t.c)
+    assert len(cams) == 3 and len(lights) == 54 and (cams[1].width, cams[1].height) == SMILE_CAPTURE_SIZE
+    target, fov = smile_framing(truth)
+    expected, _ = default_rig(target, *SMILE_CAPTURE_SIZE, fov_x_deg=fov)
+    np.testing.assert_allclose(cams[1].K, expected[1].K)
+    for args, words in ((["--smile", "--scene", str(tmp_path / "scene.json")], "not both"),
+                        (["--truth-seed", "3"], "add --smile")):
+        assert main(["teeth", "synth", "--out", str(tmp_path / "cap2"), *args]) == 2
+        err = capsys.readouterr().err
+        assert words in err and "Traceback" not in err
+    assert not (tmp_path / "cap2").exists()
+
+
+@pytest.mark.slow  # about 10 s (the gums' BVH): the options' part above runs in `make test`
+def test_synth_smile_writes_the_truth_and_masks_every_tooth(tmp_path):
     out = tmp_path / "cap"
     assert main(["teeth", "synth", "--smile", "--truth-seed", "5", "--out", str(out), "--width", "52", "--height",
                  "32", "--lights", "2", "--cameras", "3", "--samples", "1", "--samples-background", "0",
-                 "--mesh-resolution", "16"]) == 0
+                 "--mesh-resolution", "8"]) == 0
     written = load_scene(out / "scene.json")
-    truth = smile_truth(smile_scene(resolution=16), seed=5)
+    truth = smile_truth(smile_scene(resolution=8), seed=5)
     assert [t.name for t in written.teeth] == [t.name for t in truth.teeth]
     for w, t in zip(written.teeth, truth.teeth, strict=True):
         np.testing.assert_allclose(w.enamel.sigma_t, t.enamel.sigma_t, rtol=1e-12)
@@ -87,10 +113,3 @@ def test_synth_smile_writes_the_truth_and_masks_every_tooth(tmp_path, capsys):
     cap = Capture.load(out)
     assert cap.images.shape == (3, 2, 32, 52, 3)
     assert np.all(cap.masks.mean(axis=(1, 2)) > 0.1)  # teeth fill a sixth of each view at this framing
-    capsys.readouterr()
-    for args, words in ((["--smile", "--scene", str(out / "scene.json")], "not both"),
-                        (["--truth-seed", "3"], "add --smile")):
-        assert main(["teeth", "synth", "--out", str(tmp_path / "cap2"), *args]) == 2
-        err = capsys.readouterr().err
-        assert words in err and "Traceback" not in err
-    assert not (tmp_path / "cap2").exists()
