@@ -72,16 +72,16 @@ def test_smile_framing_shows_the_arches_and_a_central_incisor_30_pixels_across(s
             assert x.max() - x.min() >= INCISOR_MIN_PIXELS
 
 
-def test_synth_smile_options_give_the_smile_truth_and_its_rig(tmp_path, capsys):
+def test_synth_smile_options_give_the_smile_truth_and_its_rig(smile, tmp_path, capsys):
     """``teeth synth --smile``: the truth of --truth-seed, 3 cameras framing the arches at the default 208 x 128;
     one-line usage errors for --smile with --scene and for --truth-seed without --smile, before any work."""
     from material_structures.cli import build_parser
     from material_structures.cli.teeth import synth_scene_and_rig
 
     args = build_parser().parse_args(["teeth", "synth", "--smile", "--truth-seed", "5", "--out", str(tmp_path / "c"),
-                                      "--mesh-resolution", "8"])
+                                      "--mesh-resolution", "16"])
     scene, cams, lights = synth_scene_and_rig(args)
-    truth = smile_truth(smile_scene(resolution=8), seed=5)
+    truth = smile_truth(smile, seed=5)  # the fixture's smile is the same (mesh resolution 16)
     assert [t.name for t in scene.teeth] == [t.name for t in truth.teeth]
     for w, t in zip(scene.teeth, truth.teeth, strict=True):
         np.testing.assert_array_equal(w.enamel.sigma_t, t.enamel.sigma_t)
