@@ -12,8 +12,9 @@ m + ``OUTLIER_SIGMAS`` s + ``OUTLIER_RELATIVE`` m is set to that bound. The boun
 of a tooth holds at a pixel's scale (the relative term keeps bright edges), so only isolated spikes move.
 
 Measured on the three captures of ``bench teeth-extrapolation`` (docs/teeth-fit.md, "Isolated bright values are
-clamped"): the default fit predicts the novel camera and lights with median tooth-mean errors of 1.2 / 0.3 / 0.5 %
-against 2.6 / 0.4 / 1.2 % without the clamp, and 8 x 8 tiles within 0.3 points of the truth's own noise.
+clamped"): with every other default as it was then (g1 free), the fit predicted the novel camera and lights with
+median tooth-mean errors of 1.2 / 0.3 / 0.5 % against 2.6 / 0.4 / 1.2 % without the clamp, and 8 x 8 tiles within
+0.3 points of the truth's own noise.
 """
 
 from __future__ import annotations
