@@ -122,22 +122,24 @@ def test_open_combinations_are_named_in_words():
     assert [q["determined"] for q in neg["parameters"]] == [True, False]
 
 
-def test_a_tissue_with_an_open_phase_function_has_its_scattering_and_absorption_open():
-    """The similarity relation: the enamel's g1 open (information 1e-4), its sigma_s and sigma_a narrowed by the
-    local bound alone (400 each): both are named undetermined and get the literature's range, the trade-off is
-    named; the dentin, whose g1 is determined, keeps its scattering interval from the capture."""
-    names = ["tooth0.enamel.sigma_s[0]", "tooth0.enamel.sigma_a[0]", "tooth0.enamel.g1", "tooth0.dentin.sigma_s[0]",
-             "tooth0.dentin.g1"]
-    info = np.diag([400.0, 400.0, 1e-4, 400.0, 25.0])
-    rep = intervals_from_information(info, names, [0.1, 0.1, 0.05, 0.1, 0.05], [0.8, 0.03, 0.6, 1.5, 0.4])
+def test_a_tissue_with_an_open_phase_function_has_its_scattering_absorption_and_other_lobe_open():
+    """The similarity relation: the enamel's g1 open (information 1e-4), its sigma_s, sigma_a and g2 narrowed by
+    the local bound alone (400 each): all three are named undetermined and get the literature's range, the
+    trade-off is named; the dentin, whose g1 is determined, keeps its scattering interval from the capture."""
+    names = ["tooth0.enamel.sigma_s[0]", "tooth0.enamel.sigma_a[0]", "tooth0.enamel.g2", "tooth0.enamel.g1",
+             "tooth0.dentin.sigma_s[0]", "tooth0.dentin.g1"]
+    info = np.diag([400.0, 400.0, 400.0, 1e-4, 400.0, 25.0])
+    rep = intervals_from_information(info, names, [0.1, 0.1, 0.05, 0.05, 0.1, 0.05], [0.8, 0.03, -0.3, 0.6, 1.5,
+                                                                                       0.4])
     p = {q["name"]: q for q in rep["parameters"]}
-    assert [p[n]["determined"] for n in names] == [False, False, False, True, True]
+    assert [p[n]["determined"] for n in names] == [False, False, False, False, True, True]
+    assert p["tooth0.enamel.g2"]["interval_2sigma"] == list(literature_range("tooth0.enamel.g2"))
     for n in names[:2]:
         lo, hi = literature_range(n)
         assert p[n]["interval_2sigma"][0] <= lo and p[n]["interval_2sigma"][1] >= hi
         assert p[n]["interval_from"].startswith("literature range")
-    sd = 1.0 / np.sqrt(400.0 + 1.0 / prior_covariance(names[3:4], [0.1])[0, 0])
-    assert p[names[3]]["interval_2sigma"] == pytest.approx(1.5 * np.exp(np.array([-2, 2]) * sd * LOG_STEP),
+    sd = 1.0 / np.sqrt(400.0 + 1.0 / prior_covariance(names[4:5], [0.1])[0, 0])
+    assert p[names[4]]["interval_2sigma"] == pytest.approx(1.5 * np.exp(np.array([-2, 2]) * sd * LOG_STEP),
                                                            rel=1e-12)
     assert rep["determined_count"] == 2
     (alone, similarity) = rep["undetermined"]
