@@ -238,7 +238,13 @@ def build_grid_index(
         local = np.arange(rep.size) - np.repeat(np.cumsum(nn) - nn, nn)
         ix = ix0[rep] + local % wx[rep]
         iy = iy0[rep] + local // wx[rep]
-        keep = segment_rect_distance(seg[rep], ix * c, iy * c, c) <= r
+        # the cell's centre decides most pairs: the square lies within c / sqrt(2) of its centre, so a centre
+        # within r keeps the pair and one beyond r + c / sqrt(2) drops it; the exact test settles the rest
+        centre = point_segment_distance(np.stack([(ix + 0.5) * c, (iy + 0.5) * c], -1), seg[rep, :2],
+                                        seg[rep, 2:])
+        keep = centre <= r
+        edge = np.flatnonzero(~keep & (centre <= r + c * np.sqrt(0.5) * (1.0 + 1e-9)))
+        keep[edge] = segment_rect_distance(seg[rep[edge]], ix[edge] * c, iy[edge] * c, c) <= r
         reps.append(src[rep[keep]])
         cells.append((iy * nx + ix)[keep])
         kept += int(keep.sum())

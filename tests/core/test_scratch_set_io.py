@@ -153,3 +153,28 @@ def test_malformed_files_give_clear_errors(tmp_path):
         load_scratch_set(folder)
     with pytest.raises(ValueError, match="shape \\(M, 4\\)"):
         make_scratch_set(np.zeros((3, 3)), 1.0, 1.0, (100.0, 100.0))
+
+
+@pytest.mark.parametrize("radius", [12.5, 37.0, 260.0])
+def test_grid_index_is_the_exact_segment_square_test_of_every_pair(radius):
+    """The index (cells decided by their centres where that settles it) lists exactly the segments whose exact
+    distance to the cell's square is within the query radius, tested here for every (segment, cell) pair:
+    short and long segments, axis-parallel ones, and segments ending on cell corners. (A cell exactly at the
+    radius, a tie, can be left out: its candidate box stops there.)"""
+    from material_structures.core.scratch.scratch_set import build_grid_index, segment_rect_distance
+
+    rng = np.random.default_rng(4)
+    p0 = rng.uniform(0, 3000, (300, 2))
+    p1 = p0 + rng.normal(0, 400, (300, 2)) * rng.uniform(0.01, 1.0, (300, 1))
+    p1[:20, 1] = p0[:20, 1]  # horizontal
+    p1[20:40, 0] = p0[20:40, 0]  # vertical
+    p0[40:60] = np.round(p0[40:60] / 100.0) * 100.0  # on cell corners
+    seg = np.concatenate([p0, p1], 1)
+    c = 100.0
+    off, cnt, cells = build_grid_index(seg, (3000.0, 3000.0), c, radius, periodic=False, chunk_candidates=5000)
+    iy, ix = np.divmod(np.arange(30 * 30), 30)
+    for k in range(30 * 30):
+        exact = np.flatnonzero(segment_rect_distance(seg, np.full(300, ix[k] * c), np.full(300, iy[k] * c), c)
+                               <= radius)
+        listed = cells[off.flat[k]: off.flat[k] + cnt.flat[k]]
+        np.testing.assert_array_equal(listed, exact)
