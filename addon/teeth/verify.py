@@ -17,8 +17,11 @@ import time
 
 import numpy as np
 
+from ...core.teeth.synthetic import tooth_regions
 from ...render import dark_world, render_to_array, reset_scene
 from .scene_build import add_camera, add_point_light, build_teeth_scene, configure_teeth_cycles
+
+__all__ = ["check_scene", "compare", "cross_check", "render_core", "render_cycles", "tooth_regions"]
 
 BLUR = 8
 
@@ -37,23 +40,6 @@ def check_scene(n_teeth: int = 2, resolution: int = 20, width: int = 64, height:
     cam = Camera.look_at(target + np.array([0.0, dist, 0.1 * dist]), target, (0, 0, 1), fov, width, height, "check")
     light = PointLight(target + np.array([60.0, 150.0, 90.0]), np.full(3, 2.0e4))
     return ts, cam, light
-
-
-def tooth_regions(ts, cam) -> np.ndarray:
-    """(H, W) int: index of the tooth whose enamel every sub-pixel probe sees first, -1 elsewhere."""
-    from ...core.teeth.compiled_scene import KIND_DIELECTRIC, CompiledScene
-
-    cs = CompiledScene(ts)
-    n = len(ts.teeth)
-    jj, ii = np.meshgrid(np.arange(cam.width), np.arange(cam.height))
-    region = None
-    for dx, dy in ((0.5, 0.5), (0.02, 0.02), (0.98, 0.02), (0.02, 0.98), (0.98, 0.98)):
-        o, d = cam.rays(jj.ravel() + dx, ii.ravel() + dy)
-        tri, _ = cs.caster.first_hit(o, d)
-        t = np.maximum(tri, 0)
-        tid = np.where((tri >= 0) & (cs.kind[t] == KIND_DIELECTRIC) & (cs.tex_id[t] < n), cs.tex_id[t], -1)
-        region = tid if region is None else np.where(region == tid, region, -1)
-    return region.reshape(cam.height, cam.width)
 
 
 def render_core(ts, cam, light, spp: int, seed: int = 1, max_depth: int = 64) -> np.ndarray:

@@ -86,23 +86,40 @@ def scene_target(scene: TeethScene) -> np.ndarray:
     return 0.5 * (v.min(axis=0) + v.max(axis=0))
 
 
+_PROBES = ((0.5, 0.5), (0.02, 0.02), (0.98, 0.02), (0.02, 0.98), (0.98, 0.98))  # a pixel's centre and corners
+
+
+def _probe_teeth(cs: CompiledScene, n_teeth: int, cam: Camera):
+    """Per sub-pixel probe (``_PROBES``): the index of the tooth whose enamel the probe sees first, -1 where it
+    sees no tooth first, (H * W,) each."""
+    jj, ii = np.meshgrid(np.arange(cam.width), np.arange(cam.height))
+    for dx, dy in _PROBES:
+        o, d = cam.rays(jj.ravel() + dx, ii.ravel() + dy)
+        tri, _ = cs.caster.first_hit(o, d)
+        t = np.maximum(tri, 0)
+        yield np.where((tri >= 0) & (cs.kind[t] == KIND_DIELECTRIC) & (cs.tex_id[t] < n_teeth), cs.tex_id[t], -1)
+
+
 def tooth_masks(scene: TeethScene, cameras: list[Camera], compiled: CompiledScene | None = None) -> np.ndarray:
     """(n_cam, H, W) bool: pixels whose centre and four corners all see a tooth's enamel first."""
     cs = compiled or CompiledScene(scene)
-    n_teeth = len(scene.teeth)
     out = []
     for cam in cameras:
-        jj, ii = np.meshgrid(np.arange(cam.width), np.arange(cam.height))
         ok = np.ones(cam.height * cam.width, dtype=bool)
-        for dx, dy in ((0.5, 0.5), (0.02, 0.02), (0.98, 0.02), (0.02, 0.98), (0.98, 0.98)):
-            o, d = cam.rays(jj.ravel() + dx, ii.ravel() + dy)
-            tri, _ = cs.caster.first_hit(o, d)
-            good = tri >= 0
-            t = np.maximum(tri, 0)
-            good &= (cs.kind[t] == KIND_DIELECTRIC) & (cs.tex_id[t] < n_teeth)
-            ok &= good
+        for tid in _probe_teeth(cs, len(scene.teeth), cam):
+            ok &= tid >= 0
         out.append(ok.reshape(cam.height, cam.width))
     return np.array(out)
+
+
+def tooth_regions(scene: TeethScene, cam: Camera, compiled: CompiledScene | None = None) -> np.ndarray:
+    """(H, W) int: the index of the tooth whose enamel the pixel's centre and four corners all see first, -1
+    elsewhere (per-tooth means of a render)."""
+    cs = compiled or CompiledScene(scene)
+    region = None
+    for tid in _probe_teeth(cs, len(scene.teeth), cam):
+        region = tid if region is None else np.where(region == tid, region, -1)
+    return region.reshape(cam.height, cam.width)
 
 
 def render_capture(scene: TeethScene, cameras: list[Camera], lights: list, spp: int = 16,
