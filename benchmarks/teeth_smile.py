@@ -15,7 +15,8 @@ held out.
 Figures: ``upper_tooth_mean_rel_err_worst`` / ``_median`` over the 8 upper teeth, lights and channels, the
 truth's own (``truth_*``) beside them, per tooth the same, ``fit_seconds`` and the fit's own report.
 
-Environment: TEETH_SMILE_KEEP (a folder that keeps the capture and the fit; a later run reuses a capture made by
+Environment: TEETH_SMILE_KEEP (a folder that keeps the capture, the fit and ``held_out_camera.png``: capture |
+fit | difference under two of the checked lights; a later run reuses a capture made by
 the same command, and a finished fit of it, with its recorded time, instead of fitting again), TEETH_SMILE_LIGHT_STEP
 (every k-th light in the check; default 1, all 54), TEETH_SMILE_SYNTH_ARGS and TEETH_SMILE_FIT_ARGS (extra
 ``teeth synth`` and ``teeth fit`` arguments, for a short run checking the benchmark) and TEETH_SMILE_CAPTURE_SPP.
@@ -42,6 +43,7 @@ HELD_OUT_CAMERA = 0
 CHECK_SPP = 128
 CHECK_SEEDS = (6901, 6902)  # the truth again, the fit
 IDENTITY = "bench_identity.json"
+PICTURE = "held_out_camera.png"  # in the kept folder: capture | fit | 4 x difference, two lights, 2 x pixels
 
 
 def _log(msg: str) -> None:
@@ -141,6 +143,13 @@ def teeth_smile() -> dict:
         upper = [i for i in upper_all if (region == i).any()]  # a tooth the camera does not see: no figure
         fit_err = tooth_mean_errors(fit_img, truth_a, region, upper)
         floor = tooth_mean_errors(truth_b, truth_a, region, upper)
+        if keep:  # the README's picture: capture | fit | difference, the first and the middle checked light
+            from ..core.png_io import write_png
+            from ..core.teeth.fit_report import check_image
+
+            rows = [0, len(light_ids) // 2]
+            img = check_image(fit_img[None, rows], truth_a[None, rows], capture.masks[HELD_OUT_CAMERA][None])
+            write_png(os.path.join(keep, PICTURE), np.repeat(np.repeat(img, 2, axis=0), 2, axis=1))
         per_tooth = {truth.teeth[i].name: {
             "pixels": int((region == i).sum()),
             "fit_worst": float(fit_err[k].max()), "fit_median": float(np.median(fit_err[k])),

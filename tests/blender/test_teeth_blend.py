@@ -480,3 +480,44 @@ def test_apply_fit_result_says_what_it_did_in_one_short_line(addon_module):
     sixteen = [f"t{i} -> t{i} Enamel" for i in range(16)]
     msg = applied_message(sixteen)
     assert msg == "Applied the fit to 16 teeth: t0 -> t0 Enamel, t1 -> t1 Enamel and 14 more" and len(msg) < 100
+
+
+def test_smile_blender_bench_without_a_kept_fit_says_so_in_one_line(monkeypatch, tmp_path):
+    from material_structures.benchmarks.teeth_smile import teeth_smile_blender
+    from material_structures.core.errors import UserError
+
+    monkeypatch.setenv("TEETH_SMILE_KEEP", str(tmp_path))
+    with pytest.raises(UserError, match="set TEETH_SMILE_KEEP to the folder of a finished") as exc:
+        teeth_smile_blender()
+    assert "\n" not in str(exc.value)
+
+
+@pytest.mark.slow
+def test_smile_blender_bench_on_a_small_kept_smile(addon_module, monkeypatch, tmp_path):
+    """Nightly (about 2 minutes): ``bench teeth-smile-blender`` on a kept folder made here (a 1-light smile
+    capture of 52 x 32 pixels by the project's tracer; as the fit, its scene with every tooth's enamel 30 %
+    denser and other dentin coefficients): the median tooth's mean within 10 % of the core's at 64 spp, and
+    every tooth the camera sees has a figure."""
+    import subprocess
+    import sys
+
+    from material_structures.benchmarks.teeth_smile import teeth_smile_blender
+    from material_structures.core.teeth.scene import load_scene, save_scene
+
+    cap = tmp_path / "capture"
+    proc = subprocess.run([sys.executable, "-m", "material_structures", "teeth", "synth", "--smile", "--out",
+                           str(cap), "--lights", "1", "--width", "52", "--height", "32", "--samples", "1",
+                           "--mesh-resolution", "12"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    fit = load_scene(str(cap / "scene.json"))
+    for k, t in enumerate(fit.teeth):
+        t.enamel.sigma_t = t.enamel.sigma_t * 1.3
+        t.c = np.array([0.2, -0.1, 0.1]) * (1 if k % 2 else -1)
+    (tmp_path / "fit").mkdir()
+    save_scene(fit, str(tmp_path / "fit" / "scene_fit.json"))
+    monkeypatch.setenv("TEETH_SMILE_KEEP", str(tmp_path))
+    monkeypatch.setenv("TEETH_SMILE_BLENDER_SPP", "64")
+    out = teeth_smile_blender()
+    print("smile in Blender vs teeth render:", {k: out[k] for k in out if "rel_err" in k or "halves" in k})
+    assert len(out["per_tooth"]) >= 12
+    assert out["tooth_mean_rel_err_median"] <= 0.10, out

@@ -49,6 +49,10 @@ def test_a_short_run_end_to_end(monkeypatch, tmp_path):
                 "truth_upper_tooth_mean_rel_err_worst", "fit_seconds"):
         assert np.isfinite(first[key]) and first[key] > 0, key
     assert all(t["pixels"] > 0 for t in first["per_upper_tooth"].values())
+    from PIL import Image
+
+    with Image.open(tmp_path / "kept" / bench.PICTURE) as picture:  # 2 lights x 3 panels, pixels doubled
+        assert picture.size == (2 * (3 * 52 + 4), 2 * (2 * 32 + 2))
     calls.clear()
     second = bench.teeth_smile()
     assert calls == [] and second["fit_seconds"] == first["fit_seconds"]
