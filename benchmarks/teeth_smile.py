@@ -79,16 +79,17 @@ def _capture(cap_dir: str, spp: int, extra: list[str]) -> dict:
     return identity
 
 
-def _fit(cap_dir: str, fit_dir: str, capture_identity: dict, extra: list[str]) -> float:
-    """The default fit of the capture with the camera held out, in ``fit_dir``: kept where a finished fit of the
-    same capture and arguments is there (its recorded time), else fitted and timed. Returns its seconds."""
+def _fit(cap_dir: str, fit_dir: str, capture_identity: dict, extra: list[str]) -> float | None:
+    """The default fit of the capture with the camera held out, in ``fit_dir``: kept where a fit of the same
+    capture and arguments is there (its recorded time; None where the identity records none: the fit's own
+    ``seconds_this_run`` is read once its report is written), else fitted and timed. Returns its seconds."""
     args = ["--held-out-camera", str(HELD_OUT_CAMERA), *extra]
     identity = {"capture": capture_identity, "fit_args": args}
     kept = _read_json(os.path.join(fit_dir, IDENTITY))
     if kept is not None and kept.get("identity") == identity and os.path.isfile(
             os.path.join(fit_dir, "scene_fit.json")):
-        _log(f"the kept fit in {fit_dir} ({kept['seconds']:.0f} s)")
-        return float(kept["seconds"])
+        _log(f"the kept fit in {fit_dir}")
+        return kept.get("seconds")
     _log("teeth fit " + " ".join(args))
     t0 = time.perf_counter()
     _run(["teeth", "fit", cap_dir, "--out", fit_dir, "--no-progress", *args], "teeth fit")
@@ -128,7 +129,6 @@ def teeth_smile() -> dict:
         capture = Capture.load(cap_dir)
         truth = load_scene(os.path.join(cap_dir, "scene.json"))
         fitted = load_scene(os.path.join(fit_dir, "scene_fit.json"))
-        report = _read_json(os.path.join(fit_dir, "fit_report.json")) or {}
         cam = capture.cameras[HELD_OUT_CAMERA]
         light_ids = list(range(0, len(capture.lights), step))
         lights = [capture.lights[i] for i in light_ids]
@@ -138,6 +138,9 @@ def teeth_smile() -> dict:
         fit_img = render_capture_mitsuba(fitted, [cam], lights, spp=CHECK_SPP, seed=CHECK_SEEDS[1]).images[0]
         render_s = time.perf_counter() - t0
         truth_a = capture.images[HELD_OUT_CAMERA][light_ids]
+        report = _read_json(os.path.join(fit_dir, "fit_report.json")) or {}
+        if fit_seconds is None:
+            fit_seconds = report.get("seconds_this_run")
         region = tooth_regions(truth, cam)
         upper_all = [i for i, t in enumerate(truth.teeth) if t.name.startswith("upper")]
         upper = [i for i in upper_all if (region == i).any()]  # a tooth the camera does not see: no figure
