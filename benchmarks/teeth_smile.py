@@ -220,9 +220,10 @@ def teeth_smile_blender() -> dict:
 
     reset_scene()
     t0 = time.perf_counter()
-    assert bpy.ops.material_structures.teeth_import_scene(filepath=os.path.join(cap_dir, "scene.json")) == {
-        "FINISHED"}
-    assert bpy.ops.material_structures.teeth_apply_fit_file(filepath=fit_path) == {"FINISHED"}
+    if bpy.ops.material_structures.teeth_import_scene(filepath=os.path.join(cap_dir, "scene.json")) != {"FINISHED"}:
+        raise RuntimeError(f"Import Teeth Scene of {cap_dir}/scene.json did not finish")
+    if bpy.ops.material_structures.teeth_apply_fit_file(filepath=fit_path) != {"FINISHED"}:
+        raise RuntimeError(f"Apply Fit Result of {fit_path} did not finish")
     import_s = time.perf_counter() - t0
     scene = bpy.context.scene
     mm = next(o for o in scene.objects if o.ms_tooth.role == "ENAMEL").ms_tooth.mm_per_unit
