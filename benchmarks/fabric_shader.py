@@ -28,11 +28,9 @@ def _bpy():
 
 def _enable_addon():
     """Register the add-on's classes from this checkout (no extension repository needed)."""
-    bpy = _bpy()
-    from .. import addon
+    from ._blender import blender_with_addon
 
-    if not hasattr(bpy.types.Scene, "material_structures"):
-        addon.register()
+    blender_with_addon()
 
 
 KD, KS = (0.05, 0.03, 0.02), (0.7, 0.4, 0.3)  # render_patch_vs_core's defaults

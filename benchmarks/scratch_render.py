@@ -32,16 +32,9 @@ PLATE_CASES = (
 
 
 def _enable_addon():
-    from ..render.session import prepare_user_resources
+    from ._blender import blender_with_addon
 
-    prepare_user_resources()
-    import bpy
-
-    from .. import addon
-
-    if not hasattr(bpy.types.Scene, "material_structures"):
-        addon.register()
-    return bpy
+    return blender_with_addon()
 
 
 def _scene(bpy, name, plain, resolution, samples):

@@ -11,15 +11,9 @@ BLEND_SPP_CORE = 1024
 
 
 def teeth_cycles() -> dict:
-    from ..render.session import prepare_user_resources
+    from ._blender import blender_with_addon
 
-    prepare_user_resources()
-    import bpy
-
-    from .. import addon
-
-    if not hasattr(bpy.types.Object, "ms_tooth"):
-        addon.register()
+    bpy = blender_with_addon()
     from ..addon.teeth.verify import check_scene, compare, cross_check, render_core, render_cycles, tooth_regions
     from ..core.teeth.sigmoid_blend import DEFAULT_SPREAD_MM
 

@@ -190,7 +190,7 @@ def teeth_smile_blender() -> dict:
     import subprocess as sp
 
     from ..core.errors import UserError
-    from ..render.session import prepare_user_resources
+    from ._blender import blender_with_addon
 
     keep = os.environ.get("TEETH_SMILE_KEEP")
     fit_path = os.path.join(keep or "", "fit", "scene_fit.json")
@@ -198,13 +198,7 @@ def teeth_smile_blender() -> dict:
         raise UserError("bench teeth-smile-blender: set TEETH_SMILE_KEEP to the folder of a finished "
                         "bench teeth-smile run (it reads FOLDER/capture and FOLDER/fit/scene_fit.json)")
 
-    prepare_user_resources()
-    import bpy
-
-    from .. import addon
-
-    if not hasattr(bpy.types.Object, "ms_tooth"):
-        addon.register()
+    bpy = blender_with_addon()
     from ..addon.teeth.scene_build import add_camera, add_point_light, configure_teeth_cycles
     from ..core.exr_io import read_exr
     from ..core.teeth.capture import Capture
