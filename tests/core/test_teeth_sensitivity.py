@@ -180,3 +180,27 @@ def test_reduced_chi2_is_one_at_the_truth_and_grows_with_the_misfit(problem):
     # a capture without images has no residual to measure
     assert np.isnan(capture_sensitivity(sc, cap, D, passes=2, block=2, max_depth=5,
                                         capture_spp=spp)["reduced_chi2"])
+
+
+def test_lights_in_chunks_give_the_result_of_all_lights_at_once(problem, monkeypatch):
+    """A light's image and derivatives do not depend on the lights rendered with it, so a capture whose Jacobian
+    would not fit in memory is done a few lights at a time with the same result: one light per chunk here (the
+    smile's 51 lights at once held 23 GB). Every output, the dentin coefficients' renders included."""
+    import material_structures.core.teeth.sensitivity as sensitivity
+
+    sc, cap = problem
+    images = render(sc, cap.cameras, cap.lights, RenderSettings(spp=4, max_depth=5, seed=99)).images
+    shot = Capture(cap.cameras, cap.lights, images, cap.masks)
+    names, D = default_directions(sc)
+    D = D[[names.index(n) for n in ("tooth0.enamel.sigma_a[0]", "tooth0.dentin.sigma_s[1]", "tooth0.c[0]")]]
+
+    def run():
+        return capture_sensitivity(sc, shot, D, passes=3, block=4, max_depth=5, seed=2, capture_spp=4)
+    whole = run()
+    monkeypatch.setattr(sensitivity, "CHUNK_BYTES", 1)
+    chunked = run()
+    assert len(cap.lights) >= 3
+    np.testing.assert_allclose(chunked["information"], whole["information"], rtol=1e-9, atol=1e-12)
+    assert chunked["noise_variance"] == pytest.approx(whole["noise_variance"], rel=1e-12)
+    assert chunked["reduced_chi2"] == pytest.approx(whole["reduced_chi2"], rel=1e-9)
+    assert np.abs(whole["information"]).max() > 0
