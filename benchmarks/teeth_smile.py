@@ -7,8 +7,10 @@ held out.
 2. The fit: ``teeth fit CAPTURE --out FIT --held-out-camera 0`` with every other default (the left camera held
    out, as the thesis holds out its left one), timed.
 3. The check: Mitsuba renders the fitted scene under the held-out camera and every ``TEETH_SMILE_LIGHT_STEP``-th
-   light, and the truth again with another seed (the truth's own noise). Against the capture's images of that
-   camera, per upper front tooth (its pixels: those whose centre and corners see its enamel first,
+   light, and the truth again with another seed (the truth's own noise), at ``TEETH_SMILE_CHECK_SPP`` (default
+   128). Against the capture's images of that camera (or, where the check has more samples than the capture, a
+   third render of the truth at the check's samples, so that the capture's noise does not set the floor), per
+   upper front tooth (its pixels: those whose centre and corners see its enamel first,
    ``synthetic.tooth_regions``; at 208 x 128 the left camera sees 16 to 883 of each), the relative error of the
    tooth's mean per light and channel.
 
@@ -16,9 +18,9 @@ Figures: ``upper_tooth_mean_rel_err_worst`` / ``_median`` over the 8 upper teeth
 truth's own (``truth_*``) beside them, per tooth the same, ``fit_seconds`` and the fit's own report.
 
 Environment: TEETH_SMILE_KEEP (a folder that keeps the capture, the fit and ``held_out_camera.png``: capture |
-fit | difference under two of the checked lights; a later run reuses a capture made by
-the same command, and a finished fit of it, with its recorded time, instead of fitting again), TEETH_SMILE_LIGHT_STEP
-(every k-th light in the check; default 1, all 54), TEETH_SMILE_SYNTH_ARGS and TEETH_SMILE_FIT_ARGS (extra
+fit | difference under two of the checked lights; a later run reuses a capture made by the same command, and a
+finished fit of it, with its recorded time, instead of fitting again), TEETH_SMILE_LIGHT_STEP (every k-th light in
+the check; default 1, all 54), TEETH_SMILE_CHECK_SPP, TEETH_SMILE_SYNTH_ARGS and TEETH_SMILE_FIT_ARGS (extra
 ``teeth synth`` and ``teeth fit`` arguments, for a short run checking the benchmark) and TEETH_SMILE_CAPTURE_SPP.
 Progress on stderr. A full run: the capture about 25 minutes, the fit 1.5-2 hours on 2 cores, the check about 8
 minutes per 27 lights.
@@ -41,7 +43,7 @@ CAPTURE_SPP = 128
 CAPTURE_SEED = 690
 HELD_OUT_CAMERA = 0
 CHECK_SPP = 128
-CHECK_SEEDS = (6901, 6902)  # the truth again, the fit
+CHECK_SEEDS = (6901, 6902, 6903)  # the truth again, the fit, the truth as reference (a check above the capture's spp)
 IDENTITY = "bench_identity.json"
 PICTURE = "held_out_camera.png"  # in the kept folder: capture | fit | 4 x difference, two lights, 2 x pixels
 
@@ -116,6 +118,7 @@ def teeth_smile() -> dict:
     from ..core.teeth.synthetic import tooth_regions
 
     step = int(os.environ.get("TEETH_SMILE_LIGHT_STEP", "1"))
+    check_spp = int(os.environ.get("TEETH_SMILE_CHECK_SPP", CHECK_SPP))
     spp = int(os.environ.get("TEETH_SMILE_CAPTURE_SPP", CAPTURE_SPP))
     extra = shlex.split(os.environ.get("TEETH_SMILE_FIT_ARGS", ""))
     synth_extra = shlex.split(os.environ.get("TEETH_SMILE_SYNTH_ARGS", ""))
@@ -132,12 +135,17 @@ def teeth_smile() -> dict:
         cam = capture.cameras[HELD_OUT_CAMERA]
         light_ids = list(range(0, len(capture.lights), step))
         lights = [capture.lights[i] for i in light_ids]
-        _log(f"Mitsuba: the truth again and the fit, camera {cam.name!r} x {len(lights)} lights at {CHECK_SPP} spp")
+        against_capture = check_spp <= spp
+        _log(f"Mitsuba: the truth again{'' if against_capture else ' (twice)'} and the fit, camera {cam.name!r} x "
+             f"{len(lights)} lights at {check_spp} spp")
         t0 = time.perf_counter()
-        truth_b = render_capture_mitsuba(truth, [cam], lights, spp=CHECK_SPP, seed=CHECK_SEEDS[0]).images[0]
-        fit_img = render_capture_mitsuba(fitted, [cam], lights, spp=CHECK_SPP, seed=CHECK_SEEDS[1]).images[0]
+        truth_b = render_capture_mitsuba(truth, [cam], lights, spp=check_spp, seed=CHECK_SEEDS[0]).images[0]
+        fit_img = render_capture_mitsuba(fitted, [cam], lights, spp=check_spp, seed=CHECK_SEEDS[1]).images[0]
+        if against_capture:
+            truth_a = capture.images[HELD_OUT_CAMERA][light_ids]
+        else:
+            truth_a = render_capture_mitsuba(truth, [cam], lights, spp=check_spp, seed=CHECK_SEEDS[2]).images[0]
         render_s = time.perf_counter() - t0
-        truth_a = capture.images[HELD_OUT_CAMERA][light_ids]
         report = _read_json(os.path.join(fit_dir, "fit_report.json")) or {}
         if fit_seconds is None:
             fit_seconds = report.get("seconds_this_run")
@@ -146,7 +154,7 @@ def teeth_smile() -> dict:
         upper = [i for i in upper_all if (region == i).any()]  # a tooth the camera does not see: no figure
         fit_err = tooth_mean_errors(fit_img, truth_a, region, upper)
         floor = tooth_mean_errors(truth_b, truth_a, region, upper)
-        if keep:  # the README's picture: capture | fit | difference, the first and the middle checked light
+        if keep and against_capture:  # the README's picture: capture | fit | difference, the first and the middle light
             from ..core.png_io import write_png
             from ..core.teeth.fit_report import check_image
 
@@ -160,7 +168,8 @@ def teeth_smile() -> dict:
             for k, i in enumerate(upper)}
         return {
             "capture": identity["command"], "held_out_camera": cam.name, "check_lights": light_ids,
-            "check_spp": CHECK_SPP, "size": [cam.width, cam.height], "teeth": len(truth.teeth),
+            "check_spp": check_spp, "reference": "the capture" if against_capture else
+            f"the truth rendered again at {check_spp} spp", "size": [cam.width, cam.height], "teeth": len(truth.teeth),
             "upper_tooth_mean_rel_err_worst": float(fit_err.max()),
             "upper_tooth_mean_rel_err_median": float(np.median(fit_err)),
             "truth_upper_tooth_mean_rel_err_worst": float(floor.max()),
@@ -175,7 +184,7 @@ def teeth_smile() -> dict:
             "fit_determined": report.get("intervals", {}).get("determined_count")}
 
 
-BLENDER_SPP = 256
+BLENDER_SPP = 1024  # each side: the core's two halves then differ by 1.5 % at worst (3.5 % at 256)
 BLENDER_LIGHT = 0  # the capture's first light, near the mouth axis
 
 
@@ -186,7 +195,7 @@ def teeth_smile_blender() -> dict:
     camera under one light; ``teeth render`` of the same scene_fit.json at the same samples beside it. Figures:
     per tooth (every tooth the camera sees) and channel, |Cycles / core - 1| of the tooth's mean: worst and median
     over the upper teeth and over all; the core's two halves (its own noise) beside them. TEETH_SMILE_BLENDER_SPP
-    (default 256, each side)."""
+    (default 1024, each side)."""
     import subprocess as sp
 
     from ..core.errors import UserError

@@ -14,7 +14,10 @@ frontal camera), z up; upper crowns point down (incisal edges at z = ``upper_edg
   the teeth's labial envelope (thin at the margin, thicker over the roots: root eminences), the palatal /
   lingual face behind the teeth; the **gingival margin** follows each tooth's CEJ ``margin_above_cej`` mm
   crownward (the scalloped gum line, zenith at the labial centre) and rises between the teeth into
-  pointed **interdental papillae** where the neighbouring scallops meet (near the contact areas).
+  pointed **interdental papillae** where the neighbouring scallops meet (near the contact areas). The teeth
+  are cut out of it (``gums_around_teeth``): no root lies inside the gums' volume, every renderer sees the same
+  media (Cycles sums the media where volumes overlap; this project's tracer and Mitsuba take the medium of the
+  last surface crossed).
 * **oral cavity**: an opaque half-ellipsoid dome behind the teeth (Sec. 5.5.3's diffuse proxy), open at
   the front.
 """
@@ -332,7 +335,63 @@ def gum_mesh(teeth: list[PlacedTooth], arch: Arch, margin_above_cej: float = 1.0
     mesh = TriMesh(v_all, f, uv)
     if mesh.volume() < 0:
         mesh = TriMesh(v_all, f[:, [0, 2, 1]], uv[:, [0, 2, 1]])
-    return mesh
+    return gums_around_teeth(mesh, [t.geometry.enamel for t in teeth])
+
+
+GUM_GAP_MM = 0.05  # the teeth are cut out of the gums this far beyond their enamel: a film of air about 500 x the
+# tracer's ray offset (ray_queries.RAY_EPS) and a sixth of a smile capture's pixel, so no renderer confuses the
+# two surfaces
+
+
+def vertex_normals(mesh: TriMesh) -> np.ndarray:
+    """(V, 3) unit normals at the vertices: the sum of the adjacent faces' area-weighted normals."""
+    tri = mesh.triangles()
+    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n = np.zeros_like(mesh.vertices)
+    for k in range(3):
+        np.add.at(n, mesh.faces[:, k], face_n)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def gums_around_teeth(gums: TriMesh, enamels: list[TriMesh], gap: float = GUM_GAP_MM) -> TriMesh:
+    """The closed ``gums`` volume less every tooth (its enamel surface moved ``gap`` mm outwards along the vertex
+    normals): the roots sit in holes of the gums instead of inside their medium. A mesh boolean (manifold3d, exact
+    on closed meshes). The gums' per-corner UVs carry over (interpolated where a face was cut); the holes' walls get
+    UV (0.5, 0.5), as the sweep's end caps."""
+    import manifold3d
+
+    if gums.corner_uv is None:
+        raise ValueError("the gums need per-corner UVs")
+    # manifold3d keeps properties per vertex: one property vertex per distinct (vertex, UV) corner, and the ones
+    # that share a position declared merged, so the seams stay closed
+    corners = gums.faces.reshape(-1)
+    keys = np.concatenate([corners[:, None].astype(np.float64), gums.corner_uv.reshape(-1, 2)], axis=1)
+    unique, tri = np.unique(keys, axis=0, return_inverse=True)
+    vid = unique[:, 0].astype(np.int64)
+    first = np.empty(len(gums.vertices), dtype=np.int64)
+    _, first_of = np.unique(vid, return_index=True)
+    first[vid[first_of]] = first_of
+    dup = np.flatnonzero(first[vid] != np.arange(len(vid)))
+    body = manifold3d.Manifold(manifold3d.Mesh64(
+        vert_properties=np.ascontiguousarray(np.concatenate([gums.vertices[vid], unique[:, 1:]], axis=1)),
+        tri_verts=tri.reshape(-1, 3).astype(np.uint64), merge_from_vert=dup.astype(np.uint64),
+        merge_to_vert=first[vid[dup]].astype(np.uint64)))
+    holes = []
+    for enamel in enamels:
+        grown = enamel.vertices + gap * vertex_normals(enamel)
+        props = np.concatenate([grown, np.full((len(grown), 2), 0.5)], axis=1)
+        holes.append(manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(props),
+                                                           tri_verts=enamel.faces.astype(np.uint64))))
+    for part in [body, *holes]:
+        if part.status() != manifold3d.Error.NoError:
+            raise ValueError(f"cutting the teeth out of the gums: a mesh is not closed ({part.status()})")
+    out = (body - manifold3d.Manifold.batch_boolean(holes, manifold3d.OpType.Add)).to_mesh64()
+    props = np.asarray(out.vert_properties)
+    faces = np.asarray(out.tri_verts).astype(np.int64)
+    position = np.arange(len(props))  # property vertex -> the one that holds its position
+    position[np.asarray(out.merge_from_vert).astype(np.int64)] = np.asarray(out.merge_to_vert).astype(np.int64)
+    kept, vertex_of = np.unique(position, return_inverse=True)
+    return TriMesh(props[kept, :3], vertex_of[faces], props[faces, 3:5])
 
 
 def cavity_dome(rx: float = 46.0, ry: float = 34.0, rz: float = 34.0, centre=(0.0, -8.0, -2.0),

@@ -9,7 +9,14 @@ import pytest
 import trimesh
 
 from material_structures.core.teeth.anatomy import SPECS, cej_line, make_anatomical_tooth
-from material_structures.core.teeth.arch import build_arch, cavity_dome, gum_mesh, margin_curve
+from material_structures.core.teeth.arch import (
+    build_arch,
+    cavity_dome,
+    gum_mesh,
+    gums_around_teeth,
+    margin_curve,
+    vertex_normals,
+)
 
 RES = 40
 
@@ -178,10 +185,14 @@ def test_gums_follow_the_cej(jaw, arches):
         # the gum line lies 1 mm crownward of the CEJ at the tooth's labial centre (within 0.15 mm)
         assert sign * (lab[2] - m) == pytest.approx(1.0, abs=0.15), t.name
         zen.append((s_lab[0], m))
-        # the root is under the gum: its apex region is inside the gum volume
-        v = t.geometry.enamel.vertices
-        root = v[sign * v[:, 2] > sign * lab[2] + 3.0]
-        assert tg.contains(root).mean() > 0.95, t.name
+        # the root is under the gum: the gum closes around its apex region (0.1 mm outside the root, beyond the
+        # 0.05 mm film of air), and the root itself is not inside the gums' volume (cut out of it)
+        e = t.geometry.enamel
+        v, n = e.vertices, vertex_normals(e)
+        root = sign * v[:, 2] > sign * lab[2] + 3.0
+        assert tg.contains(v[root] + 0.1 * n[root]).mean() > 0.95, t.name
+        assert not tg.contains(v[root] - 0.02 * n[root]).any(), t.name
+        assert not tg.contains(v[root] + 0.02 * n[root]).any(), t.name  # inside the film of air
     # papillae: between two neighbours the margin rises crownward into a tip, > 1 mm beyond both zeniths and
     # > 3 mm beyond the deeper one (measured 3.1-4.1 mm upper, 1.2-5.8 mm lower: the lower canine sits deeper)
     for (s0, m0), (s1, m1) in zip(zen[:-1], zen[1:], strict=True):
@@ -209,3 +220,37 @@ def test_cavity_dome_faces_inwards():
     centre = np.array([0.0, -8.0, -2.0])
     assert (np.einsum("ij,ij->i", n, centre - t.mean(axis=1)) > 0).mean() > 0.99
     assert dome.vertices[:, 1].max() <= 1.0 + 1e-9
+
+
+def test_gums_around_teeth_removes_the_teeth_and_keeps_the_uvs():
+    """A 10 mm cube of gum with a 2 mm tooth cube half inside it: without a gap the gum loses exactly the 4 mm^3
+    inside (closed form); with the gap the tooth is cut out grown by it (points within the film of air are in
+    neither); the UVs of the gum's faces that were not cut are the ones given, the hole's walls get (0.5, 0.5)."""
+    from material_structures.core.teeth.mesh import TriMesh
+
+    def cube(lo, hi):
+        c = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        f = [(0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6), (0, 1, 5), (0, 5, 4), (2, 6, 7), (2, 7, 3), (0, 4, 6),
+             (0, 6, 2), (1, 3, 7), (1, 7, 5)]
+        m = TriMesh(c, np.array(f))
+        return m if m.volume() > 0 else TriMesh(c, np.array(f)[:, [0, 2, 1]])
+
+    gum = cube((0, 0, 0), (10, 10, 10))
+    uv = np.tile(np.array([[0.1, 0.2], [0.3, 0.4], [0.5, 0.6]]), (len(gum.faces), 1, 1))
+    gum = TriMesh(gum.vertices, gum.faces, uv)
+    tooth = cube((4, 4, 9), (6, 6, 11))  # half of it inside the gum
+    exact = gums_around_teeth(gum, [tooth], gap=0.0)
+    assert exact.is_watertight() and exact.volume() == pytest.approx(1000.0 - 4.0, rel=1e-12)
+    out = gums_around_teeth(gum, [tooth], gap=0.05)
+    assert out.is_watertight() and 1000.0 - 4.5 < out.volume() < 1000.0 - 4.0
+    tg = _tm(out)
+    # the tooth's inside and the film of air around it are not gum; 0.1 mm beyond the tooth is
+    assert not tg.contains(np.array([[5.0, 5.0, 9.5], [3.99, 5.0, 9.5], [5.0, 5.0, 8.99]])).any()
+    assert tg.contains(np.array([[5.0, 5.0, 8.85], [3.85, 5.0, 9.5], [5.0, 6.15, 9.5]])).all()
+    # the bottom face (z = 0) was not cut: its UVs are the ones given
+    bottom = np.all(np.abs(out.triangles()[..., 2]) < 1e-12, axis=1)
+    assert bottom.any()
+    got = {tuple(np.round(p, 9)) for p in out.corner_uv[bottom].reshape(-1, 2)}
+    assert got <= {(0.1, 0.2), (0.3, 0.4), (0.5, 0.6)}
+    walls = np.all(out.triangles()[..., 2] < 10.0 - 1e-9, axis=1) & np.all(out.triangles()[..., 2] > 8.5, axis=1)
+    assert walls.any() and np.allclose(out.corner_uv[walls], 0.5)

@@ -31,7 +31,8 @@ def test_tooth_mean_errors_are_per_tooth_light_and_channel():
 def test_a_short_run_end_to_end(monkeypatch, tmp_path):
     """Nightly: a 4-light smile capture of 52 x 32 pixels at 4 spp, a 2-iteration fit from the scene's values:
     every figure is there, each upper tooth the held-out camera sees is checked (at this size the far ones hide),
-    and a second run in the same kept folder renders no capture and fits nothing again (the same fit time)."""
+    and a second run in the same kept folder renders no capture and fits nothing again (the same fit time), nor a
+    third whose check has more samples than the capture (it is judged against the truth rendered at them)."""
     pytest.importorskip("mitsuba")
     for key, value in (("CAPTURE_SPP", "4"), ("SYNTH_ARGS", "--lights 4 --width 52 --height 32"),
                        ("FIT_ARGS", "--init scene --iterations 2 --held-out-lights 1"),
@@ -56,3 +57,9 @@ def test_a_short_run_end_to_end(monkeypatch, tmp_path):
     calls.clear()
     second = bench.teeth_smile()
     assert calls == [] and second["fit_seconds"] == first["fit_seconds"]
+    assert first["reference"] == second["reference"] == "the capture"
+    # a check with more samples than the capture judges against the truth rendered again at them
+    monkeypatch.setenv("TEETH_SMILE_CHECK_SPP", "8")
+    third = bench.teeth_smile()
+    assert calls == [] and third["check_spp"] == 8 and third["reference"] == "the truth rendered again at 8 spp"
+    assert np.isfinite(third["upper_tooth_mean_rel_err_median"]) and third["truth_upper_tooth_mean_rel_err_worst"] > 0
