@@ -80,8 +80,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     f = tsub.add_parser("fit", help="fit the appearance model to a capture folder",
                         description="Fit enamel, dentin and gums to a capture with the best measured settings "
-                                    "(5-20 s per iteration for a 3-camera, 54-light capture on 2 cores, longer "
-                                    "while the materials are far off: 35-100 minutes for 300). Writes "
+                                    "(5-20 s per iteration for a 3-camera, 54-light capture of two teeth on 2 "
+                                    "cores, longer while the materials are far off: 35-100 minutes for 300; it "
+                                    "grows with the teeth: about 2 hours for a 16-tooth smile). Writes "
                                     "scene_fit.json (the result), fit_report.json and check.png (the result "
                                     "against lights the fit never used), loss.json, loss.png, scene_best.json "
                                     "and checkpoint.json.")
