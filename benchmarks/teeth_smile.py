@@ -7,10 +7,10 @@ held out.
 2. The fit: ``teeth fit CAPTURE --out FIT --held-out-camera 0`` with every other default (the left camera held
    out, as the thesis holds out its left one), timed.
 3. The check: Mitsuba renders the fitted scene under the held-out camera and every ``TEETH_SMILE_LIGHT_STEP``-th
-   light, and the truth again with another seed (the truth's own noise), at ``TEETH_SMILE_CHECK_SPP`` (default
-   128). Against the capture's images of that camera (or, where the check has more samples than the capture, a
-   third render of the truth at the check's samples, so that the capture's noise does not set the floor), per
-   upper front tooth (its pixels: those whose centre and corners see its enamel first,
+   light, and the truth again with another seed (the truth's own noise), at ``TEETH_SMILE_CHECK_SPP`` (default:
+   the capture's samples, 128). Against the capture's images of that camera (or, where the check has more samples
+   than the capture, a third render of the truth at the check's samples, so that the capture's noise does not set
+   the floor), per upper front tooth (its pixels: those whose centre and corners see its enamel first,
    ``synthetic.tooth_regions``; at 208 x 128 the left camera sees 16 to 883 of each), the relative error of the
    tooth's mean per light and channel.
 
@@ -42,7 +42,6 @@ import numpy as np
 CAPTURE_SPP = 128
 CAPTURE_SEED = 690
 HELD_OUT_CAMERA = 0
-CHECK_SPP = 128
 CHECK_SEEDS = (6901, 6902, 6903)  # the truth again, the fit, the truth as reference (a check above the capture's spp)
 IDENTITY = "bench_identity.json"
 PICTURE = "held_out_camera.png"  # in the kept folder: capture | fit | 4 x difference, two lights, 2 x pixels
@@ -118,8 +117,8 @@ def teeth_smile() -> dict:
     from ..core.teeth.synthetic import tooth_regions
 
     step = int(os.environ.get("TEETH_SMILE_LIGHT_STEP", "1"))
-    check_spp = int(os.environ.get("TEETH_SMILE_CHECK_SPP", CHECK_SPP))
     spp = int(os.environ.get("TEETH_SMILE_CAPTURE_SPP", CAPTURE_SPP))
+    check_spp = int(os.environ.get("TEETH_SMILE_CHECK_SPP", spp))
     extra = shlex.split(os.environ.get("TEETH_SMILE_FIT_ARGS", ""))
     synth_extra = shlex.split(os.environ.get("TEETH_SMILE_SYNTH_ARGS", ""))
     keep = os.environ.get("TEETH_SMILE_KEEP")
