@@ -30,7 +30,6 @@ lights) the peak fell from 8.9 GB to 1.4 GB.
 from __future__ import annotations
 
 import numpy as np
-from scipy import sparse
 
 from ..errors import UserError
 from .capture import Capture
@@ -99,7 +98,6 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
     tile_of, n_tiles = traced_tiles(pixels, h, w, block)
     n_rows = len(tile_of)
     tile_pixels = np.bincount(tile_of, minlength=n_tiles).astype(np.float64)
-    tile_sum = sparse.csr_matrix((np.ones(n_rows), (tile_of, np.arange(n_rows))), shape=(n_tiles, n_rows))
     # the directions' coefficient parts: per pass, the tile sums of the central difference of two renders (every
     # light), their two scenes compiled one direction at a time (a compiled smile holds about 70 MB)
     end_tiles = {}
@@ -137,7 +135,9 @@ def capture_sensitivity(scene: TeethScene, capture: Capture, directions: np.ndar
             st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + i)
             if len(cols):
                 r = render(scene, capture.cameras, lights, st, pixels=pixels, compiled=cs, jacobian_cols=cols)
-                jt = (tile_sum @ r.jacobian.reshape(n_rows, -1)).reshape(n_tiles, len(ids), 3, len(cols))
+                jt = np.zeros((n_tiles, len(ids) * 3 * len(cols)))
+                np.add.at(jt, tile_of, r.jacobian.reshape(n_rows, -1))
+                jt = jt.reshape(n_tiles, len(ids), 3, len(cols))
                 r.jacobian = None  # freed before the next pass renders its own
                 t = jt @ material[:, cols].T  # (tiles, lights, 3, K)
             else:
