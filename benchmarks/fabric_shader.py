@@ -6,6 +6,8 @@ import time
 
 import numpy as np
 
+from ._blender import blender_with_addon
+
 TILTS = (0.0, 10.0, 20.0, 30.0)
 EXACT_CASES = [
     # sigma, tilt, azimuth, view, lamp position
@@ -15,22 +17,6 @@ EXACT_CASES = [
     ((1.2, 0.25), 30.0, 250.0, (10.0, 0.0), (0.0, 0.8, 0.6)),
     ((2.5, 2.5), 30.0, 90.0, (60.0, 300.0), (0.9, 0.9, 0.5)),
 ]
-
-
-def _bpy():
-    from ..render.session import prepare_user_resources
-
-    prepare_user_resources()
-    import bpy
-
-    return bpy
-
-
-def _enable_addon():
-    """Register the add-on's classes from this checkout (no extension repository needed)."""
-    from ._blender import blender_with_addon
-
-    blender_with_addon()
 
 
 KD, KS = (0.05, 0.03, 0.02), (0.7, 0.4, 0.3)  # render_patch_vs_core's defaults
@@ -98,7 +84,7 @@ def cycles_hdri_accuracy(samples: int = 64, views: tuple[int, int] = HDRI_VIEWS)
     import os
     import tempfile
 
-    _enable_addon()
+    blender_with_addon()
     from ..addon.fabric.presets import tilted_quat
     from ..addon.fabric.verify import render_hdri_patch_vs_core
     from ..core.fabric import closure_accuracy as A
@@ -136,7 +122,7 @@ def cycles_hdri_accuracy(samples: int = 64, views: tuple[int, int] = HDRI_VIEWS)
 def fabric_shader() -> dict:
     numpy_part = closure_accuracy()
     cycles_hdri = cycles_hdri_accuracy()
-    _enable_addon()
+    blender_with_addon()
     from ..addon.fabric.presets import tilted_quat
     from ..addon.fabric.verify import render_patch_vs_core
 
@@ -173,8 +159,7 @@ def fabric_brush_viewport(size: int = 2048, points: int = 200, repeats: int = 3)
     """Per-segment update of a 2048 x 2048 map in Blender: core edit, closure lookup of the changed
     texels (core.fabric.closure_table) and upload of the changed images; and the stroke's end (upload
     and pack)."""
-    _enable_addon()
-    bpy = _bpy()
+    bpy = blender_with_addon()
     from ..addon.fabric.brushing import BrushSession, BrushSettings
     from ..addon.fabric.maps import maps_to_images
     from ..core.fabric.parameter_maps import make_maps

@@ -17,6 +17,8 @@ import time
 
 import numpy as np
 
+from ._blender import blender_with_addon
+
 RESOLUTION = (160, 120)  # small render: reported too, where fixed per-render costs dominate
 SAMPLES = 8
 REPEATS = 3
@@ -29,12 +31,6 @@ PLATE_CASES = (
         ("AREA", (-0.4, -0.3, 1.1), 80.0, (0.35, 0.35)),
     ),
 )
-
-
-def _enable_addon():
-    from ._blender import blender_with_addon
-
-    return blender_with_addon()
 
 
 def _scene(bpy, name, plain, resolution, samples):
@@ -52,7 +48,7 @@ def _scene(bpy, name, plain, resolution, samples):
 
 
 def scratch_render() -> dict:
-    bpy = _enable_addon()
+    bpy = blender_with_addon()
     from ..addon.scratch.verify import relative_errors, render_plate_vs_core
     from ..render import render_to_array, reset_scene
 
