@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 from ..errors import UserError
 from .anatomy import SPECS, ToothSpec, cej_line, tooth_from_spec
 from .mesh import TriMesh
+from .tooth_from_surface import vertex_normals
 from .tooth_mesh import ToothGeometry
 
 UPPER_FRONT = ("upper_central", "upper_lateral", "upper_canine", "upper_premolar")
@@ -343,16 +344,6 @@ GUM_GAP_MM = 0.05  # the teeth are cut out of the gums this far beyond their ena
 # two surfaces
 
 
-def vertex_normals(mesh: TriMesh) -> np.ndarray:
-    """(V, 3) unit normals at the vertices: the sum of the adjacent faces' area-weighted normals."""
-    tri = mesh.triangles()
-    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n = np.zeros_like(mesh.vertices)
-    for k in range(3):
-        np.add.at(n, mesh.faces[:, k], face_n)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-
-
 def gums_around_teeth(gums: TriMesh, enamels: list[TriMesh], gap: float = GUM_GAP_MM) -> TriMesh:
     """The closed ``gums`` volume less every tooth (its enamel surface moved ``gap`` mm outwards along the vertex
     normals): the roots sit in holes of the gums instead of inside their medium. A mesh boolean (manifold3d, exact
@@ -378,7 +369,7 @@ def gums_around_teeth(gums: TriMesh, enamels: list[TriMesh], gap: float = GUM_GA
         merge_to_vert=first[vid[dup]].astype(np.uint64)))
     holes = []
     for enamel in enamels:
-        grown = enamel.vertices + gap * vertex_normals(enamel)
+        grown = enamel.vertices + gap * vertex_normals(enamel.vertices, enamel.faces)
         props = np.concatenate([grown, np.full((len(grown), 2), 0.5)], axis=1)
         holes.append(manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(props),
                                                            tri_verts=enamel.faces.astype(np.uint64))))

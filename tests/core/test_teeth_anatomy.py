@@ -9,14 +9,8 @@ import pytest
 import trimesh
 
 from material_structures.core.teeth.anatomy import SPECS, cej_line, make_anatomical_tooth
-from material_structures.core.teeth.arch import (
-    build_arch,
-    cavity_dome,
-    gum_mesh,
-    gums_around_teeth,
-    margin_curve,
-    vertex_normals,
-)
+from material_structures.core.teeth.arch import build_arch, cavity_dome, gum_mesh, gums_around_teeth, margin_curve
+from material_structures.core.teeth.tooth_from_surface import vertex_normals
 
 RES = 40
 
@@ -188,7 +182,7 @@ def test_gums_follow_the_cej(jaw, arches):
         # the root is under the gum: the gum closes around its apex region (0.1 mm outside the root, beyond the
         # 0.05 mm film of air), and the root itself is not inside the gums' volume (cut out of it)
         e = t.geometry.enamel
-        v, n = e.vertices, vertex_normals(e)
+        v, n = e.vertices, vertex_normals(e.vertices, e.faces)
         root = sign * v[:, 2] > sign * lab[2] + 3.0
         assert tg.contains(v[root] + 0.1 * n[root]).mean() > 0.95, t.name
         assert not tg.contains(v[root] - 0.02 * n[root]).any(), t.name

@@ -185,7 +185,7 @@ def test_reduced_chi2_is_one_at_the_truth_and_grows_with_the_misfit(problem):
 def test_lights_in_chunks_give_the_result_of_all_lights_at_once(problem, monkeypatch):
     """A light's image and derivatives do not depend on the lights rendered with it, so a capture whose Jacobian
     would not fit in memory is done a few lights at a time with the same result: one light per chunk here (the
-    smile's 51 lights at once held 23 GB). Every output, the dentin coefficients' renders included."""
+    smile's intervals held 23 GB). Every output, the dentin coefficients' renders included."""
     import material_structures.core.teeth.sensitivity as sensitivity
 
     sc, cap = problem
