@@ -190,3 +190,18 @@ def test_a_tooth_rooted_in_the_gums_matches_mitsuba(tracer):
     assert dentin_z.min() < 2.5 < dentin_z.max()  # the gums' surface cuts the dentin
     _compare_with_mitsuba(sc, cam, lights, tracer, "rooted in the gums")
 
+
+def test_a_tooth_cut_out_of_the_gums_matches_mitsuba(tracer):
+    """The smile's gums now (``arch.gums_around_teeth``): the same box of gums with the tooth cut out of it and a
+    0.05 mm film of air between them, so no volumes overlap: a path leaves the gums through the hole's wall, crosses
+    the film and enters the enamel. Both renderers see nested surfaces only and must agree."""
+    from material_structures.core.teeth.arch import gums_around_teeth
+    from material_structures.core.teeth.synthetic import box_mesh
+
+    sc, cam, lights = _refractive_scene(1.5)
+    lo, hi = sc.gums.mesh.vertices.min(axis=0), sc.gums.mesh.vertices.max(axis=0)
+    box = box_mesh((lo[0], lo[1], lo[2]), (hi[0], hi[1], 2.5))
+    sc.gums.mesh = gums_around_teeth(box, [sc.teeth[0].enamel_mesh])
+    assert sc.gums.mesh.volume() < box.volume() - 1.0  # the root's volume is gone from the gums
+    _compare_with_mitsuba(sc, cam, lights, tracer, "cut out of the gums")
+
