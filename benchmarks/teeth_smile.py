@@ -18,10 +18,11 @@ Figures: ``upper_tooth_mean_rel_err_worst`` / ``_median`` over the 8 upper teeth
 truth's own (``truth_*``) beside them, per tooth the same, ``fit_seconds`` and the fit's own report.
 
 Environment: TEETH_SMILE_KEEP (a folder that keeps the capture, the fit and ``held_out_camera.png``: capture |
-fit | difference under two of the checked lights; a later run reuses a capture made by the same command, and a
-finished fit of it, with its recorded time, instead of fitting again), TEETH_SMILE_LIGHT_STEP (every k-th light in
-the check; default 1, all 54), TEETH_SMILE_CHECK_SPP, TEETH_SMILE_SYNTH_ARGS and TEETH_SMILE_FIT_ARGS (extra
-``teeth synth`` and ``teeth fit`` arguments, for a short run checking the benchmark) and TEETH_SMILE_CAPTURE_SPP.
+fit | difference under two of the checked lights; a later run reuses a capture made by the same command of the
+same truth, and a finished fit of it, with its recorded time, instead of fitting again), TEETH_SMILE_LIGHT_STEP
+(every k-th light in the check; default 1, all 54), TEETH_SMILE_CHECK_SPP, TEETH_SMILE_SYNTH_ARGS and
+TEETH_SMILE_FIT_ARGS (extra ``teeth synth`` and ``teeth fit`` arguments, for a short run checking the benchmark)
+and TEETH_SMILE_CAPTURE_SPP.
 Progress on stderr. A full run: the capture about 25 minutes, the fit 1.5-2 hours on 2 cores, the check about 8
 minutes per 27 lights.
 """
@@ -29,6 +30,8 @@ minutes per 27 lights.
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import json
 import os
 import shlex
@@ -65,16 +68,51 @@ def _run(cmd: list[str], what: str) -> None:
         raise RuntimeError(f"{what} failed: {proc.stderr.strip()[-2000:]}")
 
 
+def _scene_digest(path: str) -> str | None:
+    """SHA-256 of a scene file (None where there is none)."""
+    try:
+        with open(path, "rb") as f:
+            return hashlib.sha256(f.read()).hexdigest()
+    except OSError:
+        return None
+
+
+@functools.lru_cache(maxsize=4)
+def truth_scene_bytes(synth_cmd: tuple[str, ...]) -> bytes:
+    """The ``scene.json`` that ``synth_cmd`` (a ``teeth synth`` command) writes, built without rendering: the
+    truth's geometry and materials as this checkout makes them."""
+    from ..cli import build_parser
+    from ..cli.teeth import synth_truth
+    from ..core.json_io import save_json
+
+    args = build_parser().parse_args([*synth_cmd, "--out", "unused"])
+    scene, _, _ = synth_truth(args)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "scene.json")
+        save_json(path, scene.to_dict())  # as Capture.save writes it
+        with open(path, "rb") as f:
+            return f.read()
+
+
 def _capture(cap_dir: str, spp: int, extra: list[str]) -> dict:
-    """The smile capture in ``cap_dir``: kept where it was made by the same command, else made."""
+    """The smile capture in ``cap_dir``: kept where it was made by the same command from the same truth (its
+    ``scene.json`` is the one this checkout's smile makes: a smile built another way, e.g. before the gums were cut
+    around the teeth, is captured again), else made. The identity holds the truth's digest, so a fit kept beside a
+    capture of another truth is not reused either."""
     cmd = ["teeth", "synth", "--smile", "--renderer", "mitsuba", "--samples", str(spp), "--seed", str(CAPTURE_SEED),
            *extra]
-    identity = {"command": cmd}
-    if _read_json(os.path.join(cap_dir, IDENTITY)) == identity:
+    identity = {"command": cmd, "truth_sha256": hashlib.sha256(truth_scene_bytes(tuple(cmd))).hexdigest()}
+    kept = _read_json(os.path.join(cap_dir, IDENTITY)) or {}
+    if kept.get("command") == cmd and _scene_digest(os.path.join(cap_dir, "scene.json")) == identity["truth_sha256"]:
         _log(f"the kept capture in {cap_dir}")
+        if kept != identity:
+            with open(os.path.join(cap_dir, IDENTITY), "w") as f:
+                json.dump(identity, f)
         return identity
     _log("Mitsuba capture of the smile: " + " ".join(cmd))
     _run([*cmd, "--out", cap_dir], "teeth synth --smile")
+    if _scene_digest(os.path.join(cap_dir, "scene.json")) != identity["truth_sha256"]:
+        raise RuntimeError(f"teeth synth wrote another truth than {cmd} builds in this process")
     with open(os.path.join(cap_dir, IDENTITY), "w") as f:
         json.dump(identity, f)
     return identity

@@ -165,12 +165,10 @@ def run_synth(args: argparse.Namespace) -> int:
     if args.out is None:
         raise UsageError("teeth synth: the following arguments are required: --out")
     refuse_unwritable_folder(args.out)
-    scene, cams, lights = synth_scene_and_rig(args)
+    scene, cams, lights = synth_truth(args)
     if args.renderer == "mitsuba":
         from ..core.teeth.mitsuba_capture import import_mitsuba, render_capture_mitsuba
 
-        scene = scene.copy()
-        scene.blend_spread = 1e-5  # Mitsuba's enamel/dentin boundary is sharp
         _, variant = import_mitsuba()
         with _bar(len(lights), "synth (mitsuba)", "light") as bar:
             cap = render_capture_mitsuba(scene, cams, lights, args.samples, args.seed, progress=bar.update,
@@ -185,6 +183,16 @@ def run_synth(args: argparse.Namespace) -> int:
     cap.save(args.out, scene.to_dict())
     print(f"wrote {len(cams)} x {len(lights)} images and masks{how} to {args.out}")
     return 0
+
+
+def synth_truth(args: argparse.Namespace):
+    """``teeth synth``'s ground truth as it renders it and writes it to ``scene.json``, and its rig: (scene,
+    cameras, lights). Mitsuba's enamel/dentin boundary is sharp, so its truth has the smallest blend spread."""
+    scene, cams, lights = synth_scene_and_rig(args)
+    if args.renderer == "mitsuba":
+        scene = scene.copy()
+        scene.blend_spread = 1e-5
+    return scene, cams, lights
 
 
 def synth_scene_and_rig(args: argparse.Namespace):

@@ -3,6 +3,10 @@ short run end to end, whose kept capture and fit a second run reuses."""
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+
 import numpy as np
 import pytest
 
@@ -63,3 +67,41 @@ def test_a_short_run_end_to_end(monkeypatch, tmp_path):
     third = bench.teeth_smile()
     assert calls == [] and third["check_spp"] == 8 and third["reference"] == "the truth rendered again at 8 spp"
     assert np.isfinite(third["upper_tooth_mean_rel_err_median"]) and third["truth_upper_tooth_mean_rel_err_worst"] > 0
+
+
+def test_a_kept_capture_of_another_truth_is_made_again_and_its_fit_not_reused(monkeypatch, tmp_path):
+    """A kept capture is reused only where its scene.json is the truth this checkout's smile makes: one of another
+    smile (as the captures made before the gums were cut around the teeth) is captured again, and a fit kept
+    beside a capture of another truth is fitted again (the capture's identity holds the truth's digest). That
+    ``truth_scene_bytes`` is what ``teeth synth`` writes is the nightly end-to-end run's (its second run keeps the
+    capture)."""
+    truth = b'{"teeth": "this checkout\'s smile"}'
+    calls = []
+
+    def fake_run(cmd, what):  # teeth synth writes the truth's scene.json (no images); teeth fit a scene_fit.json
+        calls.append(cmd[:2])
+        out = cmd[cmd.index("--out") + 1]
+        os.makedirs(out, exist_ok=True)
+        name, content = ("scene.json", truth) if cmd[1] == "synth" else ("scene_fit.json", b"{}")
+        with open(os.path.join(out, name), "wb") as f:
+            f.write(content)
+
+    monkeypatch.setattr(bench, "_run", fake_run)
+    monkeypatch.setattr(bench, "truth_scene_bytes", lambda cmd: truth)
+    cap, fit = str(tmp_path / "capture"), str(tmp_path / "fit")
+    first = bench._capture(cap, 4, [])
+    assert calls == [["teeth", "synth"]] and first["truth_sha256"] == hashlib.sha256(truth).hexdigest()
+    assert bench._capture(cap, 4, []) == first and len(calls) == 1  # kept
+    bench._fit(cap, fit, first, [])
+    assert bench._fit(cap, fit, first, []) is not None and calls[1:] == [["teeth", "fit"]]  # kept
+    with open(os.path.join(cap, "scene.json"), "wb") as f:  # the kept capture's truth is another smile's
+        f.write(b'{"teeth": "another smile"}')
+    calls.clear()
+    assert bench._capture(cap, 4, []) == first and calls == [["teeth", "synth"]]
+    # a fit kept with a capture identity that names no truth (as every one before the digest) is fitted again
+    with open(os.path.join(fit, bench.IDENTITY), "w") as f:
+        json.dump({"identity": {"capture": {"command": first["command"]}, "fit_args": ["--held-out-camera", "0"]},
+                   "seconds": 1.0}, f)
+    calls.clear()
+    bench._fit(cap, fit, first, [])
+    assert calls == [["teeth", "fit"]]
