@@ -10,8 +10,8 @@ import pytest
 def test_smile_scene_builds_the_full_model(addon_module, tmp_path):
     """The smile as built (its render is the library regression's ``teeth-smile`` entry, on 5.2): 8 upper + 8
     lower front teeth, each an enamel shell with its dentin core (shape keys live, partners set, the shared
-    Enamel group), one gum, one mouth cavity, one lamp; every tooth has its Blend Volume, and one (the first
-    upper central) evaluates to its three grids. The other 15 have their grids' modifier switched off first: left
+    Enamel group), one gum, one mouth cavity, one lamp; every tooth has its Blend Volume, and one (the upper
+    right central) evaluates to its three grids. The other 15 have their grids' modifier switched off first: left
     on, Blender evaluates all 16 when the next file is read (15 s on 2 cores, billed to another test); the grids of
     the whole smile are rendered by the library regression's ``teeth-smile`` entry."""
     from material_structures.addon.teeth.blend_volume import GRID_M, GRID_O, GRID_Q, MODIFIER, blend_object
