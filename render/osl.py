@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import hashlib
 import os
 import re
+import shutil
+import tempfile
 from collections.abc import Iterable
 
 from .session import OSL_DIR, ensure_bundled_paths, osl_shader_path
@@ -76,11 +79,27 @@ def compile_script_node(node, scene=None) -> list[str]:
         except ImportError:  # Cycles' add-on missing: Blender's generic update
             node.update()
         else:
-            cycles_osl.update_script_node(node, lambda kind, msg: errors.append(msg) if "ERROR" in kind else None)
+            with _private_temporary_folder():
+                cycles_osl.update_script_node(node, lambda kind, msg: errors.append(msg) if "ERROR" in kind else None)
     finally:
         if ctx is not None:
             ctx.render.engine, ctx.cycles.shading_system = saved
     return errors
+
+
+@contextlib.contextmanager
+def _private_temporary_folder():
+    """Python's temporary files inside a folder of their own, removed afterwards. Cycles compiles an internal
+    script through a temporary ``.osl`` and ``.oso`` and removes only the ``.osl`` (Blender 4.5 and 5.2,
+    ``cycles/osl.py``): without this, every compile left a ``tmp*.oso`` in the system's temporary folder."""
+    saved = tempfile.tempdir
+    folder = tempfile.mkdtemp(prefix="ms-osl-")
+    tempfile.tempdir = folder
+    try:
+        yield folder
+    finally:
+        tempfile.tempdir = saved
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 TEXT_MARKER = "material_structures_osl"  # ID property on embedded shader texts: the source's hash

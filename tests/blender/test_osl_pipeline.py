@@ -67,3 +67,20 @@ def test_broken_shader_is_reported(tmp_path):
     mat = R.new_material("T")
     with pytest.raises(R.OslScriptError):
         R.load_osl_script(mat.node_tree, str(bad), scene, outputs=["C"])
+
+
+def test_compiling_an_embedded_script_leaves_no_file_behind():
+    """Cycles compiles an internal script through a temporary .osl and .oso and removes only the .osl: loading a
+    shader twice (a compile each) leaves the system's temporary folder as it was, with the bytecode in the node."""
+    import glob
+    import os
+    import tempfile
+
+    folder = tempfile.gettempdir()
+    before = set(glob.glob(os.path.join(folder, "*.os[lo]")))
+    scene = bpy.context.scene
+    for name in ("A", "B"):
+        node = R.load_osl_script(R.new_material(name).node_tree, "ms_constant_emission", scene, inputs=["Color"])
+        assert node.mode == "INTERNAL" and "ms_constant_emission" in node.bytecode
+    assert set(glob.glob(os.path.join(folder, "*.os[lo]"))) == before
+    assert tempfile.gettempdir() == folder
