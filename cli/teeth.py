@@ -13,6 +13,7 @@ Old spellings, accepted until the next release with a note on stderr: ``teeth sy
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -337,8 +338,23 @@ def _saved_settings(out: str, state) -> dict | None:
     return saved if isinstance(saved, dict) else None
 
 
-def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str,
-                      resume_trials: bool = False):
+@contextlib.contextmanager
+def _fit_backends(args: argparse.Namespace, cap, on_dask: bool):
+    """(gradient, task_map) the fit's trials, iterations and intervals render with: (None, None) in this process;
+    on Dask the cluster's, kept open from the start trials to the intervals."""
+    if not on_dask:
+        yield None, None
+        return
+    from ..scaleout.cluster import dask_client
+    from ..scaleout.teeth import DaskGradient
+
+    with dask_client(args.scheduler, args.dask_workers) as client:
+        gradient = DaskGradient(client, cap)
+        yield gradient, gradient.task_map
+
+
+def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str, gradient=None,
+                      task_map=None, resume_trials: bool = False):
     """(start, whether the fit resumes): the literature search's start; with ``start_trials``, one start per
     g, the fit's first iterations from each (``start_trials.best_start``), and the winner's checkpoint, log
     and scene files moved into ``--out``, where the fit resumes them. ``resume_trials``: an interrupted fit's
@@ -401,7 +417,8 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
                 trial_bar.total = n_all[0]
                 trial_bar.refresh()
 
-        trials = best_start(starts, cap, fs, work, progress=trial_progress, dropped=trial_dropped)
+        trials = best_start(starts, cap, fs, work, progress=trial_progress, dropped=trial_dropped,
+                            gradient=gradient, task_map=task_map)
     if trials is None:
         shutil.rmtree(work)
         return starts[0], False
@@ -518,109 +535,106 @@ def run_fit(args: argparse.Namespace) -> int:
     if fs.held_out_camera >= 0:  # the fit, its search, trials, check and intervals see the other cameras only
         cap, cam_cap = split_camera(full_cap, fs.held_out_camera)
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
-    os.makedirs(args.out, exist_ok=True)  # before the search and the trials: a bad --out fails at once
-    resume = args.resume
-    if stopped_in_trials:
-        with FolderLock(args.out):
-            if os.path.isfile(trials_path):
-                _adopt_trial(trials_work, _chosen_trial(trials_path), args.out)
-            else:
-                scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path, resume_trials=True)
-    elif not args.resume:
-        with FolderLock(args.out):  # the search and the trials write to --out/start_trials
-            for earlier in (trials_path, ckpt):  # an earlier fit's, in this folder: this fit replaces it
-                if os.path.isfile(earlier):
-                    os.remove(earlier)
-            if args.init == "literature":
-                scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path)
-        if args.init == "perturbed":
-            scene = perturbed_start(scene, seed=fs.seed)
-    if resume and not before:  # the winning start's trial, moved into --out by this run
-        before = load_state(ckpt).log
-    total = fs.iterations + fs.textured_iterations
-    bar = None if args.no_progress or as_json else _bar(total, "fit", "it")
-    done = [0]
+    os.makedirs(args.out, exist_ok=True)  # before the cluster, the search and the trials: a bad --out fails at once
+    with _fit_backends(args, cap, on_dask) as (gradient, task_map):
+        resume = args.resume
+        if stopped_in_trials:
+            with FolderLock(args.out):
+                if os.path.isfile(trials_path):
+                    _adopt_trial(trials_work, _chosen_trial(trials_path), args.out)
+                else:
+                    scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path, gradient, task_map,
+                                                      resume_trials=True)
+        elif not args.resume:
+            with FolderLock(args.out):  # the search and the trials write to --out/start_trials
+                for earlier in (trials_path, ckpt):  # an earlier fit's, in this folder: this fit replaces it
+                    if os.path.isfile(earlier):
+                        os.remove(earlier)
+                if args.init == "literature":
+                    scene, resume = _literature_start(scene, cap, fs, args, as_json, trials_path, gradient,
+                                                      task_map)
+            if args.init == "perturbed":
+                scene = perturbed_start(scene, seed=fs.seed)
+        if resume and not before:  # the winning start's trial, moved into --out by this run
+            before = load_state(ckpt).log
+        total = fs.iterations + fs.textured_iterations
+        bar = None if args.no_progress or as_json else _bar(total, "fit", "it")
+        done = [0]
 
-    def progress(entry):
-        done[0] += 1
-        if as_json:
-            _event(progress="fit", iteration=done[0], iterations=total, loss=entry["loss"], phase=entry["phase"])
+        def progress(entry):
+            done[0] += 1
+            if as_json:
+                _event(progress="fit", iteration=done[0], iterations=total, loss=entry["loss"], phase=entry["phase"])
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(loss=f"{entry['loss']:.3e}", best=f"{entry['best_loss']:.3e}", phase=entry["phase"])
+
+        def status(text: str) -> None:
+            if as_json:
+                _event(progress="status", message=text)
+            if bar is not None:
+                bar.set_description_str(f"fit: {text}" if text else "fit")
+
+        done[0] = len(before)
+        if bar is not None and before:
+            bar.update(len(before))
+        if as_json and before:  # the iterations done before (the winning start's trial, or an interrupted fit)
+            _event(progress="fit", iteration=len(before), iterations=total, loss=before[-1]["loss"],
+                   phase=before[-1]["phase"])
+        os.makedirs(args.out, exist_ok=True)
+        best, log = fit(scene, cap, fs, out_dir=args.out, resume=resume, progress=progress, status=status,
+                        gradient=gradient, task_map=task_map)
         if bar is not None:
-            bar.update(1)
-            bar.set_postfix(loss=f"{entry['loss']:.3e}", best=f"{entry['best_loss']:.3e}", phase=entry["phase"])
-
-    def status(text: str) -> None:
+            bar.close()
+        plot_loss(log, os.path.join(args.out, "loss.png"))
+        target = scene_target(scene)
+        angles = light_angles_deg(cap, target)
+        held_out = held_out_light_ids(cap, target, fs.held_out_lights)
         if as_json:
-            _event(progress="status", message=text)
-        if bar is not None:
-            bar.set_description_str(f"fit: {text}" if text else "fit")
+            _event(progress="status", message=f"checking the fit on {len(held_out)} held-out lights")
+        elif not args.no_progress and len(held_out):
+            print(f"checking the fit on {len(held_out)} held-out lights", flush=True)
+        check = held_out_check(best, cap, held_out, os.path.join(args.out, "check.png"), workers=fs.workers)
+        if len(held_out):  # how far outside the training cone the check reaches
+            check["light_angles_deg"] = [round(float(a), 2) for a in angles[held_out]]
+            check["training_cone_deg"] = round(float(np.delete(angles, held_out).max()), 2)
+        report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,
+                  "held_out": check, "capture_outliers": outliers}
+        if cam_cap is not None:
+            if as_json:
+                _event(progress="status", message=f"checking the fit from the held-out camera {fs.held_out_camera}")
+            elif not args.no_progress:
+                print(f"checking the fit from the held-out camera {fs.held_out_camera}", flush=True)
+            cam_check = held_out_check(best, cam_cap, np.arange(len(cam_cap.lights)),
+                                       os.path.join(args.out, "check_camera.png"), workers=fs.workers)
+            report["held_out_camera"] = {"camera": fs.held_out_camera, **cam_check}
+        if cap.masks is not None:
+            from ..core.teeth.fit_intervals import parameter_intervals
 
-    done[0] = len(before)
-    if bar is not None and before:
-        bar.update(len(before))
-    if as_json and before:  # the iterations done before (the winning start's trial, or an interrupted fit)
-        _event(progress="fit", iteration=len(before), iterations=total, loss=before[-1]["loss"],
-               phase=before[-1]["phase"])
-    os.makedirs(args.out, exist_ok=True)
-    if on_dask:
-        from ..scaleout.cluster import dask_client
-        from ..scaleout.teeth import DaskGradient
-
-        with dask_client(args.scheduler, args.dask_workers) as client:
-            best, log = fit(scene, cap, fs, out_dir=args.out, resume=resume, progress=progress,
-                            gradient=DaskGradient(client, cap), status=status)
-    else:
-        best, log = fit(scene, cap, fs, out_dir=args.out, resume=resume, progress=progress, status=status)
-    if bar is not None:
-        bar.close()
-    plot_loss(log, os.path.join(args.out, "loss.png"))
-    target = scene_target(scene)
-    angles = light_angles_deg(cap, target)
-    held_out = held_out_light_ids(cap, target, fs.held_out_lights)
-    if as_json:
-        _event(progress="status", message=f"checking the fit on {len(held_out)} held-out lights")
-    elif not args.no_progress and len(held_out):
-        print(f"checking the fit on {len(held_out)} held-out lights", flush=True)
-    check = held_out_check(best, cap, held_out, os.path.join(args.out, "check.png"), workers=fs.workers)
-    if len(held_out):  # how far outside the training cone the check reaches
-        check["light_angles_deg"] = [round(float(a), 2) for a in angles[held_out]]
-        check["training_cone_deg"] = round(float(np.delete(angles, held_out).max()), 2)
-    report = {"result": "scene_fit.json", "iterations": len(log), "final_loss": log[-1]["loss"] if log else None,
-              "held_out": check, "capture_outliers": outliers}
-    if cam_cap is not None:
-        if as_json:
-            _event(progress="status", message=f"checking the fit from the held-out camera {fs.held_out_camera}")
-        elif not args.no_progress:
-            print(f"checking the fit from the held-out camera {fs.held_out_camera}", flush=True)
-        cam_check = held_out_check(best, cam_cap, np.arange(len(cam_cap.lights)),
-                                   os.path.join(args.out, "check_camera.png"), workers=fs.workers)
-        report["held_out_camera"] = {"camera": fs.held_out_camera, **cam_check}
-    if cap.masks is not None:
-        from ..core.teeth.fit_intervals import parameter_intervals
-
-        if as_json:
-            _event(progress="status", message="estimating what the capture determines")
-        elif not args.no_progress:
-            print("estimating what the capture determines (intervals)", flush=True)
-        trained = np.setdiff1d(np.arange(len(cap.lights)), held_out)
-        try:
-            report["intervals"] = parameter_intervals(best, cap, light_ids=trained, seed=fs.seed)
-        except UserError as e:  # a capture whose noise cannot be estimated: the fit stands, without intervals
-            report["intervals"] = {"error": str(e)}
-    report["seconds_this_run"] = time.perf_counter() - t_start
-    if os.path.isfile(trials_path):
-        with open(trials_path) as f:
-            report["start_trials"] = json.load(f)
-    save_json(os.path.join(args.out, "fit_report.json"), report)
-    summary = (f"held-out lights: {check['rms_relative']:.1%} RMS per pixel, {check['rms_relative_tiles']:.1%} "
-               f"on 8 x 8 tiles (check.png)" if check["lights"] else "no held-out lights")
-    if cam_cap is not None:
-        cc = report["held_out_camera"]
-        summary += (f"; held-out camera {fs.held_out_camera}: {cc['rms_relative']:.1%} RMS per pixel, "
-                    f"{cc['rms_relative_tiles']:.1%} on 8 x 8 tiles (check_camera.png)")
-    print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json; {summary}; "
-          "fit_report.json, loss.png, scene_best.json")
-    return 0
+            if as_json:
+                _event(progress="status", message="estimating what the capture determines")
+            elif not args.no_progress:
+                print("estimating what the capture determines (intervals)", flush=True)
+            trained = np.setdiff1d(np.arange(len(cap.lights)), held_out)
+            try:
+                report["intervals"] = parameter_intervals(best, cap, light_ids=trained, seed=fs.seed,
+                                                             task_map=task_map)
+            except UserError as e:  # a capture whose noise cannot be estimated: the fit stands, without intervals
+                report["intervals"] = {"error": str(e)}
+        report["seconds_this_run"] = time.perf_counter() - t_start
+        if os.path.isfile(trials_path):
+            with open(trials_path) as f:
+                report["start_trials"] = json.load(f)
+        save_json(os.path.join(args.out, "fit_report.json"), report)
+        summary = (f"held-out lights: {check['rms_relative']:.1%} RMS per pixel, {check['rms_relative_tiles']:.1%} "
+                   f"on 8 x 8 tiles (check.png)" if check["lights"] else "no held-out lights")
+        if cam_cap is not None:
+            cc = report["held_out_camera"]
+            summary += (f"; held-out camera {fs.held_out_camera}: {cc['rms_relative']:.1%} RMS per pixel, "
+                        f"{cc['rms_relative_tiles']:.1%} on 8 x 8 tiles (check_camera.png)")
+        print(f"best loss {min(e['loss'] for e in log):.4e}; wrote {args.out}/scene_fit.json; {summary}; "
+              "fit_report.json, loss.png, scene_best.json")
+        return 0
 
 
 def run_render(args: argparse.Namespace) -> int:

@@ -32,14 +32,23 @@ from .scene import TeethScene
 
 def pass_pair(scene: TeethScene, capture: Capture, cameras: list[int], light_ids, st: RenderSettings, seed_a: int,
               seed_b: int, layout: ParamLayout, loss_block: int = 1, image_spp: int = 0,
-              share: float = 1.0, shape: bool = True) -> tuple[float, np.ndarray, dict]:
+              share: float = 1.0, shape: bool = True,
+              rows: tuple[int, int] | None = None) -> tuple[float, np.ndarray, dict]:
     """Loss estimate, physical gradient and statistics of ``cameras`` (indices into the capture) for
     ``light_ids``; ``share`` scales loss and adjoint (a camera's share of a loss over more cameras).
-    ``shape``: estimate the dentin coefficients' entries (two more renders); False leaves them 0."""
+    ``shape``: estimate the dentin coefficients' entries (two more renders); False leaves them 0.
+    ``rows``: only the masked pixels of image rows [rows[0], rows[1]) (a band whose edges are multiples of
+    ``loss_block``: the band's loss is its share of the whole image's)."""
     if image_spp < 0:
         raise ValueError(f"image_spp must be >= 0 (0 = st.spp), got {image_spp}")
     cams = [capture.cameras[c] for c in cameras]
     masks = capture.masks[cameras]
+    if rows is not None:
+        if rows[0] % loss_block or (rows[1] % loss_block and rows[1] < masks.shape[1]):
+            raise ValueError(f"a band's rows {rows} must start and end on the loss's {loss_block}-pixel blocks")
+        masks = masks.copy()
+        masks[:, :rows[0]] = False
+        masks[:, rows[1]:] = False
     pixels = [np.flatnonzero(m.ravel()) for m in masks]
     cs = CompiledScene(scene, layout=layout)
     ref = capture.images[np.ix_(cameras, np.asarray(light_ids))].astype(np.float64)

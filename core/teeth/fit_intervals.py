@@ -60,6 +60,7 @@ from .literature_init import ALBEDO_RANGE, G_VALUES, SIGMA_RANGE_MM
 from .param_vector import RANGES, ParamLayout, scene_to_vector
 from .scene import TeethScene
 from .sensitivity import capture_sensitivity, default_directions
+from .task_map import TaskMap
 
 G_STEP = 0.05  # the phase-function parameters' step (g1, g2, beta are 0..1-ish numbers)
 OPEN_STEPS = 5.0  # two standard deviations beyond 5 steps (a 50 % change of sigma_s or sigma_a): not determined
@@ -129,9 +130,10 @@ def _words(name: str) -> str:
 
 
 def parameter_intervals(scene: TeethScene, capture: Capture, light_ids: np.ndarray | None = None, passes: int = 4,
-                        block: int = 8, seed: int = 7) -> dict:
+                        block: int = 8, seed: int = 7, task_map: TaskMap | None = None) -> dict:
     """Each parameter's fitted value and 2-standard-deviation interval, and the combinations the capture leaves
-    open (module docstring), for ``fit_report.json``. ``light_ids``: the lights the fit used (default all)."""
+    open (module docstring), for ``fit_report.json``. ``light_ids``: the lights the fit used (default all);
+    ``task_map`` computes the renders (``sensitivity.capture_sensitivity``; default: this process)."""
     if light_ids is not None:
         ids = np.asarray(light_ids, dtype=np.int64)
         capture = Capture(capture.cameras, [capture.lights[i] for i in ids],
@@ -139,7 +141,8 @@ def parameter_intervals(scene: TeethScene, capture: Capture, light_ids: np.ndarr
     layout = ParamLayout(scene)
     names, dirs, steps = _directions(scene, layout)
     noise = capture_noise_variance(capture)
-    sens = capture_sensitivity(scene, capture, dirs, passes=passes, block=block, noise_variance=noise, seed=seed)
+    sens = capture_sensitivity(scene, capture, dirs, passes=passes, block=block, noise_variance=noise, seed=seed,
+                               task_map=task_map)
     values = [_value(scene, layout, n) for n in names]
     out = intervals_from_information(sens["information"], names, steps, values, reduced_chi2=sens["reduced_chi2"])
     out.update({"noise_variance": noise, "passes": passes, "block": block,

@@ -48,6 +48,7 @@ from .compiled_scene import CompiledScene
 from .param_vector import ParamLayout, chain_to_optimiser
 from .path_tracer import RenderSettings, render, traced_tiles
 from .scene import TeethScene
+from .task_map import TaskMap, local_map
 
 ESTIMATORS = ("per-pass", "pooled")
 
@@ -63,13 +64,14 @@ def optimiser_jacobian_map(y: np.ndarray, layout: ParamLayout, cols: np.ndarray)
 def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, cols: np.ndarray, y: np.ndarray,
                         *, passes: int = 4, block: int = 8, max_depth: int | None = None,
                         seed: int = 0, workers: int = 1, lights_per_render: int = 9,
-                        estimator: str = "per-pass") -> np.ndarray:
+                        estimator: str = "per-pass", task_map: TaskMap | None = None) -> np.ndarray:
     """(k, k) Gauss-Newton matrix of the per-pixel L2 loss over all of ``capture``'s lights in the
     optimiser variables ``y[cols]``, estimated from ``passes`` 1-spp Jacobian passes (module docstring).
 
     ``estimator``: "per-pass" averages the passes' own J_i^T J_i (Monte Carlo bias Sigma, the variance
     of one pass's tile Jacobian); "pooled" is (mean_i J_i)^T (mean_i J_i), also positive semi-definite,
-    with bias Sigma / passes (module docstring)."""
+    with bias Sigma / passes (module docstring). Each group of ``lights_per_render`` lights is one item of
+    ``task_map`` (default: this process); the matrix is their sum, the same whichever map computes it."""
     if estimator not in ESTIMATORS:
         raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
     if passes < 1:
@@ -81,33 +83,45 @@ def gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout
     cols = np.asarray(cols, dtype=np.int64)
     k = len(cols)
     chain = optimiser_jacobian_map(y, layout, cols)
+    n_l = len(capture.lights)
+    m = len(np.flatnonzero(capture.masks)) * n_l * 3
+    groups = [(np.arange(i, min(i + lights_per_render, n_l)), gi)
+              for gi, i in enumerate(range(0, n_l, lights_per_render))]
+    shared = (scene, capture, layout, cols, chain, passes, block, max_depth, seed, workers, estimator)
+    out = np.zeros((k, k))
+    for part in (task_map or local_map)(light_group_curvature, shared, groups):
+        out += part
+    return out * (2.0 / (m * passes * (passes if estimator == "pooled" else 1)))
+
+
+def light_group_curvature(scene: TeethScene, capture: Capture, layout: ParamLayout, cols: np.ndarray,
+                          chain: np.ndarray, passes: int, block: int, max_depth: int | None, seed: int, workers: int,
+                          estimator: str, ids: np.ndarray, group: int) -> np.ndarray:
+    """One light group's share of :func:`gauss_newton_matrix` before its normaliser: the sum over passes of
+    J_p^T J_p ("per-pass") or (sum_p J_p)^T (sum_p J_p) ("pooled"), J_p the pass's (tiles x lights x 3, k)
+    tile Jacobian in the optimiser variables; pass p renders with seed ``seed + 1000 p + group``."""
     h, w = capture.masks.shape[1:]
     pixels = [np.flatnonzero(m.ravel()) for m in capture.masks]
     tile_of, n_tiles = traced_tiles(pixels, h, w, block)
     inv_sqrt_n = 1.0 / np.sqrt(np.bincount(tile_of, minlength=n_tiles).astype(np.float64))
-    n_l = len(capture.lights)
-    m = len(tile_of) * n_l * 3
     cs = CompiledScene(scene, layout=layout)
-    groups = [np.arange(i, min(i + lights_per_render, n_l)) for i in range(0, n_l, lights_per_render)]
+    k = len(cols)
     out = np.zeros((k, k))
-    pooled: list = [0.0] * len(groups)  # "pooled": per light group, the sum of the passes' tile Jacobians
+    pooled = 0.0
     for p in range(passes):
-        for gi, ids in enumerate(groups):
-            st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + 1000 * p + gi, workers=workers)
-            r = render(scene, capture.cameras, capture.lights, st, pixels=pixels, light_ids=ids, compiled=cs,
-                       jacobian_cols=cols)
-            jt = np.zeros((n_tiles,) + r.jacobian.shape[1:])  # (tiles, L, 3, k) tile sums
-            np.add.at(jt, tile_of, r.jacobian)
-            jt = (jt * inv_sqrt_n[:, None, None, None]).reshape(-1, k) @ chain
-            if estimator == "pooled":
-                pooled[gi] = pooled[gi] + jt
-            else:
-                out += jt.T @ jt
+        st = RenderSettings(spp=1, max_depth=max_depth, seed=seed + 1000 * p + group, workers=workers)
+        r = render(scene, capture.cameras, capture.lights, st, pixels=pixels, light_ids=ids, compiled=cs,
+                   jacobian_cols=cols)
+        jt = np.zeros((n_tiles,) + r.jacobian.shape[1:])  # (tiles, L, 3, k) tile sums
+        np.add.at(jt, tile_of, r.jacobian)
+        jt = (jt * inv_sqrt_n[:, None, None, None]).reshape(-1, k) @ chain
+        if estimator == "pooled":
+            pooled = pooled + jt
+        else:
+            out += jt.T @ jt
     if estimator == "pooled":
-        for jsum in pooled:
-            out += jsum.T @ jsum
-        return out * (2.0 / (m * passes * passes))
-    return out * (2.0 / (m * passes))
+        out = pooled.T @ pooled
+    return out
 
 
 def damped_inverse(hmat: np.ndarray, damping: float) -> np.ndarray:

@@ -43,6 +43,7 @@ from .param_vector import (
 from .path_tracer import RenderSettings
 from .scene import TeethScene
 from .synthetic import scene_target
+from .task_map import TaskMap
 
 __all__ = ["Adam", "DEFAULT_FREE", "FitSettings", "FitState", "block_sums", "fit", "free_mask", "held_out_light_ids",
            "light_angles_deg", "iteration_gradient", "l2_loss", "paired_loss", "plot_loss", "tail_start",
@@ -130,10 +131,11 @@ def _gn_seed(s: FitSettings, phase_index: int, iteration: int) -> int:
 
 
 def fit_gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, gn_idx: np.ndarray,
-                            y: np.ndarray, s: FitSettings, seed: int) -> np.ndarray:
+                            y: np.ndarray, s: FitSettings, seed: int, task_map: TaskMap | None = None) -> np.ndarray:
     """The Gauss-Newton matrix over the variables ``gn_idx`` that ``optimiser="gauss-newton"`` steps."""
     return gauss_newton_matrix(scene, capture, layout, gn_idx, y, passes=s.gn_passes, block=s.gn_block,
-                               max_depth=s.max_depth, seed=seed, workers=s.workers, estimator=GN_ESTIMATOR)
+                               max_depth=s.max_depth, seed=seed, workers=s.workers, estimator=GN_ESTIMATOR,
+                               task_map=task_map)
 
 
 def _new_guard(s: FitSettings) -> DivergenceGuard | None:
@@ -159,7 +161,8 @@ def _resumed_guard(saved: dict | None, s: FitSettings) -> DivergenceGuard | None
 def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str | None = None,
         resume: bool = False, progress: Callable | None = None,
         callback: Callable | None = None, gradient: Callable | None = None,
-        status: Callable[[str], None] | None = None, until: int | None = None) -> tuple[TeethScene, list]:
+        status: Callable[[str], None] | None = None, until: int | None = None,
+        task_map: TaskMap | None = None) -> tuple[TeethScene, list]:
     """Fit ``scene``'s free parameters to ``capture``; returns (result, log): the best-loss scene, or with
     ``settings.average_tail`` the mean of the last iterates (Polyak-Ruppert averaging).
 
@@ -170,7 +173,8 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     log, the settings and the held-out lights), ``scene_fit.json`` (the result so far: the best-loss scene
     until the averaged iterations begin, then their running mean) and ``scene_best.json`` (the best-loss
     scene); ``resume`` continues from the checkpoint. ``gradient`` replaces
-    :func:`fit_gradient.iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``.
+    :func:`fit_gradient.iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``;
+    ``task_map`` computes the Gauss-Newton matrices' light groups (``task_map``; default: this process).
     ``progress(entry)`` and ``callback(entry, scene)`` are called after every iteration; ``status(text)``
     says what the fit does between iterations that takes long (the Gauss-Newton matrix estimate; "" when
     it is done).
@@ -182,11 +186,12 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     if out_dir is not None:
         os.makedirs(out_dir, exist_ok=True)
         with FolderLock(out_dir):
-            return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until)
-    return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until)
+            return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until,
+                        task_map)
+    return _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until, task_map)
 
 
-def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until):
+def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient, status, until, task_map):
     s = settings
     if until is not None and until < 1:
         raise ValueError("until must be at least 1 iteration")
@@ -293,7 +298,7 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
                 t_gn = time.perf_counter()
                 if status is not None:
                     status(f"estimating the Gauss-Newton matrix ({s.gn_passes} passes of all lights)")
-                hmat = fit_gauss_newton_matrix(cur, capture, layout, gn_idx, y, s, _gn_seed(s, pi, it))
+                hmat = fit_gauss_newton_matrix(cur, capture, layout, gn_idx, y, s, _gn_seed(s, pi, it), task_map)
                 precond_it = it
                 gn_seconds = time.perf_counter() - t_gn
                 if status is not None:

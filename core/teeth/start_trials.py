@@ -31,6 +31,7 @@ from .capture import Capture
 from .fit_settings import FitSettings
 from .optimise import fit
 from .scene import TeethScene
+from .task_map import TaskMap
 
 
 def trial_score(log: list[dict]) -> float:
@@ -54,7 +55,8 @@ class StartTrials:
 
 def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings, work_dir: str,
                progress: Callable[[dict], None] | None = None,
-               dropped: Callable[[int], None] | None = None) -> StartTrials | None:
+               dropped: Callable[[int], None] | None = None, gradient: Callable | None = None,
+               task_map: TaskMap | None = None) -> StartTrials | None:
     """The trials (module docstring) of the fit's first ``settings.start_trials`` iterations (at most
     ``settings.iterations``) from each of ``starts``: each start's first half, then the rest for those
     under ``DROP_RATIO`` times the best (positive) first-half score. Trial k leaves its checkpoint, loss.json and
@@ -62,7 +64,8 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
     finds a checkpoint there (an interrupted fit's trials) goes on from it, so that trials run again after an
     interruption end as the uninterrupted ones would.
     ``progress(entry)`` after every trial iteration; ``dropped(n)`` with the iterations a dropped start
-    will not run. One start, or ``start_trials`` 0: None, nothing run."""
+    will not run. ``gradient`` and ``task_map``: where the trials render (``optimise.fit``'s). One start, or
+    ``start_trials`` 0: None, nothing run."""
     if not starts:
         raise ValueError("no start to try")
     if len(starts) == 1 or settings.start_trials == 0:
@@ -74,7 +77,8 @@ def best_start(starts: list[TeethScene], capture: Capture, settings: FitSettings
         # a trial with a checkpoint (an interrupted fit's) goes on from it: the same iterations, to the bit
         folder = trial_dir(work_dir, k)
         resume = os.path.isfile(os.path.join(folder, "checkpoint.json"))
-        return fit(starts[k], capture, settings, out_dir=folder, resume=resume, progress=progress, until=until)[1]
+        return fit(starts[k], capture, settings, out_dir=folder, resume=resume, progress=progress, until=until,
+                   gradient=gradient, task_map=task_map)[1]
 
     logs = [run(k, half) for k in range(len(starts))]
     # over the first half only: a resumed trial may have run past it before the interruption

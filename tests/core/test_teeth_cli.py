@@ -162,7 +162,7 @@ def test_fit_workers_in_one_process_and_clear_errors(tmp_path, capsys):
         assert main(common + ["--out", str(tmp_path / name), *extra]) == 0
         logs[name] = json.loads((tmp_path / name / "loss.json").read_text())["log"]
     assert [e["loss"] for e in logs["two"]] == pytest.approx([e["loss"] for e in logs["one"]], rel=1e-9)
-    # on a local Dask cluster (one task per camera on its workers)
+    # on a local Dask cluster (a task per band of a camera's rows; the intervals' renders too)
     assert main(common + ["--out", str(tmp_path / "dask"), "--dask-workers", "1"]) == 0
     assert len(json.loads((tmp_path / "dask" / "loss.json").read_text())["log"]) == 2
     capsys.readouterr()

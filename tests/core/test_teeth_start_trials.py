@@ -104,20 +104,25 @@ def test_one_start_or_no_trials_runs_no_trial():
 
 def test_every_drop_is_announced_before_the_second_halves_run(monkeypatch, tmp_path):
     """The progress total shrinks before any second half runs, so the last progress event reads
-    "done of done" even where the last start is the one dropped (a fake fit: start k's loss is given)."""
+    "done of done" even where the last start is the one dropped (a fake fit: start k's loss is given); every
+    trial renders where the fit does (its gradient and task map)."""
     from material_structures.core.teeth import start_trials
 
     loss = {0: 1.0, 1: 1.1, 2: 5.0}  # start 2 is over DROP_RATIO times start 0's: dropped at the half
     events = []
 
-    def fake_fit(scene, capture, settings, out_dir, resume, progress, until):
+    backends = (object(), object())  # the gradient and task map the trials render with (a cluster's)
+
+    def fake_fit(scene, capture, settings, out_dir, resume, progress, until, gradient, task_map):
         k = int(out_dir[-1])
+        assert (gradient, task_map) == backends
         events.append(("run", k, until))
         return scene, [{"loss": loss[k]} for _ in range(until)]
 
     monkeypatch.setattr(start_trials, "fit", fake_fit)
     settings = replace(FitSettings(), start_trials=10, iterations=40)
     out = start_trials.best_start([0, 1, 2], None, settings, str(tmp_path),
-                                  dropped=lambda n: events.append(("dropped", n)))
+                                  dropped=lambda n: events.append(("dropped", n)), gradient=backends[0],
+                                  task_map=backends[1])
     assert events == [("run", 0, 5), ("run", 1, 5), ("run", 2, 5), ("dropped", 5), ("run", 0, 10), ("run", 1, 10)]
     assert out.chosen == 0 and out.iterations == [10, 10, 5]

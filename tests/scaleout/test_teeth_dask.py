@@ -107,9 +107,13 @@ def test_fit_on_dask_is_deterministic_and_matches_local_decomposition(problem, c
     from material_structures.core.teeth.optimise import FitSettings, fit
 
     scene, capture = problem
-    fs = FitSettings(iterations=2, spp=1, max_depth=4, lights_per_iteration=2, seed=1)
-    a, log_a = fit(scene, capture, fs, gradient=DaskGradient(client, capture))
-    b, log_b = fit(scene, capture, fs, gradient=local_gradient(capture))
+    # a Gauss-Newton matrix at iteration 1: its light groups are tasks too
+    fs = FitSettings(iterations=3, spp=1, max_depth=4, lights_per_iteration=2, seed=1, gn_start=1, gn_every=1,
+                     gn_passes=2)
+    on_cluster = DaskGradient(client, capture, bands_per_camera=2)
+    a, log_a = fit(scene, capture, fs, gradient=on_cluster, task_map=on_cluster.task_map)
+    b, log_b = fit(scene, capture, fs, gradient=local_gradient(capture, 2))
+    assert any("gauss_newton_seconds" in e for e in log_a)
     assert [e["loss"] for e in log_a] == [e["loss"] for e in log_b]
     assert a.to_dict() == b.to_dict()
 
@@ -128,3 +132,61 @@ def test_image_spp_reaches_the_dask_tasks(problem, client):
     _, log_1 = fit(scene, capture, FitSettings(iterations=2, spp=1, max_depth=4, lights_per_iteration=2, seed=1),
                    gradient=local_gradient(capture))
     assert log_a[0]["loss"] != log_1[0]["loss"]
+
+
+def test_row_bands_cover_each_camera_once_and_equal_their_local_decomposition(problem, client):
+    """Bands of rows (whole loss blocks) split every camera's masked pixels without overlap, and a gradient of 3
+    bands per camera on the cluster equals the same decomposition in this process, to the bit."""
+    from material_structures.scaleout.teeth import camera_bands, gradient_items
+
+    scene, capture = problem
+    for c in range(len(capture.cameras)):
+        bands = camera_bands(capture.masks[c], 2, 3)
+        assert 1 < len(bands) <= 3 and all(y0 % 2 == 0 for y0, _ in bands)
+        covered = np.zeros(capture.masks.shape[1], int)
+        for y0, y1 in bands:
+            covered[y0:y1] += 1
+        assert covered.max() == 1 and np.all(covered[np.any(capture.masks[c], axis=1)] == 1)
+    layout = ParamLayout(scene)
+    st = RenderSettings(spp=4, max_depth=4)
+    ids = np.array([1, 3])
+    items = gradient_items(capture, 2, 3)
+    assert len(items) > len(capture.cameras)
+    ref_loss, ref_grad, _ = local_gradient(capture, 3)(scene, capture, ids, st, 5, layout, loss_block=2)
+    loss, grad, stats = DaskGradient(client, capture, bands_per_camera=3)(scene, capture, ids, st, 5, layout,
+                                                                          loss_block=2)
+    assert stats["tasks"] == len(items)
+    assert loss == ref_loss and np.any(grad != 0)
+    np.testing.assert_array_equal(grad, ref_grad)
+
+
+def test_gauss_newton_matrix_and_intervals_on_the_cluster_equal_this_process(problem, client):
+    """The Gauss-Newton matrix's light groups and the intervals' renders as tasks (DaskMap): the same matrix to
+    the bit; the same information with the lights in other chunks (one per worker)."""
+    from material_structures.core.teeth.gauss_newton import gauss_newton_matrix
+    from material_structures.core.teeth.param_vector import scene_to_vector, to_optimiser
+    from material_structures.core.teeth.sensitivity import capture_sensitivity, default_directions
+    from material_structures.scaleout.teeth import DaskMap
+
+    scene, capture = problem
+    layout = ParamLayout(scene)
+    cols = np.arange(layout.size)
+    y = to_optimiser(scene_to_vector(scene, layout), layout)
+    task_map = DaskMap(client, capture)
+    kw = dict(passes=2, block=2, max_depth=3, seed=11, lights_per_render=2, estimator="pooled")
+    here = gauss_newton_matrix(scene, capture, layout, cols, y, **kw)
+    there = gauss_newton_matrix(scene, capture, layout, cols, y, task_map=task_map, **kw)
+    assert np.abs(here).max() > 0
+    np.testing.assert_array_equal(there, here)
+
+    names, dirs = default_directions(scene, layout)
+    assert any(".c[" in n for n in names)  # the dentin coefficients' tasks too
+    assert task_map.parallel == 2 and len(capture.lights) > 2  # two chunks of lights there, one here
+    a = capture_sensitivity(scene, capture, dirs, passes=2, block=2, max_depth=3, seed=4, capture_spp=2)
+    b = capture_sensitivity(scene, capture, dirs, passes=2, block=2, max_depth=3, seed=4, capture_spp=2,
+                            task_map=task_map)
+    scale = np.abs(a["information"]).max()
+    assert scale > 0
+    np.testing.assert_allclose(b["information"], a["information"], rtol=1e-9, atol=1e-12 * scale)
+    assert b["noise_variance"] == pytest.approx(a["noise_variance"], rel=1e-12)
+    assert b["reduced_chi2"] == pytest.approx(a["reduced_chi2"], rel=1e-9)
