@@ -11,9 +11,9 @@ This benchmark runs each kind of step on a local cluster of ``TEETH_SMILE_DASK_W
 ``TEETH_SMILE_DASK_SPLIT`` workers would split it (default 16: 8 bands per camera, 16 chunks of lights); it records
 every task's compute time (Dask's task stream) and each call's wall time, and times the client's own steps here.
 It then projects the fit's wall time on N workers: per step, the client's time around its tasks plus the makespan
-of its tasks on N workers (longest first), times the number of such steps a default fit makes (300 iterations, 60
-more in the start trials that do not count towards them, a Gauss-Newton matrix every 40 iterations from 80, the
-intervals once). Tasks split for 16 workers are conservative for fewer (a coarser split renders less twice).
+of its tasks on N workers (longest first), times the number of such steps a default fit makes (300 iterations, a
+Gauss-Newton matrix every 40 iterations from 80, the intervals once). Tasks split for 16 workers are conservative
+for fewer (a coarser split renders less twice).
 
 Environment: TEETH_SMILE_KEEP (the folder of ``bench teeth-smile``: its capture, and its fit's result if there is
 one; otherwise the capture's own scene is the state timed), TEETH_SMILE_DASK_WORKERS, TEETH_SMILE_DASK_SPLIT,
@@ -30,7 +30,6 @@ import time
 import numpy as np
 
 PROJECT_WORKERS = (1, 2, 4, 8, 16, 32)
-TRIAL_ITERATIONS = 60  # the start trials' iterations beyond the winner's (3 starts x 30, the winner's 30 count)
 
 
 def _log(msg: str) -> None:
@@ -149,7 +148,8 @@ def teeth_smile_dask() -> dict:
         iv = _step([_timed(client, lambda: parameter_intervals(scene, cap, light_ids=trained, task_map=task_map))],
                    workers)
 
-    n_iterations = fs.iterations + TRIAL_ITERATIONS
+    # with start trials (an option), the losing starts' trials would add up to 2 x start_trials iterations
+    n_iterations = fs.iterations + 2 * fs.start_trials
     n_gn = len(range(fs.gn_start, fs.iterations, fs.gn_every))
     steps = {"iteration": (iteration, n_iterations), "gauss_newton": (gn, n_gn), "intervals": (iv, 1)}
     serial = out["literature_search_s"] + out["checks_s"]

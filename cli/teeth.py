@@ -355,16 +355,17 @@ def _fit_backends(args: argparse.Namespace, cap, on_dask: bool):
 
 def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, trials_path: str, gradient=None,
                       task_map=None, resume_trials: bool = False):
-    """(start, whether the fit resumes): the literature search's start; with ``start_trials``, one start per
-    g, the fit's first iterations from each (``start_trials.best_start``), and the winner's checkpoint, log
-    and scene files moved into ``--out``, where the fit resumes them. ``resume_trials``: an interrupted fit's
-    trials go on from their checkpoints, from the starts its search saved (no search)."""
+    """(start, whether the fit resumes): the literature search's start at g ``START_G`` (the default); with
+    ``start_trials``, one start per g of the table, the fit's first iterations from each
+    (``start_trials.best_start``), and the winner's checkpoint, log and scene files moved into ``--out``, where
+    the fit resumes them. ``resume_trials``: an interrupted fit's trials go on from their checkpoints, from the
+    starts its search saved (no search)."""
     import shutil
     from dataclasses import asdict
 
     from ..core.json_io import save_json
     from ..core.teeth.fit_checkpoint import load_state
-    from ..core.teeth.literature_init import literature_points, literature_start, literature_starts
+    from ..core.teeth.literature_init import G_VALUES, START_G, literature_points, literature_starts
     from ..core.teeth.scene import TeethScene
     from ..core.teeth.start_trials import best_start, trial_dir
 
@@ -385,9 +386,9 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
         if as_json:
             _event(progress="init", message="searching the literature table for a start")
         with _bar(literature_points(), "init", "point", disable=args.no_progress or as_json) as init_bar:
-            if fs.start_trials == 0:
-                return literature_start(scene, cap, progress=init_bar.update), False
             starts = literature_starts(scene, cap, progress=init_bar.update)
+        if fs.start_trials == 0:
+            return starts[G_VALUES.index(START_G)], False
         shutil.rmtree(work, ignore_errors=True)  # an interrupted fit's trials
         os.makedirs(work)
         # the trials run from the starts as saved (a resumed trial starts from them read back, to the bit)

@@ -27,9 +27,11 @@ DEFAULT_FREE = ("*.sigma_t", "*.albedo", "*.g1", "*.g2", "*.beta", "*.a_t", "*.c
 @dataclass
 class FitSettings:
     # ---- schedule
-    # the fit's first iterations, run from each literature start (one per phase-function g); the fit goes on
-    # from the best trial, whose iterations count (start_trials.best_start); 0: the search's single best start
-    start_trials: int = 30
+    # 0: the fit starts from the literature search's start at g literature_init.START_G; n > 0: the fit's first n
+    # iterations are run from the start of every g, and it goes on from the best trial, whose iterations count
+    # (start_trials.best_start; the trials choose the start that converges fastest, not the one that predicts
+    # new lights best: literature_init)
+    start_trials: int = 0
     iterations: int = 300  # "homogeneous" phase (thesis Sec. 5.7)
     textured_iterations: int = 0  # "textured" phase: a_t becomes a texture_size^2 texture
     texture_size: int = 8

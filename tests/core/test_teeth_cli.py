@@ -15,6 +15,18 @@ from material_structures.core.teeth.fit_settings import FitSettings
 from material_structures.core.teeth.path_tracer import RenderSettings, render
 from material_structures.core.teeth.scene import load_scene
 
+TRIALS = 30  # FitSettings.start_trials of the tests of the start trials (the default fit has none)
+
+
+@pytest.fixture
+def with_trials(monkeypatch):
+    """``teeth fit`` with start trials (a FitSettings option the command line does not offer)."""
+    import dataclasses
+
+    import material_structures.cli.teeth as cli_teeth
+
+    monkeypatch.setattr(cli_teeth, "FIT_DEFAULTS", dataclasses.replace(FitSettings(), start_trials=TRIALS))
+
 pytestmark = pytest.mark.heavy  # seconds each: outside `make test-fast`
 
 
@@ -109,9 +121,31 @@ def test_sensitivity_cli_writes_a_table(tmp_path, capsys):
     assert err.startswith("error: ") and "--capture-samples" in err and err.count("\n") == 1, err
 
 
-def test_fit_starts_from_the_literature_search(tmp_path):
-    """``--init literature`` (the default) runs the table search, one start per phase-function g, the fit's
-    first iterations from each, and goes on from the trial of lowest loss (its iterations count): with only
+def test_fit_starts_at_the_literature_middle_g(tmp_path):
+    """``--init literature`` (the default) runs the table search and starts from its start of g 0.6
+    (``literature_init.START_G``): with only the dentin coefficients free, the materials stay that start's (its
+    table values and g), and there are no trials (no start_trials.json, no trials' folder)."""
+    from material_structures.core.teeth.literature_init import G_VALUES, START_G, literature_starts
+
+    cap_dir = tmp_path / "cap"
+    assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "3", "--cameras", "1", "--samples", "2", "--samples-background", "0",
+                 "--mesh-resolution", "12"]) == 0
+    fit_dir = tmp_path / "fit"
+    assert main(["teeth", "fit", str(cap_dir), "--out", str(fit_dir), "--iterations", "1", "--no-progress",
+                 "--free", "*.c"]) == 0
+    assert START_G == 0.6 and not (fit_dir / "start_trials.json").exists() and not (fit_dir / "start_trials").exists()
+    assert "start_trials" not in json.loads((fit_dir / "fit_report.json").read_text())
+    expected = literature_starts(load_scene(cap_dir / "scene.json"), Capture.load(cap_dir))[G_VALUES.index(START_G)]
+    for t, e in zip(load_scene(fit_dir / "scene_fit.json").teeth, expected.teeth, strict=True):
+        assert t.enamel.g1 == t.dentin.g1 == START_G
+        np.testing.assert_allclose(t.enamel.sigma_t, e.enamel.sigma_t, rtol=1e-12)
+        np.testing.assert_allclose(t.dentin.albedo, e.dentin.albedo, rtol=1e-12)
+
+
+def test_fit_starts_from_the_literature_search(tmp_path, with_trials):
+    """With start trials, the table search's start of every phase-function g runs the fit's
+    first iterations, and goes on from the trial of lowest loss (its iterations count): with only
     the dentin coefficients free, the materials stay that start's (table values), and start_trials.json /
     fit_report.json name it; the trials' folder is gone."""
     from material_structures.core.teeth.literature_init import G_VALUES, literature_starts, literature_table
@@ -214,7 +248,7 @@ def test_fit_cli_defaults_are_fit_settings_and_help_is_short(tmp_path, capsys):
     assert report["held_out"]["lights"] == [] and not (fit_dir / "check.png").exists()
 
 
-def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
+def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch, with_trials):
     """With MATERIAL_STRUCTURES_PROGRESS=json (what the Blender add-on sets) the fit reports each iteration,
     what it does between iterations and nothing else as JSON lines on stdout: no progress bars to parse."""
     cap_dir = tmp_path / "cap"
@@ -223,7 +257,7 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
                  "--mesh-resolution", "10"]) == 0
     capsys.readouterr()
     monkeypatch.setenv("MATERIAL_STRUCTURES_PROGRESS", "json")
-    n = FitSettings().start_trials + 2
+    n = TRIALS + 2
     assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "fit"), "--iterations", str(n)]) == 0
     out, err = capsys.readouterr()
     events = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
@@ -233,7 +267,7 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch):
     assert all(np.isfinite(e["loss"]) for e in fits)
     assert events[0] == {"progress": "init", "message": "searching the literature table for a start"}
     trials = [e["message"] for e in events if e["progress"] == "init"][1:]
-    assert trials[0] == f"trying 3 starts, {FitSettings().start_trials} iterations each"
+    assert trials[0] == f"trying 3 starts, {TRIALS} iterations each"
     ran = sum(json.loads((tmp_path / "fit" / "start_trials.json").read_text())["iterations"])  # some may stop early
     assert len(trials) == 1 + ran
     assert all(m.startswith(f"trying 3 starts: {i} of ") for i, m in enumerate(trials[1:], 1))
@@ -253,7 +287,7 @@ def uninterrupted_fit(tmp_path_factory):
     assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
                  "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
                  "--mesh-resolution", "10"]) == 0
-    n = FitSettings().start_trials + 2
+    n = TRIALS + 2
     real_search, starts = literature_init.literature_starts, []
 
     def search(*a, **kw):
@@ -261,6 +295,11 @@ def uninterrupted_fit(tmp_path_factory):
         return [s.copy() for s in starts]
 
     with pytest.MonkeyPatch.context() as mp:
+        import dataclasses
+
+        import material_structures.cli.teeth as cli_teeth
+
+        mp.setattr(cli_teeth, "FIT_DEFAULTS", dataclasses.replace(FitSettings(), start_trials=TRIALS))
         mp.setattr(literature_init, "literature_starts", search)
         assert main(["teeth", "fit", str(cap_dir), "--out", str(whole), "--iterations", str(n), "--no-progress"]) == 0
     assert len(starts) == 3
@@ -271,7 +310,7 @@ def uninterrupted_fit(tmp_path_factory):
 # after the trials, while the winner's files move into --out
 @pytest.mark.parametrize("stop_after", [22, 47, 0])
 def test_fit_stopped_during_its_start_trials_resumes_to_the_same_fit(uninterrupted_fit, tmp_path, monkeypatch,
-                                                                     stop_after):
+                                                                     with_trials, stop_after):
     """Ctrl-C during the start trials, then ``--resume``: the trials go on from their checkpoints (no second
     search) and the fit ends with the uninterrupted fit's losses and result, to the bit."""
     from material_structures.core.teeth import literature_init, start_trials
