@@ -32,13 +32,15 @@ from .scene import TeethScene
 
 def pass_pair(scene: TeethScene, capture: Capture, cameras: list[int], light_ids, st: RenderSettings, seed_a: int,
               seed_b: int, layout: ParamLayout, loss_block: int = 1, image_spp: int = 0,
-              share: float = 1.0, shape: bool = True,
-              rows: tuple[int, int] | None = None) -> tuple[float, np.ndarray, dict]:
+              share: float = 1.0, shape: bool = True, rows: tuple[int, int] | None = None,
+              direction_seed: int | None = None) -> tuple[float, np.ndarray, dict]:
     """Loss estimate, physical gradient and statistics of ``cameras`` (indices into the capture) for
     ``light_ids``; ``share`` scales loss and adjoint (a camera's share of a loss over more cameras).
     ``shape``: estimate the dentin coefficients' entries (two more renders); False leaves them 0.
     ``rows``: only the masked pixels of image rows [rows[0], rows[1]) (a band whose edges are multiples of
-    ``loss_block``: the band's loss is its share of the whole image's)."""
+    ``loss_block``: the band's loss is its share of the whole image's). ``direction_seed``: the seed of the dentin
+    coefficients' random direction (default ``seed_b``); the bands of one iteration share it, so that a worker
+    refits the two shifted dentins once for all its bands."""
     if image_spp < 0:
         raise ValueError(f"image_spp must be >= 0 (0 = st.spp), got {image_spp}")
     cams = [capture.cameras[c] for c in cameras]
@@ -69,7 +71,8 @@ def pass_pair(scene: TeethScene, capture: Capture, cameras: list[int], light_ids
         grad[cols] = 0.0
         if shape:
             grad[cols] = shape_gradient(scene, cams, capture.lights, light_ids, pixels, adj * share, sb, layout,
-                                        random_direction(seed_b, len(cols)))
+                                        random_direction(seed_b if direction_seed is None else direction_seed,
+                                                         len(cols)))
     stats = {"path_vertices": ra.stats["path_vertices"] + rb.stats["path_vertices"],
              "render_seconds": seconds_a, "gradient_seconds": rb.stats["seconds"],
              "shape_seconds": time.perf_counter() - t0, "loss_single_pass": loss_a * share}
