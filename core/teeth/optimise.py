@@ -174,7 +174,7 @@ def fit(scene: TeethScene, capture: Capture, settings: FitSettings, out_dir: str
     until the averaged iterations begin, then their running mean) and ``scene_best.json`` (the best-loss
     scene); ``resume`` continues from the checkpoint. ``gradient`` replaces
     :func:`fit_gradient.iteration_gradient` (same signature), e.g. ``scaleout.teeth.DaskGradient``;
-    ``task_map`` computes the Gauss-Newton matrices' light groups (``task_map``; default: this process).
+    ``task_map`` computes the Gauss-Newton matrices' light groups (``core.teeth.task_map``; default: this process).
     ``progress(entry)`` and ``callback(entry, scene)`` are called after every iteration; ``status(text)``
     says what the fit does between iterations that takes long (the Gauss-Newton matrix estimate; "" when
     it is done).
