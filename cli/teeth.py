@@ -385,8 +385,17 @@ def _literature_start(scene, cap, fs, args: argparse.Namespace, as_json: bool, t
     else:
         if as_json:
             _event(progress="init", message="searching the literature table for a start")
-        with _bar(literature_points(), "init", "point", disable=args.no_progress or as_json) as init_bar:
-            starts = literature_starts(scene, cap, progress=init_bar.update)
+        total, searched = literature_points(), [0, 0]  # points done, twentieths announced
+
+        with _bar(total, "init", "point", disable=args.no_progress or as_json) as init_bar:
+            def point_done(n: int) -> None:  # the bar; as JSON (the add-on's panel) every 5 % of the points
+                init_bar.update(n)
+                searched[0] += n
+                if as_json and 20 * searched[0] // total > searched[1]:
+                    searched[1] = 20 * searched[0] // total
+                    _event(progress="init", message=f"searching the literature table: {searched[0]} of {total} points")
+
+            starts = literature_starts(scene, cap, progress=point_done)
         if fs.start_trials == 0:
             return starts[G_VALUES.index(START_G)], False
         shutil.rmtree(work, ignore_errors=True)  # an interrupted fit's trials

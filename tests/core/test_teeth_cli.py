@@ -249,8 +249,11 @@ def test_fit_cli_defaults_are_fit_settings_and_help_is_short(tmp_path, capsys):
 
 
 def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch, with_trials):
-    """With MATERIAL_STRUCTURES_PROGRESS=json (what the Blender add-on sets) the fit reports each iteration,
-    what it does between iterations and nothing else as JSON lines on stdout: no progress bars to parse."""
+    """With MATERIAL_STRUCTURES_PROGRESS=json (what the Blender add-on sets) the fit reports the literature
+    search's points, each iteration, what it does between iterations and nothing else as JSON lines on stdout: no
+    progress bars to parse."""
+    from material_structures.core.teeth.literature_init import literature_points
+
     cap_dir = tmp_path / "cap"
     assert main(["teeth", "synth", "--out", str(cap_dir), "--teeth", "1", "--width", "12", "--height", "10",
                  "--lights", "4", "--cameras", "1", "--samples", "1", "--samples-background", "0",
@@ -266,7 +269,14 @@ def test_fit_progress_as_json_lines(tmp_path, capsys, monkeypatch, with_trials):
     assert [e["iteration"] for e in fits] == [n - 2, n - 1, n] and all(e["iterations"] == n for e in fits)
     assert all(np.isfinite(e["loss"]) for e in fits)
     assert events[0] == {"progress": "init", "message": "searching the literature table for a start"}
-    trials = [e["message"] for e in events if e["progress"] == "init"][1:]
+    # the search's progress (the panel shows the last message), every 5 % of its points, to the last
+    inits = [e["message"] for e in events if e["progress"] == "init"][1:]
+    searched = [m for m in inits if m.startswith("searching the literature table: ")]
+    points = [int(m.split(": ")[1].split(" of ")[0]) for m in searched]
+    total = literature_points()
+    assert 10 <= len(searched) <= 20 and points == sorted(points)
+    assert searched[-1].endswith(f"{total} of {total} points")
+    trials = inits[len(searched):]
     assert trials[0] == f"trying 3 starts, {TRIALS} iterations each"
     ran = sum(json.loads((tmp_path / "fit" / "start_trials.json").read_text())["iterations"])  # some may stop early
     assert len(trials) == 1 + ran
