@@ -87,7 +87,7 @@ def teeth_smile_dask() -> dict:
     from ..core.teeth.fit_report import held_out_check
     from ..core.teeth.fit_settings import FitSettings
     from ..core.teeth.literature_init import literature_starts
-    from ..core.teeth.optimise import fit_gauss_newton_matrix, free_mask, held_out_light_ids
+    from ..core.teeth.optimise import fit_gauss_newton_matrix, gauss_newton_columns, held_out_light_ids
     from ..core.teeth.param_vector import ParamLayout, scene_to_vector, to_optimiser
     from ..core.teeth.path_tracer import RenderSettings
     from ..core.teeth.scene import load_scene
@@ -114,7 +114,7 @@ def teeth_smile_dask() -> dict:
     trained = np.setdiff1d(np.arange(len(cap.lights)), held_out)
     layout = ParamLayout(scene)
     x = scene_to_vector(scene, layout)
-    gn_idx = np.flatnonzero(free_mask(layout, fs.free) & (layout.kinds() != "c"))  # as the fit's matrix
+    gn_idx = gauss_newton_columns(layout, fs)
     st = RenderSettings(spp=fs.spp, max_depth=fs.max_depth)
     rng = np.random.default_rng(0)
     out: dict = {"state": os.path.relpath(state, keep), "workers_here": workers, "split_for": split,

@@ -130,6 +130,15 @@ def _gn_seed(s: FitSettings, phase_index: int, iteration: int) -> int:
     return 3_000_000_000 + 10_000_000 * s.seed + 1_000_000 * phase_index + 10_000 * iteration
 
 
+def gauss_newton_columns(layout: ParamLayout, s: FitSettings) -> np.ndarray:
+    """The variables ``optimiser="gauss-newton"`` steps (the rest of the free ones keep Adam): the free ones but
+    the dentin coefficients, which keep Adam on their difference gradient (dentin_shape_gradient): their
+    path-space Jacobian columns, which the matrix would need, are noise. None with ``optimiser="adam"``."""
+    if s.optimiser != "gauss-newton":
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(free_mask(layout, s.free) & (layout.kinds() != "c"))
+
+
 def fit_gauss_newton_matrix(scene: TeethScene, capture: Capture, layout: ParamLayout, gn_idx: np.ndarray,
                             y: np.ndarray, s: FitSettings, seed: int, task_map: TaskMap | None = None) -> np.ndarray:
     """The Gauss-Newton matrix over the variables ``gn_idx`` that ``optimiser="gauss-newton"`` steps."""
@@ -262,14 +271,10 @@ def _fit(scene, capture, settings, out_dir, resume, progress, callback, gradient
         # parameter there (clamped) until steps against the gradient's new sign had walked it back
         y_lo, y_hi = optimiser_bounds(layout)
         y = np.clip(y, y_lo, y_hi)
-        # optimiser "gauss-newton": the variables it steps (the rest of the free ones keep Adam)
-        gn = np.zeros_like(free)
         is_c = layout.kinds() == "c"
-        if s.optimiser == "gauss-newton":
-            # the dentin coefficients keep Adam on their difference gradient (dentin_shape_gradient): their
-            # path-space Jacobian columns, which the matrix would need, are noise
-            gn = free & ~is_c
-        gn_idx = np.flatnonzero(gn)
+        gn_idx = gauss_newton_columns(layout, s)
+        gn = np.zeros_like(free)
+        gn[gn_idx] = True
         # with Gauss-Newton the dentin coefficients wait for it (gn_start) in the first phase: before, the
         # materials are far off, the coefficients' gradient follows their error, and the coefficients run into
         # the valley they share with the dentin's materials, where they stay (docs/teeth-fit.md, "The
