@@ -4,21 +4,31 @@
 noise), fitted by ``python -m material_structures fabric fit`` in a subprocess (its process tree's
 memory is sampled from /proc); scored on 16 x 16 held-out pairs; compared with a plain per-texel
 ``scipy.optimize.least_squares`` loop on a sub-tile, measured in the same run.
+``fabric-fit-large``: the same fit streamed over a 1024 x 1024 texel BTF with 64 x 64 pairs (51 GB of float32
+values, 13x the machine's memory), beside a 256 x 256 one in the same run: time per texel and the peak memory of
+the fit's process tree at both sizes (memory flat in the texel count: the fit maps only a tile of the BTF at a
+time). Rendering all of its 4 billion values would take about 20 minutes, so the BTF repeats a synthetic
+1024 x 128 texel band down its rows (the fit does not know: every texel is fitted on its own); scored on the
+first band against 16 x 16 held-out pairs of its ground truth.
 ``fabric-brush``: 200-point stroke on 2048 x 2048 maps, time per stroke-segment update.
 
 Environment knobs for quick runs: ``FABRIC_BENCH_SIZE`` (texels per side, default 200),
-``FABRIC_BENCH_DIRS`` (lights = views, default 64), ``FABRIC_BENCH_WORKERS`` (default 2).
+``FABRIC_BENCH_DIRS`` (lights = views, default 64), ``FABRIC_BENCH_WORKERS`` (default 2); for
+``fabric-fit-large``: ``FABRIC_LARGE_SIZES`` (default ``256,1024``), ``FABRIC_LARGE_BAND`` (rows rendered,
+default 128) and ``FABRIC_LARGE_KEEP`` (a folder that keeps the generated BTFs for a later run).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+import zipfile
 
 import numpy as np
 
@@ -168,6 +178,85 @@ def bench_fit() -> dict:
     }
 
 
+def _write_banded_npz(path: str, band, wi: np.ndarray, wo: np.ndarray, size: int) -> None:
+    """An uncompressed BTF ``.npz`` of ``size x size`` texels whose rows repeat the rendered ``band``'s, written
+    16 images at a time (memory flat in the BTF's size)."""
+    from ..core.fabric.synthetic_btf import render_btf
+
+    rows = band.shape[0]
+    tmp = path + ".tmp"
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for key, arr in (("wi", wi), ("wo", wo)):
+            with zf.open(f"{key}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asarray(arr, dtype=np.float64))
+        with zf.open("values.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array_header_2_0(
+                f, {"descr": "<f4", "fortran_order": False, "shape": (len(wi), size, size, 3)})
+            for k0 in range(0, len(wi), 16):
+                vals = render_btf(band, wi[k0:k0 + 16], wo[k0:k0 + 16])  # (m, rows, size, 3)
+                f.write(np.tile(vals, (1, -(-size // rows), 1, 1))[:, :size].tobytes())
+    os.replace(tmp, path)
+
+
+def bench_fit_large() -> dict:
+    from ..core.fabric.btf_prediction import psnr
+    from ..core.fabric.parameter_maps import load_params, make_maps
+    from ..core.fabric.synthetic_btf import light_view_pairs, render_btf, synthetic_maps
+
+    sizes = [int(v) for v in os.environ.get("FABRIC_LARGE_SIZES", "256,1024").split(",")]
+    rows = int(os.environ.get("FABRIC_LARGE_BAND", 128))
+    ndir, workers = 64, int(os.environ.get("FABRIC_BENCH_WORKERS", 2))
+    keep = os.environ.get("FABRIC_LARGE_KEEP")
+    wi, wo = light_view_pairs(ndir, ndir)
+    hwi, hwo = light_view_pairs(16, 16, rotation=0.9)
+    runs = {}
+    with tempfile.TemporaryDirectory(prefix="fabric-large-") as tmp:
+        folder = keep or tmp
+        os.makedirs(folder, exist_ok=True)
+        for size in sizes:
+            band = synthetic_maps(min(rows, size), size, seed=11)
+            btf = os.path.join(folder, f"btf-{size}x{size}-band{band.shape[0]}-{ndir}x{ndir}.npz")
+            t0 = time.perf_counter()
+            if not os.path.isfile(btf):
+                _write_banded_npz(btf, band, wi, wo, size)
+            t_gen = time.perf_counter() - t0
+            out = os.path.join(tmp, f"fit-{size}")
+            cmd = [sys.executable, "-m", "material_structures", "fabric", "fit", btf, "--out", out,
+                   "--workers", str(workers), "--drop-cache", "--no-progress"]
+            seconds, rss, pss, rc = _run_sampled(cmd)
+            if rc != 0:
+                raise RuntimeError(f"fabric fit exited with {rc}")
+            fit = load_params(out)
+            r = band.shape[0]
+            first = make_maps(fit.kd[:r], fit.ks[:r], fit.sigma[:r], fit.basis[:r])
+            with open(os.path.join(out, "params.json")) as f:
+                stats = json.load(f)["fit"]
+            runs[str(size)] = {
+                "texels": size * size,
+                "seconds": round(seconds, 1),
+                "seconds_per_megatexel": round(seconds / (size * size) * 1e6, 1),
+                "median_cost": stats["median_cost"],
+                "peak_rss_gb": round(rss / 2**30, 3),
+                "peak_pss_gb": round(pss / 2**30, 3),
+                "btf_gb": round(os.path.getsize(btf) / 2**30, 2),
+                "psnr_db_holdout_first_band": round(psnr(render_btf(first, hwi, hwo), render_btf(band, hwi, hwo)), 2),
+                "generate_seconds": round(t_gen, 1),
+            }
+            shutil.rmtree(out, ignore_errors=True)
+            if not keep:
+                os.remove(btf)
+    big, small = runs[str(max(sizes))], runs[str(min(sizes))]
+    return {
+        "sizes": runs,
+        "pairs": ndir * ndir,
+        "workers": workers,
+        "band_rows": rows,
+        "largest_fit_minutes": round(big["seconds"] / 60, 2),
+        "peak_pss_ratio_largest_vs_smallest": round(big["peak_pss_gb"] / small["peak_pss_gb"], 2),
+        "texel_ratio_largest_vs_smallest": big["texels"] / small["texels"],
+    }
+
+
 def bench_brush() -> dict:
     from ..core.fabric.brushing import BrushStates, brush_data_driven, brush_edit, brush_fibres, capsule_window
     from ..core.fabric.closure_table import load_table, lookup_closure_texels
@@ -221,4 +310,4 @@ def bench_brush() -> dict:
     }
 
 
-BENCHMARKS = {"fabric-fit": bench_fit, "fabric-brush": bench_brush}
+BENCHMARKS = {"fabric-fit": bench_fit, "fabric-fit-large": bench_fit_large, "fabric-brush": bench_brush}

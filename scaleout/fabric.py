@@ -1,8 +1,8 @@
 """Fabric BTF fitting on Dask: one task per texel tile.
 
-The client prepares the fit cache once (``core.fabric.btf_fitter``: the texel-major BTF memory map
-and the NDF operator) in the output folder, which must be on storage the workers share; each
-task maps only its tile, fits it and writes the tile's checkpoint atomically. Finished tiles are
+The client prepares the fit cache once (``core.fabric.btf_fitter``: the NDF operator and, where the BTF is not an
+uncompressed ``.npz``, a copy of its images) in the output folder, which must be on storage the workers share, as
+must the BTF; each task maps only its tile, fits it and writes the tile's checkpoint atomically. Finished tiles are
 never recomputed (a rerun or a resumed client skips them), a task lost with a killed worker is
 rerun elsewhere, and every tile fit is deterministic, so the result equals a local run bit for
 bit. The final assembly and post-processing are the local fitter's own (``fit_btf`` with every
@@ -54,11 +54,11 @@ def fit_btf_dask(
     checked = btf_fitter.check_btf(btf_path)
     os.makedirs(out_dir, exist_ok=True)
     with FolderLock(out_dir):  # the tiles; fit_btf below takes the lock again for the assembly
-        hdr, cache, values_path = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress, checked)
+        hdr, cache, values = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress, checked)
         tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
         btf_fitter.check_tiles(cache, tiles)
         todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
-        init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
+        init_args = (values, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
         if todo:
             if client is not None:
                 _run_tiles(client, todo, cache, init_args, progress, len(tiles))

@@ -4,9 +4,16 @@ Pipeline per tile (see :mod:`tile_fit`): NDF extraction (eq. 3.11) into a parabo
 PCA basis (3.13-3.15), ``S_v`` (3.16), batched Levenberg-Marquardt (3.17-3.19); then, for the
 whole map, the post-processing of section 3.4.3. Output: :func:`parameter_maps.save_params`.
 
-On-disk work state in ``OUT/.fit_cache``: ``values.npy`` (the BTF as a texel-major (H, W, N, 3)
-float32 memory map, so workers read only their tile), ``meta.json`` (what it was built from) and ``tiles/*.npz``
-(one checkpoint per finished tile). An interrupted fit run again with the same inputs resumes.
+The BTF streams through the fit: a worker maps the BTF's images (N, H, W, 3), copies out its tile's texels and
+unmaps them, so no process holds more than a tile of the BTF and memory does not grow with the texel count; the
+tiles are fitted in row order, so the rows of the images that the workers read are in the page cache for the
+tiles beside them. An ``.npz`` saved uncompressed (``np.savez``, as ``save_btf`` writes one) is mapped where it
+lies; a folder of EXR images or a compressed ``.npz`` is first copied, image after image, into
+``OUT/.fit_cache/values.npy`` (float32).
+
+On-disk work state in ``OUT/.fit_cache``: that copy where one is needed, the NDF operator, ``meta.json`` (what it
+was built from) and ``tiles/*.npz`` (one checkpoint per finished tile). An interrupted fit run again with the same
+inputs resumes.
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ from ..errors import BadFileError
 from ..folder_lock import FolderLock
 from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
-from .btf_io import iter_btf_blocks, read_btf_header
+from .btf_io import ArrayInFile, iter_btf_blocks, npz_stored_array, read_btf_header
 from .closure_fit import FIT_KEY_BUDGET, fit_closure_maps, save_closure_maps
 from .levenberg_marquardt import Samples
 from .ndf_extraction import NdfOperator, check_ndf_coverage, ndf_operator
@@ -52,8 +59,8 @@ def _tile_path(cache: str, t: tuple[int, int, int, int]) -> str:
 _WORKER: dict = {}
 
 
-def _init_worker(values_path: str, op_path: str, wi: np.ndarray, wo: np.ndarray, options: dict) -> None:
-    _WORKER["values"] = np.load(values_path, mmap_mode="r")
+def _init_worker(values: ArrayInFile, op_path: str, wi: np.ndarray, wo: np.ndarray, options: dict) -> None:
+    _WORKER["values"] = values
     with np.load(op_path) as z:
         _WORKER["op"] = NdfOperator(A=z["A"], directions=z["directions"], solid_angle=z["solid_angle"],
                                     valid=z["valid"], resolution=int(z["resolution"]))
@@ -65,8 +72,7 @@ def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, 
     """Fit one tile (in a worker) and write its checkpoint atomically."""
     y0, y1, x0, x1 = t
     start = time.perf_counter()
-    block = np.asarray(_WORKER["values"][y0:y1, x0:x1], dtype=np.float64)  # (th, tw, N, 3)
-    vals = block.reshape(-1, block.shape[2], 3)
+    vals = read_tile_values(_WORKER["values"], t)
     res = fit_tile(vals, _WORKER["samples"], _WORKER["op"], _WORKER["options"])
     path = _tile_path(cache, t)
     tmp = path + f".tmp-{os.getpid()}.npz"
@@ -74,6 +80,16 @@ def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, 
              iterations=res.iterations)
     os.replace(tmp, path)
     return t, time.perf_counter() - start, res.iterations
+
+
+def read_tile_values(values: ArrayInFile, t: tuple[int, int, int, int]) -> np.ndarray:
+    """The BTF values of tile ``t`` texel-major, ``(texels, N, 3)`` float64 (through float32, as every BTF is
+    fitted), from the images ``values`` (N, H, W, 3); only the tile's pages are mapped, and only meanwhile."""
+    y0, y1, x0, x1 = t
+    images = values.map()
+    block = np.asarray(images[:, y0:y1, x0:x1], dtype=np.float32)  # (N, th, tw, 3)
+    del images
+    return np.ascontiguousarray(block.transpose(1, 2, 0, 3), dtype=np.float64).reshape(-1, block.shape[0], 3)
 
 
 TILE_ARRAYS = {"quat": 4, "sigma": 2, "ks": 3, "kd": 3, "cost": 0}
@@ -124,21 +140,29 @@ def check_btf(btf_path: str) -> tuple:
     return hdr, op
 
 
-def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool, checked: tuple):
-    """The fit cache of ``out_dir`` for the BTF that ``check_btf`` accepted (``checked``: its result)."""
+def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool,
+                   checked: tuple) -> tuple:
+    """The fit cache of ``out_dir`` for the BTF that ``check_btf`` accepted (``checked``: its result):
+    (header, cache folder, the BTF's images as an :class:`ArrayInFile`). Every value of the BTF is checked
+    (finite, >= 0) when the cache is made, before any tile is fitted."""
     hdr, op = checked
     cache = os.path.join(out_dir, CACHE)
+    stored = npz_stored_array(hdr.source, "values") if hdr.images is None else None
+    if stored is not None and np.dtype(stored.dtype).kind != "f":
+        stored = None  # iter_btf_blocks says what is wrong with it
     meta = {
         "source": os.path.abspath(hdr.source),
         "files": _content_stamp(hdr),
         "shape": [hdr.count, hdr.height, hdr.width, 3],
         "directions": _directions_hash(hdr.wi, hdr.wo),
         "tile": tile,
-        "layout": "HWN3",
+        "layout": "NHW3",
+        "values": "btf" if stored is not None else "values.npy",
         "options": asdict(options),
     }
     meta_path = os.path.join(cache, "meta.json")
     values_path = os.path.join(cache, "values.npy")
+    shape = tuple(meta["shape"])
     old = None
     if os.path.isfile(meta_path):
         try:
@@ -147,7 +171,7 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         except (ValueError, UnicodeDecodeError):  # damaged: the cache is built anew, as for another BTF
             old = None
     same = old == meta
-    if not same or not _cache_readable(cache, meta["shape"]):
+    if not same or not _cache_readable(cache, meta["shape"], stored is None):
         if same:  # this BTF's copy or operator damaged: they are made again, the tiles fitted so far stay
             for name in ("meta.json", "values.npy", "ndf_operator.npz"):
                 if os.path.exists(os.path.join(cache, name)):
@@ -155,34 +179,41 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
         else:
             shutil.rmtree(cache, ignore_errors=True)
         os.makedirs(os.path.join(cache, "tiles"), exist_ok=True)
-        tmp = values_path + ".tmp.npy"
-        n, h, w, _ = meta["shape"]
-        # texel-major (H, W, N, 3): a tile's samples are contiguous, so a worker maps only its tile
-        mm = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(h, w, n, 3))
         try:
-            for k0, vals in iter_btf_blocks(btf_path, progress=progress):
-                mm[:, :, k0:k0 + vals.shape[0]] = vals.transpose(1, 2, 0, 3)
-            mm.flush()
-        except BaseException:  # an unreadable image, Ctrl-C: no BTF-sized leftover
-            del mm
+            if stored is not None:  # mapped where it lies: only checked, block after block
+                for _ in iter_btf_blocks(btf_path, progress=progress):
+                    pass
+            else:  # image after image into an (N, H, W, 3) float32 copy: written in order, read by tile
+                tmp = values_path + ".tmp.npy"
+                mm = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
+                for k0, vals in iter_btf_blocks(btf_path, progress=progress):
+                    mm[k0:k0 + vals.shape[0]] = vals
+                mm.flush()
+                del mm
+                os.replace(tmp, values_path)
+        except BaseException:  # an unreadable image or value, Ctrl-C: no BTF-sized leftover
             shutil.rmtree(cache, ignore_errors=True)
             raise
-        del mm
-        os.replace(tmp, values_path)
         np.savez(os.path.join(cache, "ndf_operator.npz"), A=op.A, directions=op.directions,
                  solid_angle=op.solid_angle, valid=op.valid, resolution=op.resolution)
         save_json(meta_path, meta)
-    return hdr, cache, values_path
+    if stored is not None:
+        return hdr, cache, stored
+    values = np.load(values_path, mmap_mode="r")
+    offset = values.offset
+    del values
+    return hdr, cache, ArrayInFile(path=os.path.abspath(values_path), offset=offset, dtype="<f4", shape=shape)
 
 
-def _cache_readable(cache: str, shape: list) -> bool:
-    """Whether the cache's BTF copy and NDF operator can be read (a damaged one is built anew: it is derived
-    from the BTF, so nothing is lost)."""
-    n, h, w, _ = shape
+def _cache_readable(cache: str, shape: list, copied: bool) -> bool:
+    """Whether the cache's BTF copy (where the fit needs one) and NDF operator can be read (a damaged one is built
+    anew: it is derived from the BTF, so nothing is lost)."""
     try:
-        values = np.load(os.path.join(cache, "values.npy"), mmap_mode="r")
-        ok = values.shape == (h, w, n, 3) and values.dtype == np.float32
-        del values
+        ok = True
+        if copied:
+            values = np.load(os.path.join(cache, "values.npy"), mmap_mode="r")
+            ok = values.shape == tuple(shape) and values.dtype == np.float32
+            del values
         with np.load(os.path.join(cache, "ndf_operator.npz")) as z:
             ok = ok and {"A", "directions", "solid_angle", "valid", "resolution"} <= set(z.files)
             ok = ok and all(z[k] is not None for k in z.files)
@@ -229,12 +260,12 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
              preferred, keep_cache: bool, checked: tuple) -> tuple[FabricMaps, dict]:
     workers = workers or os.cpu_count() or 1
     t_start = time.perf_counter()
-    hdr, cache, values_path = _prepare_cache(btf_path, out_dir, tile, options, progress is True, checked)
+    hdr, cache, values = _prepare_cache(btf_path, out_dir, tile, options, progress is True, checked)
     t_loaded = time.perf_counter()
     tiles = _tiles(hdr.height, hdr.width, tile)
     check_tiles(cache, tiles)
     todo = [t for t in tiles if not os.path.isfile(_tile_path(cache, t))]
-    init_args = (values_path, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
+    init_args = (values, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
     bar = None
     if callable(progress):  # progress(tiles done, tiles): e.g. JSON lines for the Blender add-on
         bar = _CallbackBar(progress, len(tiles), len(tiles) - len(todo))

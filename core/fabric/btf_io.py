@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ UNIT_TOL = 1e-3
 
 
 MAX_SIDE = 16384  # texels a side (fabric synth makes at most as many)
+BLOCK_BYTES = 256 * 2**20  # iter_btf_blocks: images per block up to this many bytes (memory flat in the BTF's size)
 
 
 @dataclass
@@ -151,6 +153,45 @@ def _npz_member_header(zf, key: str):
     return f, tuple(shape), fortran, dtype
 
 
+@dataclass(frozen=True)
+class ArrayInFile:
+    """An array stored uncompressed at byte ``offset`` of the file ``path``, in C order: mapped, not read."""
+
+    path: str
+    offset: int
+    dtype: str
+    shape: tuple[int, ...]
+
+    def map(self) -> np.memmap:
+        """A read-only memory map of the array (delete it when done: its pages then leave the process)."""
+        return np.memmap(self.path, dtype=np.dtype(self.dtype), mode="r", offset=self.offset, shape=self.shape)
+
+
+_ZIP_LOCAL_HEADER = struct.Struct("<4s5H3L2H")  # signature ... file name length, extra field length
+
+
+def npz_stored_array(path: str, key: str) -> ArrayInFile | None:
+    """Where ``key`` of an ``.npz`` lies in the file, if it is stored uncompressed (``np.savez``) in C order;
+    ``None`` for a compressed member (``np.savez_compressed``) or a Fortran-order one, which must be read."""
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo(f"{key}.npy")
+    if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:  # compressed or encrypted
+        return None
+    with open(path, "rb") as f:
+        f.seek(info.header_offset)
+        local = _ZIP_LOCAL_HEADER.unpack(f.read(_ZIP_LOCAL_HEADER.size))
+        if local[0] != b"PK\x03\x04":
+            return None
+        f.seek(info.header_offset + _ZIP_LOCAL_HEADER.size + local[-2] + local[-1])
+        version = np.lib.format.read_magic(f)
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read_header(f)
+        offset = f.tell()
+    if fortran or dtype.hasobject:
+        return None
+    return ArrayInFile(path=os.path.abspath(path), offset=offset, dtype=dtype.str, shape=tuple(int(n) for n in shape))
+
+
 def _npz_shape(path: str, key: str) -> tuple[int, ...]:
     with zipfile.ZipFile(path) as zf:
         f, shape, _, _ = _npz_member_header(zf, key)
@@ -173,14 +214,15 @@ def _check_values(source: str, k0: int, vals: np.ndarray) -> None:
 
 
 def iter_btf_blocks(path: str | os.PathLike, block: int = 256, progress: bool = False):
-    """Yield ``(start, values[start:start + block])`` float32 blocks of a BTF (bounded memory; a block may be
-    read-only).
+    """Yield ``(start, values[start:start + block])`` float32 blocks of a BTF (bounded memory: at most ``block``
+    images and ``BLOCK_BYTES`` a block, at least one image; a block may be read-only).
 
     Raises ValueError/FileNotFoundError with the offending file for size mismatches, missing
     files, non-finite pixels and directions below the horizon.
     """
     hdr = read_btf_header(path)
     h, w = hdr.height, hdr.width
+    block = max(1, min(block, BLOCK_BYTES // (h * w * 3 * 4)))
     bar = None
     if progress:
         from tqdm import tqdm

@@ -390,6 +390,44 @@ def test_fit_resumes_from_tile_checkpoints(closures_from_the_table, tmp_path):
         assert np.allclose(getattr(first, name), getattr(again, name), atol=1e-6)
 
 
+@pytest.mark.parametrize("dtype", ["<f4", ">f8", "<f2"])
+def test_an_uncompressed_npz_member_is_mapped_where_it_lies(tmp_path, dtype):
+    """``npz_stored_array`` finds the bytes of ``values`` inside an ``np.savez`` file (what the fit maps instead of
+    copying the BTF): the map equals ``np.load``'s array; a compressed member has no place to map."""
+    from material_structures.core.fabric.btf_io import npz_stored_array
+
+    a = np.random.default_rng(1).random((5, 3, 7, 3)).astype(dtype)
+    np.savez(tmp_path / "s.npz", wi=np.ones((5, 3)), values=a, wo=np.ones((5, 3)))
+    where = npz_stored_array(str(tmp_path / "s.npz"), "values")
+    assert where.shape == a.shape and np.dtype(where.dtype) == a.dtype
+    images = where.map()
+    np.testing.assert_array_equal(images, a)
+    del images
+    np.savez_compressed(tmp_path / "c.npz", values=a)
+    assert npz_stored_array(str(tmp_path / "c.npz"), "values") is None
+
+
+@pytest.mark.heavy  # three small fits (about 1 s each): outside `make test-fast`
+def test_the_fit_streams_an_npz_and_fits_every_layout_alike(closures_from_the_table, tmp_path):
+    """An uncompressed .npz is fitted from where it lies (no copy in the fit cache); a compressed one and a folder
+    of EXR images are copied image by image; all three fits are the same to the bit, with tiles that cut across
+    the images' rows and columns (tile 3 of a 7 x 5 sample)."""
+    maps = synthetic_maps(7, 5, seed=9)
+    wi, wo = light_view_pairs(12, 12)
+    values = render_btf(maps, wi, wo)
+    save_btf(tmp_path / "b.npz", values, wi, wo)
+    np.savez_compressed(tmp_path / "c.npz", values=values, wi=wi, wo=wo)
+    save_btf(tmp_path / "folder", values, wi, wo)
+    fits = {}
+    for name in ("b.npz", "c.npz", "folder"):
+        fits[name], _ = fit_btf(tmp_path / name, tmp_path / f"fit-{name}", tile=3, workers=2, progress=False)
+    assert not (tmp_path / "fit-b.npz" / ".fit_cache" / "values.npy").exists()
+    assert (tmp_path / "fit-c.npz" / ".fit_cache" / "values.npy").exists()
+    for name in ("c.npz", "folder"):
+        for m in ("kd", "ks", "sigma", "basis"):
+            np.testing.assert_array_equal(getattr(fits[name], m), getattr(fits["b.npz"], m), err_msg=f"{name} {m}")
+
+
 @pytest.mark.heavy  # a whole fit (1-3 s): outside `make test-fast`
 def test_an_image_rewritten_in_place_invalidates_the_cache(closures_from_the_table, tmp_path):
     """The cache is keyed on every file's size and mtime, not the folder: after one image of the BTF is
