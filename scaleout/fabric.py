@@ -1,8 +1,9 @@
 """Fabric BTF fitting on Dask: one task per texel tile.
 
-The client prepares the fit cache once (``core.fabric.btf_fitter``: the NDF operator and, where the BTF is not an
-uncompressed ``.npz``, a copy of its images) in the output folder, which must be on storage the workers share, as
-must the BTF; each task maps only its tile, fits it and writes the tile's checkpoint atomically. Finished tiles are
+The client prepares the fit cache (``core.fabric.btf_fitter``) in the output folder, which must be on storage the
+workers share, and reads the BTF a band of tile rows at a time into the cache's band files
+(``core.fabric.btf_bands``); each task maps its tile from its band file, fits it and writes the tile's checkpoint
+atomically. Finished tiles are
 never recomputed (a rerun or a resumed client skips them), a task lost with a killed worker is
 rerun elsewhere, and every tile fit is deterministic, so the result equals a local run bit for
 bit. The final assembly and post-processing are the local fitter's own (``fit_btf`` with every
@@ -22,13 +23,13 @@ from ..core.folder_lock import FolderLock
 _INIT_LOCK = threading.Lock()
 
 
-def _fit_tile_task(tile: tuple[int, int, int, int], cache: str, init_args: tuple) -> tuple:
-    """Runs on a worker: load the shared inputs once per worker process, fit one tile."""
+def _fit_tile_task(tile: tuple[int, int, int, int], cache: str, band, init_args: tuple) -> tuple:
+    """Runs on a worker: load the shared inputs once per worker process, fit one tile from its band file."""
     with _INIT_LOCK:
         if btf_fitter._WORKER.get("_init_key") != init_args[0]:
             btf_fitter._init_worker(*init_args)
             btf_fitter._WORKER["_init_key"] = init_args[0]
-    return btf_fitter._fit_one(tile, cache)
+    return btf_fitter._fit_one(tile, cache, band)
 
 
 def fit_btf_dask(
@@ -58,13 +59,13 @@ def fit_btf_dask(
         tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
         btf_fitter.check_tiles(cache, tiles)
         todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
-        init_args = (values, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
+        init_args = (os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
         if todo:
             if client is not None:
-                _run_tiles(client, todo, cache, init_args, progress, len(tiles))
+                _run_tiles(client, values, hdr, todo, cache, init_args, progress, len(tiles))
             else:
                 with dask_client(scheduler, n_workers) as own:
-                    _run_tiles(own, todo, cache, init_args, progress, len(tiles))
+                    _run_tiles(own, values, hdr, todo, cache, init_args, progress, len(tiles))
     # Every tile is checkpointed now: the local fitter only assembles and post-processes.
     maps, stats = btf_fitter.fit_btf(
         btf_path, out_dir, tile=tile, workers=1, options=options, progress=False, keep_cache=keep_cache
@@ -80,31 +81,42 @@ def _asdict(options: FitOptions) -> dict:
     return asdict(options)
 
 
-def _run_tiles(client, todo, cache, init_args, progress, total) -> None:
-    from distributed import as_completed
+class _DaskRunner:
+    """Tiles as Dask tasks (``btf_bands.TileRunner``)."""
 
+    def __init__(self, client, cache: str, shared):
+        self.client, self.cache, self.shared = client, cache, shared
+        self.submitted: list = []
+
+    def submit(self, t, band):
+        # key per tile and fit folder; retries: a task lost with a killed worker runs elsewhere
+        future = self.client.submit(_fit_tile_task, t, self.cache, band, init_args=self.shared, retries=3,
+                                  key=f"fabric-tile-{t[0]}-{t[2]}-{os.path.basename(os.path.dirname(self.cache))}")
+        self.submitted.append(future)
+        return future
+
+    def wait_some(self, running):
+        from distributed import wait
+
+        return wait(list(running), return_when="FIRST_COMPLETED").done
+
+    def result(self, handle):
+        return handle.result()  # raises the task's error, if any
+
+
+def _run_tiles(client, values, hdr, todo, cache, init_args, progress, total) -> None:
     # sent once, not per task; hash=False: no key shared with an earlier fit (dask/distributed#3703)
     [shared] = client.scatter([init_args], broadcast=True, hash=False)
-    futures = client.map(
-        _fit_tile_task,
-        todo,
-        cache=cache,
-        init_args=shared,
-        key=[f"fabric-tile-{t[0]}-{t[2]}-{os.path.basename(os.path.dirname(cache))}" for t in todo],
-        retries=3,
-    )
+    runner = _DaskRunner(client, cache, shared)
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=total, initial=total - len(todo), desc="fit tiles (dask)", unit="tile", file=sys.stderr)
     try:
-        for future in as_completed(futures):
-            future.result()  # raises the task's error, if any
-            if bar:
-                bar.update(1)
+        btf_fitter.fit_all_bands(values, hdr, cache, todo, runner, lambda _: bar.update(1) if bar else None)
     except BaseException:  # Ctrl-C, SIGTERM or a failed tile: the finished tiles stay checkpointed, the others
-        client.cancel(futures)  # are dropped from the cluster instead of running on
+        client.cancel(runner.submitted)  # are dropped from the cluster instead of running on
         raise
     finally:
         if bar:

@@ -4,16 +4,14 @@ Pipeline per tile (see :mod:`tile_fit`): NDF extraction (eq. 3.11) into a parabo
 PCA basis (3.13-3.15), ``S_v`` (3.16), batched Levenberg-Marquardt (3.17-3.19); then, for the
 whole map, the post-processing of section 3.4.3. Output: :func:`parameter_maps.save_params`.
 
-The BTF streams through the fit: a worker maps the BTF's images (N, H, W, 3), copies out its tile's texels and
-unmaps them, so no process holds more than a tile of the BTF and memory does not grow with the texel count; the
-tiles are fitted in row order, so the rows of the images that the workers read are in the page cache for the
-tiles beside them. An ``.npz`` saved uncompressed (``np.savez``, as ``save_btf`` writes one) is mapped where it
-lies; a folder of EXR images or a compressed ``.npz`` is first copied, image after image, into
+The BTF streams through the fit a band of tile rows at a time (:mod:`btf_bands`), so memory and the cache do not
+grow with the texel count. An ``.npz`` saved uncompressed (``np.savez``, as ``save_btf`` writes one) is read where
+it lies; a folder of EXR images or a compressed ``.npz`` is first copied, image after image, into
 ``OUT/.fit_cache/values.npy`` (float32).
 
-On-disk work state in ``OUT/.fit_cache``: that copy where one is needed, the NDF operator, ``meta.json`` (what it
-was built from) and ``tiles/*.npz`` (one checkpoint per finished tile). An interrupted fit run again with the same
-inputs resumes.
+On-disk work state in ``OUT/.fit_cache``: that copy where one is needed, the NDF operator, the two band files while
+the fit runs, ``meta.json`` (what it was built from) and ``tiles/*.npz`` (one checkpoint per finished tile). An
+interrupted fit run again with the same inputs resumes.
 """
 
 from __future__ import annotations
@@ -22,20 +20,22 @@ import hashlib
 import json
 import multiprocessing
 import os
+import queue
 import shutil
 import sys
 import time
 import zipfile
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 
 import numpy as np
 
-from ..errors import BadFileError
+from ..errors import BadFileError, UserError
 from ..folder_lock import FolderLock
 from ..forked_map import fork_warning_silenced
 from ..json_io import save_json
+from .btf_bands import BandFile, fit_in_bands
 from .btf_io import ArrayInFile, iter_btf_blocks, npz_stored_array, read_btf_header
 from .closure_fit import FIT_KEY_BUDGET, fit_closure_maps, save_closure_maps
 from .levenberg_marquardt import Samples
@@ -59,8 +59,7 @@ def _tile_path(cache: str, t: tuple[int, int, int, int]) -> str:
 _WORKER: dict = {}
 
 
-def _init_worker(values: ArrayInFile, op_path: str, wi: np.ndarray, wo: np.ndarray, options: dict) -> None:
-    _WORKER["values"] = values
+def _init_worker(op_path: str, wi: np.ndarray, wo: np.ndarray, options: dict) -> None:
     with np.load(op_path) as z:
         _WORKER["op"] = NdfOperator(A=z["A"], directions=z["directions"], solid_angle=z["solid_angle"],
                                     valid=z["valid"], resolution=int(z["resolution"]))
@@ -68,12 +67,10 @@ def _init_worker(values: ArrayInFile, op_path: str, wi: np.ndarray, wo: np.ndarr
     _WORKER["samples"] = Samples.make(wi, wo, _WORKER["options"].weighting)
 
 
-def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, int, int], float, int]:
-    """Fit one tile (in a worker) and write its checkpoint atomically."""
-    y0, y1, x0, x1 = t
+def _fit_one(t: tuple[int, int, int, int], cache: str, band: BandFile) -> tuple[tuple[int, int, int, int], float, int]:
+    """Fit one tile (in a worker) from its band and write its checkpoint atomically."""
     start = time.perf_counter()
-    vals = read_tile_values(_WORKER["values"], t)
-    res = fit_tile(vals, _WORKER["samples"], _WORKER["op"], _WORKER["options"])
+    res = fit_tile(band.tile_values(t), _WORKER["samples"], _WORKER["op"], _WORKER["options"])
     path = _tile_path(cache, t)
     tmp = path + f".tmp-{os.getpid()}.npz"
     np.savez(tmp, quat=res.quat, sigma=res.sigma, ks=res.ks, kd=res.kd, cost=res.cost,
@@ -82,14 +79,46 @@ def _fit_one(t: tuple[int, int, int, int], cache: str) -> tuple[tuple[int, int, 
     return t, time.perf_counter() - start, res.iterations
 
 
-def read_tile_values(values: ArrayInFile, t: tuple[int, int, int, int]) -> np.ndarray:
-    """The BTF values of tile ``t`` texel-major, ``(texels, N, 3)`` float64 (through float32, as every BTF is
-    fitted), from the images ``values`` (N, H, W, 3); only the tile's pages are mapped, and only meanwhile."""
-    y0, y1, x0, x1 = t
-    images = values.map()
-    block = np.asarray(images[:, y0:y1, x0:x1], dtype=np.float32)  # (N, th, tw, 3)
-    del images
-    return np.ascontiguousarray(block.transpose(1, 2, 0, 3), dtype=np.float64).reshape(-1, block.shape[0], 3)
+class _InProcess:
+    """Tiles fitted here, one after the other (one worker)."""
+
+    def submit(self, t, band):
+        return _Finished(_fit_one(t, self.cache, band))
+
+    def wait_some(self, running):
+        return running
+
+    def result(self, handle):
+        return handle.result
+
+
+class _Finished:
+    def __init__(self, result):
+        self.result = result
+
+
+class _Pool:
+    """Tiles fitted in a process pool. Finished tiles arrive on a queue (a done-callback puts them there): the main
+    thread waits on the queue, never inside the pool's locks, so Ctrl-C or SIGTERM while it waits cannot leave one
+    held and the pool's shutdown waiting on it."""
+
+    def __init__(self, pool, cache):
+        self.pool, self.cache = pool, cache
+        self.finished: queue.SimpleQueue = queue.SimpleQueue()
+
+    def submit(self, t, band):
+        future = self.pool.submit(_fit_one, t, self.cache, band)
+        future.add_done_callback(self.finished.put)
+        return future
+
+    def wait_some(self, running):
+        done = [self.finished.get()]
+        while not self.finished.empty():
+            done.append(self.finished.get())
+        return done
+
+    def result(self, handle):
+        return handle.result()
 
 
 TILE_ARRAYS = {"quat": 4, "sigma": 2, "ks": 3, "kd": 3, "cost": 0}
@@ -143,8 +172,8 @@ def check_btf(btf_path: str) -> tuple:
 def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, progress: bool,
                    checked: tuple) -> tuple:
     """The fit cache of ``out_dir`` for the BTF that ``check_btf`` accepted (``checked``: its result):
-    (header, cache folder, the BTF's images as an :class:`ArrayInFile`). Every value of the BTF is checked
-    (finite, >= 0) when the cache is made, before any tile is fitted."""
+    (header, cache folder, the BTF's images as an :class:`ArrayInFile`). A BTF that is copied is checked (values
+    finite, >= 0) as it is copied; one read where it lies is checked a band at a time, before the band is fitted."""
     hdr, op = checked
     cache = os.path.join(out_dir, CACHE)
     stored = npz_stored_array(hdr.source, "values") if hdr.images is None else None
@@ -180,9 +209,10 @@ def _prepare_cache(btf_path: str, out_dir: str, tile: int, options: FitOptions, 
             shutil.rmtree(cache, ignore_errors=True)
         os.makedirs(os.path.join(cache, "tiles"), exist_ok=True)
         try:
-            if stored is not None:  # mapped where it lies: only checked, block after block
-                for _ in iter_btf_blocks(btf_path, progress=progress):
-                    pass
+            if stored is not None:  # read where it lies, a band at a time; its values are checked by band
+                if os.path.getsize(stored.path) < stored.offset + int(np.prod(stored.shape)) * np.dtype(
+                        stored.dtype).itemsize:
+                    raise UserError(f"{hdr.source}: values is truncated")
             else:  # image after image into an (N, H, W, 3) float32 copy: written in order, read by tile
                 tmp = values_path + ".tmp.npy"
                 mm = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
@@ -237,6 +267,17 @@ class _CallbackBar:
         pass
 
 
+def fit_all_bands(values: ArrayInFile, hdr, cache: str, todo: list, runner, done) -> None:
+    """Fit the tiles ``todo`` band by band (:func:`btf_bands.fit_in_bands`). A value the BTF cannot hold, found
+    in a band read from the BTF where it lies, refuses the BTF: the cache goes with it (its tiles came from that
+    BTF), as when the BTF is copied."""
+    try:
+        fit_in_bands(values, hdr.source, cache, todo, runner, done)
+    except UserError:
+        shutil.rmtree(cache, ignore_errors=True)
+        raise
+
+
 def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int = 20,
             workers: int | None = None, options: FitOptions | None = None,
             progress: bool | Callable[[int, int], None] = True, preferred=(1.0, 0.0, 0.0),
@@ -265,7 +306,7 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
     tiles = _tiles(hdr.height, hdr.width, tile)
     check_tiles(cache, tiles)
     todo = [t for t in tiles if not os.path.isfile(_tile_path(cache, t))]
-    init_args = (values, os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
+    init_args = (os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, asdict(options))
     bar = None
     if callable(progress):  # progress(tiles done, tiles): e.g. JSON lines for the Blender add-on
         bar = _CallbackBar(progress, len(tiles), len(tiles) - len(todo))
@@ -275,24 +316,25 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
         bar = tqdm(total=len(tiles), initial=len(tiles) - len(todo), desc="fit tiles", unit="tile",
                    file=sys.stderr)
     iters = []
+
+    def done(result: tuple) -> None:
+        iters.append(result[2])
+        if bar:
+            bar.update(1)
+
     if todo:
         if workers <= 1:
             _init_worker(*init_args)
-            for t in todo:
-                iters.append(_fit_one(t, cache)[2])
-                if bar:
-                    bar.update(1)
+            runner = _InProcess()
+            runner.cache = cache
+            fit_all_bands(values, hdr, cache, todo, runner, done)
         else:
             method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
             ctx = multiprocessing.get_context(method)
             with fork_warning_silenced(), ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx,
                                                               initializer=_init_worker, initargs=init_args) as pool:
-                futures = [pool.submit(_fit_one, t, cache) for t in todo]
                 try:
-                    for fut in as_completed(futures):
-                        iters.append(fut.result()[2])
-                        if bar:
-                            bar.update(1)
+                    fit_all_bands(values, hdr, cache, todo, _Pool(pool, cache), done)
                 except BaseException:  # Ctrl-C, SIGTERM or a failed tile: drop the queued tiles, let the
                     pool.shutdown(wait=True, cancel_futures=True)  # running ones finish, leave no worker
                     raise

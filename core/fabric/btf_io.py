@@ -199,7 +199,7 @@ def _npz_shape(path: str, key: str) -> tuple[int, ...]:
     return shape
 
 
-def _check_values(source: str, k0: int, vals: np.ndarray) -> None:
+def check_values(source: str, k0: int, vals: np.ndarray) -> None:
     """Refuse non-finite or negative radiance in images ``k0...`` (``vals``: (m, H, W, 3)), naming the first
     image that holds one. A min and a max (NaN propagates through both) clear a good block in two passes."""
     lo, hi = vals.min(), vals.max()
@@ -247,7 +247,7 @@ def iter_btf_blocks(path: str | os.PathLike, block: int = 256, progress: bool = 
                     if len(buf) != per * m:
                         raise UserError(f"{hdr.source}: values is truncated near image {k0}")
                     vals = np.frombuffer(buf, dtype=dtype).reshape(m, h, w, 3).astype(np.float32, copy=False)
-                    _check_values(hdr.source, k0, vals)
+                    check_values(hdr.source, k0, vals)
                     if bar:
                         bar.update(m)
                     yield k0, vals
