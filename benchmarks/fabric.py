@@ -20,6 +20,7 @@ default 128) and ``FABRIC_LARGE_KEEP`` (a folder that keeps the generated BTFs f
 
 from __future__ import annotations
 
+import glob
 import json
 import os
 import shutil
@@ -34,15 +35,17 @@ import numpy as np
 
 
 def _tree_memory(root: int) -> tuple[float, float]:
-    """(sum of RSS, sum of PSS) in bytes over ``root`` and its descendants (Linux /proc)."""
+    """(sum of RSS, sum of PSS) in bytes over ``root`` and its descendants (Linux /proc), children of every thread."""
     pids, frontier = {root}, [root]
     while frontier:
         pid = frontier.pop()
-        try:
-            with open(f"/proc/{pid}/task/{pid}/children") as f:
-                kids = [int(k) for k in f.read().split()]
-        except OSError:
-            kids = []
+        kids = []
+        for path in glob.glob(f"/proc/{pid}/task/*/children"):  # every thread's: Dask starts its workers from one
+            try:
+                with open(path) as f:
+                    kids += [int(k) for k in f.read().split()]
+            except OSError:
+                pass
         for k in kids:
             if k not in pids:
                 pids.add(k)

@@ -5,9 +5,10 @@ texel-major. Mapping a tile straight from the images costs a page fault per imag
 20 x 20 tile, each a random 4 KB read where the BTF is not in memory): on a 1024 x 1024 texel BTF with 4096
 images (51 GB) the fit then ran 8 times slower than its arithmetic. Instead the fit reads one band of ``tile``
 rows of every image (whole rows: one sequential read per image), checks its values, and writes it texel-major
-``(rows, W, N, 3)`` float32 into one of two band files of the fit cache; the workers map their tile from it (20
-contiguous runs per tile). While the workers fit one band, the next is read into the other file, so the space
-taken is two bands (2 GB for 1024 texels x 4096 images x 20 rows), whatever the texel count.
+``(rows, W, N, 3)`` float32 into a band file of the fit cache; the workers map their tile from it (20 contiguous
+runs per tile). While the workers fit one band, the next is written, so the cache holds two bands (2 GB for 1024
+texels x 4096 images x 20 rows) and the process that reads them a 64 MB group of images' rows, whatever the texel
+count.
 """
 
 from __future__ import annotations
@@ -42,36 +43,38 @@ class BandFile:
         return block.reshape(-1, block.shape[2], 3)
 
 
-def read_rows(images: ArrayInFile, y0: int, y1: int, source: str) -> np.ndarray:
-    """Rows ``y0:y1`` of every image of ``images`` (N, H, W, 3) as float32 ``(N, y1 - y0, W, 3)``: one read of
-    whole rows per image. Refuses (one line, naming the image) a file cut short and values a BTF cannot hold."""
+GROUP_BYTES = 64 * 2**20  # a band is read this many bytes of images' rows at a time
+
+
+def write_band(images: ArrayInFile, y0: int, y1: int, source: str, path: str) -> BandFile:
+    """Rows ``y0:y1`` of every image of ``images`` (N, H, W, 3) into the band file ``path``, texel-major
+    ``(rows, W, N, 3)`` float32. The images are read in groups of at most ``GROUP_BYTES`` of whole rows (one read
+    per image) and written a band row at a time through a map of that row alone, so this process holds a group,
+    not the band. Refuses (one line, naming the image) a file cut short and values a BTF cannot hold."""
     n, h, w, c = images.shape
     dtype = np.dtype(images.dtype)
+    th = y1 - y0
     row = w * c * dtype.itemsize
-    out = np.empty((n, y1 - y0, w, c), dtype=dtype)
+    group = max(1, GROUP_BYTES // (th * row))
+    band = np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=(th, w, n, c))
+    offset = band.offset
+    del band
+    buf = np.empty((min(group, n), th, w, c), dtype=dtype)
     with open(images.path, "rb", buffering=0) as f:
         fd = f.fileno()
-        for k in range(n):
-            got = os.preadv(fd, [memoryview(out[k]).cast("B")], images.offset + (k * h + y0) * row)
-            if got != out[k].nbytes:
-                raise UserError(f"{source}: values is truncated near image {k}")
-    vals = out.astype(np.float32, copy=False)
-    check_values(source, 0, vals)
-    return vals
-
-
-def write_band(path: str, rows: np.ndarray, y0: int) -> BandFile:
-    """Write ``rows`` (N, th, W, 3) texel-major into the band file ``path`` (replaced whole, so a worker still
-    mapping the band it held keeps it)."""
-    n, th, w, c = rows.shape
-    tmp = f"{path}.tmp-{os.getpid()}.npy"
-    band = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(th, w, n, c))
-    for x in range(0, w, 64):  # in column blocks: each a cache-sized transposition
-        band[:, x:x + 64] = rows[:, :, x:x + 64].transpose(1, 2, 0, 3)
-    offset = band.offset
-    band.flush()
-    del band
-    os.replace(tmp, path)
+        for k0 in range(0, n, group):
+            m = min(group, n - k0)
+            for j in range(m):
+                got = os.preadv(fd, [memoryview(buf[j]).cast("B")], images.offset + ((k0 + j) * h + y0) * row)
+                if got != buf[j].nbytes:
+                    raise UserError(f"{source}: values is truncated near image {k0 + j}")
+            vals = buf[:m].astype(np.float32, copy=False)
+            check_values(source, k0, vals)
+            for r in range(th):
+                texels = np.memmap(path, dtype=np.float32, mode="r+", offset=offset + r * w * n * c * 4,
+                                   shape=(w, n, c))
+                texels[:, k0:k0 + m] = vals[:, r].transpose(1, 0, 2)
+                del texels
     return BandFile(ArrayInFile(path=os.path.abspath(path), offset=offset, dtype="<f4", shape=(th, w, n, c)), y0)
 
 
@@ -87,9 +90,9 @@ class TileRunner(Protocol):
 
 def fit_in_bands(images: ArrayInFile, source: str, band_dir: str, todo: list[Tile], runner: TileRunner,
                  done: Callable[[tuple], None]) -> None:
-    """Fit the tiles ``todo`` (row-major; whole bands of rows) through two band files in ``band_dir``: band k is
-    read while band k - 1 is fitted, and written once band k - 2's tiles are all done. ``done(result)`` is called
-    for every finished tile, in the order they finish."""
+    """Fit the tiles ``todo`` (row-major; whole bands of rows) through band files in ``band_dir``, at most two at a
+    time: band k is read and written while band k - 1 is fitted, once band k - 2's tiles are all done and its file
+    is deleted. ``done(result)`` is called for every finished tile, in the order they finish."""
     bands: dict[tuple[int, int], list[Tile]] = {}
     for t in todo:
         bands.setdefault((t[0], t[1]), []).append(t)
@@ -106,11 +109,11 @@ def fit_in_bands(images: ArrayInFile, source: str, band_dir: str, todo: list[Til
 
     try:
         for k, ((y0, y1), tiles) in enumerate(bands.items()):
-            rows = read_rows(images, y0, y1, source)
             while left[k - 2] > 0:
                 settle(runner.wait_some(running))
-            band = write_band(os.path.join(band_dir, f"band{k % 2}.npy"), rows, y0)
-            del rows
+            if os.path.exists(old := os.path.join(band_dir, f"band{k - 2}.npy")):
+                os.remove(old)  # a worker that still maps it keeps its pages until it lets go
+            band = write_band(images, y0, y1, source, os.path.join(band_dir, f"band{k}.npy"))
             for t in tiles:
                 h = runner.submit(t, band)
                 running.add(h)

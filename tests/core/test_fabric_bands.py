@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from material_structures.core.errors import UserError
-from material_structures.core.fabric.btf_bands import fit_in_bands, read_rows, write_band
+from material_structures.core.fabric import btf_bands
+from material_structures.core.fabric.btf_bands import fit_in_bands, write_band
 from material_structures.core.fabric.btf_io import npz_stored_array
 
 
@@ -18,31 +19,36 @@ def _stored(tmp_path, values):
 
 
 @pytest.mark.parametrize("dtype", ["<f4", ">f8"])
-def test_a_band_read_and_written_texel_major_is_the_images_rows(tmp_path, dtype):
-    """Rows 3:7 of 5 images of 9 x 130 texels (over two 64-column blocks of the transposition), read whole rows per
-    image and written (rows, W, N, 3): every tile cut from the band file equals the same texels of the images."""
+def test_a_band_written_texel_major_holds_the_images_rows(tmp_path, dtype, monkeypatch):
+    """Rows 3:7 of 5 images of 9 x 130 texels, read 2 images at a time (a group of 2 x 4 rows) and written a band
+    row at a time: the band file is the images' rows texel-major, and every tile cut from it equals the same
+    texels of the images."""
     values = np.random.default_rng(3).random((5, 9, 130, 3)).astype(dtype)
     images = _stored(tmp_path, values)
-    rows = read_rows(images, 3, 7, "b.npz")
-    np.testing.assert_array_equal(rows, values[:, 3:7].astype(np.float32))
-    band = write_band(str(tmp_path / "band0.npy"), rows, 3)
+    monkeypatch.setattr(btf_bands, "GROUP_BYTES", 2 * 4 * 130 * 3 * np.dtype(dtype).itemsize)
+    band = write_band(images, 3, 7, "b.npz", str(tmp_path / "band0.npy"))
+    rows = values[:, 3:7].astype(np.float32).transpose(1, 2, 0, 3)
+    np.testing.assert_array_equal(np.load(tmp_path / "band0.npy"), rows)
     for t in ((3, 7, 0, 20), (3, 7, 120, 130), (5, 7, 60, 70)):
         want = values[:, t[0]:t[1], t[2]:t[3]].astype(np.float32).astype(np.float64).transpose(1, 2, 0, 3)
         np.testing.assert_array_equal(band.tile_values(t), want.reshape(-1, 5, 3))
 
 
-def test_a_band_with_a_bad_value_or_cut_short_is_refused_by_image(tmp_path):
+def test_a_band_with_a_bad_value_or_cut_short_is_refused_by_image(tmp_path, monkeypatch):
     values = np.ones((4, 6, 5, 3), dtype=np.float32)
     values[2, 4, 1, 0] = np.nan
     images = _stored(tmp_path, values)
-    read_rows(images, 0, 4, "b.npz")  # the NaN is in row 4
+    monkeypatch.setattr(btf_bands, "GROUP_BYTES", 1)  # an image at a time
+    band = str(tmp_path / "band.npy")
+    write_band(images, 0, 4, "b.npz", band)  # the NaN is in row 4
     with pytest.raises(UserError, match=r"b.npz: values\[2\] holds non-finite values"):
-        read_rows(images, 3, 6, "b.npz")
+        write_band(images, 3, 6, "b.npz", band)
     cut = tmp_path / "cut.npz"
     cut.write_bytes((tmp_path / "b.npz").read_bytes())
     short = type(images)(path=str(cut), offset=images.offset, dtype=images.dtype, shape=(40, 6, 5, 3))
+    monkeypatch.setattr(btf_bands, "GROUP_BYTES", 1 << 20)  # one group: every image is read before any check
     with pytest.raises(UserError, match=r"cut.npz: values is truncated near image \d+"):
-        read_rows(short, 0, 3, "cut.npz")  # images past the file's end
+        write_band(short, 0, 3, "cut.npz", band)  # images past the file's end
 
 
 class _Recorder:
@@ -68,9 +74,9 @@ class _Recorder:
 
 
 def test_band_k_is_written_only_after_band_k_minus_2_is_fitted(tmp_path):
-    """Five bands of one tile row (tile 2 of an 10 x 4 sample) through two band files: every tile gets its own
-    texels, a band file is rewritten only when every tile of the band it held has finished, and the band files are
-    gone at the end."""
+    """Five bands of one tile row (tile 2 of an 10 x 4 sample): every tile gets its own texels, band k is written
+    only when every tile of band k - 2 has finished (at most two band files at a time), and the band files are gone
+    at the end."""
     values = np.random.default_rng(5).random((3, 10, 4, 3)).astype(np.float32)
     images = _stored(tmp_path, values)
     todo = [(y, y + 2, x, x + 2) for y in range(0, 10, 2) for x in (0, 2)]
@@ -93,7 +99,8 @@ def test_band_k_is_written_only_after_band_k_minus_2_is_fitted(tmp_path):
             band = e[1][0] // 2
             slot_users = [t for t in todo if t[0] // 2 == band - 2]
             assert set(slot_users) <= finished, (e, finished)
-            assert os.path.basename(e[2]) == f"band{band % 2}.npy"
+            assert os.path.basename(e[2]) == f"band{band}.npy"
+            assert len([f for f in os.listdir(cache) if f.startswith("band")]) <= 2
     assert os.listdir(cache) == []
 
 
