@@ -82,6 +82,9 @@ def _fit_one(t: tuple[int, int, int, int], cache: str, band: BandFile) -> tuple[
 class _InProcess:
     """Tiles fitted here, one after the other (one worker)."""
 
+    def __init__(self, cache):
+        self.cache = cache
+
     def submit(self, t, band):
         return _Finished(_fit_one(t, self.cache, band))
 
@@ -325,9 +328,7 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
     if todo:
         if workers <= 1:
             _init_worker(*init_args)
-            runner = _InProcess()
-            runner.cache = cache
-            fit_all_bands(values, hdr, cache, todo, runner, done)
+            fit_all_bands(values, hdr, cache, todo, _InProcess(cache), done)
         else:
             method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
             ctx = multiprocessing.get_context(method)
