@@ -3,11 +3,9 @@
 The client prepares the fit cache (``core.fabric.btf_fitter``) in the output folder, which must be on storage the
 workers share, and reads the BTF a band of tile rows at a time into the cache's band files
 (``core.fabric.btf_bands``); each task maps its tile from its band file, fits it and writes the tile's checkpoint
-atomically. Finished tiles are
-never recomputed (a rerun or a resumed client skips them), a task lost with a killed worker is
-rerun elsewhere, and every tile fit is deterministic, so the result equals a local run bit for
-bit. The final assembly and post-processing are the local fitter's own (``fit_btf`` with every
-tile already done).
+atomically. Finished tiles are never recomputed (a rerun or a resumed client skips them), a task lost with a killed
+worker is rerun elsewhere, and every tile fit is deterministic, so the result equals a local run bit for bit. The
+final assembly and post-processing are the local fitter's own (``fit_btf`` with every tile already done).
 """
 
 from __future__ import annotations
@@ -24,11 +22,13 @@ _INIT_LOCK = threading.Lock()
 
 
 def _fit_tile_task(tile: tuple[int, int, int, int], cache: str, band, init_args: tuple) -> tuple:
-    """Runs on a worker: load the shared inputs once per worker process, fit one tile from its band file."""
+    """Runs on a worker: load the shared inputs once per worker process and fit (a long-lived cluster's worker
+    loads them again for another fit: another folder, BTF directions or options), fit one tile from its band file."""
+    key = (init_args[0], btf_fitter._directions_hash(init_args[1], init_args[2]), repr(init_args[3]))
     with _INIT_LOCK:
-        if btf_fitter._WORKER.get("_init_key") != init_args[0]:
+        if btf_fitter._WORKER.get("_init_key") != key:
             btf_fitter._init_worker(*init_args)
-            btf_fitter._WORKER["_init_key"] = init_args[0]
+            btf_fitter._WORKER["_init_key"] = key
     return btf_fitter._fit_one(tile, cache, band)
 
 

@@ -60,6 +60,22 @@ def test_distributed_equals_local(btf, client, tmp_path):
     _assert_identical(resumed, local)
 
 
+def test_a_second_btf_fitted_into_the_same_folder_on_the_same_cluster_is_fitted_with_its_own_directions(
+        btf, client, tmp_path):
+    """A long-lived cluster's workers keep the directions and NDF operator they loaded for a fit: another BTF (other
+    light/view pairs) fitted into the same folder afterwards must not be fitted with the first one's (the workers
+    keyed them on the cache's path alone)."""
+    path, local = btf
+    out = tmp_path / "same"
+    fit_btf_dask(path, out, client=client, tile=4, progress=False)
+    maps = synthetic_maps(8, 8, seed=6)
+    wi, wo = light_view_pairs(7, 9)
+    other = save_btf(str(tmp_path / "other.npz"), render_btf(maps, wi, wo), wi, wo)
+    got, _ = fit_btf_dask(other, out, client=client, tile=4, progress=False)
+    want, _ = fit_btf(other, tmp_path / "other-local", tile=4, workers=1, progress=False)
+    _assert_identical(got, want)
+
+
 def test_killed_worker_still_gives_identical_result(btf, client, tmp_path):
     path, local = btf
     out = tmp_path / "killed"
