@@ -61,11 +61,13 @@ def fit_btf_dask(
         todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
         init_args = (os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
         if todo:
+            # workers of a cluster this call did not start may be on other machines: the bands go to storage
             if client is not None:
-                _run_tiles(client, values, hdr, todo, cache, init_args, progress, len(tiles))
+                _run_tiles(client, values, hdr, todo, cache, init_args, progress, len(tiles), durable=True)
             else:
                 with dask_client(scheduler, n_workers) as own:
-                    _run_tiles(own, values, hdr, todo, cache, init_args, progress, len(tiles))
+                    _run_tiles(own, values, hdr, todo, cache, init_args, progress, len(tiles),
+                               durable=scheduler is not None)
     # Every tile is checkpointed now: the local fitter only assembles and post-processes.
     maps, stats = btf_fitter.fit_btf(
         btf_path, out_dir, tile=tile, workers=1, options=options, progress=False, keep_cache=keep_cache
@@ -104,7 +106,7 @@ class _DaskRunner:
         return handle.result()  # raises the task's error, if any
 
 
-def _run_tiles(client, values, hdr, todo, cache, init_args, progress, total) -> None:
+def _run_tiles(client, values, hdr, todo, cache, init_args, progress, total, durable: bool) -> None:
     # sent once, not per task; hash=False: no key shared with an earlier fit (dask/distributed#3703)
     [shared] = client.scatter([init_args], broadcast=True, hash=False)
     runner = _DaskRunner(client, cache, shared)
@@ -114,7 +116,8 @@ def _run_tiles(client, values, hdr, todo, cache, init_args, progress, total) -> 
 
         bar = tqdm(total=total, initial=total - len(todo), desc="fit tiles (dask)", unit="tile", file=sys.stderr)
     try:
-        btf_fitter.fit_all_bands(values, hdr, cache, todo, runner, lambda _: bar.update(1) if bar else None)
+        btf_fitter.fit_all_bands(values, hdr, cache, todo, runner, lambda _: bar.update(1) if bar else None,
+                                 durable)
     except BaseException:  # Ctrl-C, SIGTERM or a failed tile: the finished tiles stay checkpointed, the others
         client.cancel(runner.submitted)  # are dropped from the cluster instead of running on
         raise

@@ -46,11 +46,13 @@ class BandFile:
 GROUP_BYTES = 64 * 2**20  # a band is read this many bytes of images' rows at a time
 
 
-def write_band(images: ArrayInFile, y0: int, y1: int, source: str, path: str) -> BandFile:
+def write_band(images: ArrayInFile, y0: int, y1: int, source: str, path: str, durable: bool = False) -> BandFile:
     """Rows ``y0:y1`` of every image of ``images`` (N, H, W, 3) into the band file ``path``, texel-major
     ``(rows, W, N, 3)`` float32. The images are read in groups of at most ``GROUP_BYTES`` of whole rows (one read
     per image) and written a band row at a time through a map of that row alone, so this process holds a group,
-    not the band. Refuses (one line, naming the image) a file cut short and values a BTF cannot hold."""
+    not the band. ``durable``: the file is synced to its storage before it is handed on (workers on other machines
+    read it from shared storage; this machine's workers read the page cache). Refuses (one line, naming the image)
+    a file cut short and values a BTF cannot hold."""
     n, h, w, c = images.shape
     dtype = np.dtype(images.dtype)
     th = y1 - y0
@@ -75,6 +77,9 @@ def write_band(images: ArrayInFile, y0: int, y1: int, source: str, path: str) ->
                                    shape=(w, n, c))
                 texels[:, k0:k0 + m] = vals[:, r].transpose(1, 0, 2)
                 del texels
+    if durable:
+        with open(path, "rb+") as f:
+            os.fsync(f.fileno())
     return BandFile(ArrayInFile(path=os.path.abspath(path), offset=offset, dtype="<f4", shape=(th, w, n, c)), y0)
 
 
@@ -89,10 +94,11 @@ class TileRunner(Protocol):
 
 
 def fit_in_bands(images: ArrayInFile, source: str, band_dir: str, todo: list[Tile], runner: TileRunner,
-                 done: Callable[[tuple], None]) -> None:
+                 done: Callable[[tuple], None], durable: bool = False) -> None:
     """Fit the tiles ``todo`` (row-major; whole bands of rows) through band files in ``band_dir``, at most two at a
     time: band k is read and written while band k - 1 is fitted, once band k - 2's tiles are all done and its file
-    is deleted. ``done(result)`` is called for every finished tile, in the order they finish."""
+    is deleted. ``done(result)`` is called for every finished tile, in the order they finish; ``durable``: see
+    :func:`write_band`."""
     bands: dict[tuple[int, int], list[Tile]] = {}
     for t in todo:
         bands.setdefault((t[0], t[1]), []).append(t)
@@ -113,7 +119,7 @@ def fit_in_bands(images: ArrayInFile, source: str, band_dir: str, todo: list[Til
                 settle(runner.wait_some(running))
             if os.path.exists(old := os.path.join(band_dir, f"band{k - 2}.npy")):
                 os.remove(old)  # a worker that still maps it keeps its pages until it lets go
-            band = write_band(images, y0, y1, source, os.path.join(band_dir, f"band{k}.npy"))
+            band = write_band(images, y0, y1, source, os.path.join(band_dir, f"band{k}.npy"), durable)
             for t in tiles:
                 h = runner.submit(t, band)
                 running.add(h)

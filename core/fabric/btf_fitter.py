@@ -270,12 +270,12 @@ class _CallbackBar:
         pass
 
 
-def fit_all_bands(values: ArrayInFile, hdr, cache: str, todo: list, runner, done) -> None:
-    """Fit the tiles ``todo`` band by band (:func:`btf_bands.fit_in_bands`). A value the BTF cannot hold, found
-    in a band read from the BTF where it lies, refuses the BTF: the cache goes with it (its tiles came from that
-    BTF), as when the BTF is copied."""
+def fit_all_bands(values: ArrayInFile, hdr, cache: str, todo: list, runner, done, durable: bool = False) -> None:
+    """Fit the tiles ``todo`` band by band (:func:`btf_bands.fit_in_bands`; ``durable`` where workers on other
+    machines read the bands). A value the BTF cannot hold, found in a band read from the BTF where it lies, refuses
+    the BTF: the cache goes with it (its tiles came from that BTF), as when the BTF is copied."""
     try:
-        fit_in_bands(values, hdr.source, cache, todo, runner, done)
+        fit_in_bands(values, hdr.source, cache, todo, runner, done, durable)
     except UserError:
         shutil.rmtree(cache, ignore_errors=True)
         raise

@@ -131,3 +131,15 @@ def test_sigterm_stops_a_streamed_fit_and_it_resumes(tmp_path):
     r = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert json.loads(r.stdout)["tiles_fitted_this_run"] == 100 - kept
+
+
+def test_a_band_for_workers_on_other_machines_is_synced_to_storage(tmp_path, monkeypatch):
+    """``durable`` (a cluster this fit did not start): the band file is fsync'ed before its tiles go out; a fit on
+    this machine's workers (they read the page cache) does not wait for the disk."""
+    images = _stored(tmp_path, np.ones((3, 4, 4, 3), dtype=np.float32))
+    synced = []
+    monkeypatch.setattr(btf_bands.os, "fsync", lambda fd: synced.append(fd))
+    write_band(images, 0, 2, "b.npz", str(tmp_path / "local.npy"))
+    assert synced == []
+    write_band(images, 0, 2, "b.npz", str(tmp_path / "shared.npy"), durable=True)
+    assert len(synced) == 1
