@@ -175,20 +175,17 @@ def npz_stored_array(path: str, key: str) -> ArrayInFile | None:
     ``None`` for a compressed member (``np.savez_compressed``) or a Fortran-order one, which must be read."""
     with zipfile.ZipFile(path) as zf:
         info = zf.getinfo(f"{key}.npy")
-    if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:  # compressed or encrypted
-        return None
+        if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:  # compressed or encrypted
+            return None
+        member, shape, fortran, dtype = _npz_member_header(zf, key)
+        with member:
+            header = member.tell()  # the .npy header's length: the data follow it
     with open(path, "rb") as f:
         f.seek(info.header_offset)
         local = _ZIP_LOCAL_HEADER.unpack(f.read(_ZIP_LOCAL_HEADER.size))
-        if local[0] != b"PK\x03\x04":
-            return None
-        f.seek(info.header_offset + _ZIP_LOCAL_HEADER.size + local[-2] + local[-1])
-        version = np.lib.format.read_magic(f)
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, fortran, dtype = read_header(f)
-        offset = f.tell()
-    if fortran or dtype.hasobject:
+    if local[0] != b"PK\x03\x04" or fortran or dtype.hasobject:
         return None
+    offset = info.header_offset + _ZIP_LOCAL_HEADER.size + local[-2] + local[-1] + header
     return ArrayInFile(path=os.path.abspath(path), offset=offset, dtype=dtype.str, shape=tuple(int(n) for n in shape))
 
 
