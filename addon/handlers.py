@@ -1,7 +1,8 @@
 """App handlers: each feature's (``<feature>/handlers.py``: lamps kept current in the shaders that
-evaluate them, so moving a lamp just works), the embedded shaders brought up to date after a file
-is loaded, and images that match their stored data after an undo or redo. Registered in this order:
-within one handler list, the fabric's run before the scratches'."""
+evaluate them, so moving a lamp just works; a tooth's Blend Volume kept on the materials the tooth
+wears), the embedded shaders brought up to date after a file is loaded, and images that match their
+stored data after an undo or redo. Registered in this order: within one handler list, the fabric's
+run before the scratches', the scratches' before the teeth's."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from .scratch.handlers import SCRATCH_HANDLERS
 from .scratch.material import MARKER as SCRATCH_MARKER
 from .scratch.material import ensure_base_metal
 from .teeth.blend_volume import upgrade_after_load as upgrade_teeth_after_load
+from .teeth.handlers import TEETH_HANDLERS
 
 
 @persistent
@@ -41,7 +43,7 @@ def on_undo_redo_post(*_args) -> None:
     drop_sessions()
 
 
-HANDLERS = [*FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_load_post), *SCRATCH_HANDLERS,
+HANDLERS = [*FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_load_post), *SCRATCH_HANDLERS, *TEETH_HANDLERS,
             (bpy.app.handlers.undo_post, on_undo_redo_post), (bpy.app.handlers.redo_post, on_undo_redo_post)]
 
 

@@ -15,6 +15,7 @@ import bpy
 import numpy as np
 
 from .. import addon
+from ..addon.teeth.blend_volume import follow_materials
 from ..addon.teeth.materials import group_node, new_teeth_material
 from ..addon.teeth.scene_build import add_camera, add_point_light, build_teeth_scene, configure_teeth_cycles
 from ..core.teeth.anatomy import make_anatomical_tooth
@@ -153,6 +154,7 @@ def shade_preview(scene, material) -> None:
     objs = build_teeth_scene(ts, scene.collection, mm_per_unit=1.0, smooth=True)
     group_node(material).inputs["mm per Unit"].default_value = 1.0  # the preview stage is in mm
     objs["teeth"][0][1].data.materials[0] = material
+    follow_materials([objs["teeth"][0][0]])  # the tooth's Blend Volume takes the shade (as for an artist)
     w, h = scene.render.resolution_x, scene.render.resolution_y
     _light_and_camera(scene, np.array([0.0, 0.0, 3.5]), w, h, 24.0, [((60.0, 150.0, 60.0), 5.0e4)])
     configure_teeth_cycles(scene, scene.cycles.samples, scene.cycles.seed, bounces=24)

@@ -37,6 +37,8 @@ model instead. Measured in ``bench teeth-cycles`` (``default_spread_*``, docs/ac
 
 from __future__ import annotations
 
+import re
+
 import bpy
 
 from ...core.teeth.blend_spread import DEFAULT_SPREAD_MM
@@ -333,9 +335,10 @@ def blend_object(enamel):
 
 
 def set_blending(mat, on: bool) -> None:
-    """An Enamel/Dentin material attenuates only (``on``: its tooth's Blend Volume scatters) or is whole."""
+    """An Enamel/Dentin material attenuates only (``on``: its tooth's Blend Volume scatters) or is whole. A material
+    linked from another file is left as it is (its data cannot change here)."""
     node = group_node(mat)
-    if node is not None and BLEND_INPUT in node.inputs:
+    if node is not None and BLEND_INPUT in node.inputs and mat.library is None:
         node.inputs[BLEND_INPUT].default_value = 1.0 if on else 0.0
 
 
@@ -388,6 +391,47 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
     set_blending(dm, on)
     obj.hide_render = not on
     return obj
+
+
+def linked_materials(blend_mat) -> tuple:
+    """The (Enamel, Dentin) materials whose parameters drive ``blend_mat`` (read from its drivers; None for a
+    medium no driver names)."""
+    bnode = group_node(blend_mat)
+    anim = blend_mat.node_tree.animation_data if bnode is not None else None
+    found = {}
+    for fc in anim.drivers if anim is not None else ():
+        index = re.search(r"inputs\[(\d+)\]", fc.data_path)
+        if index is None or not fc.driver.variables or int(index.group(1)) >= len(bnode.inputs):
+            continue
+        medium = bnode.inputs[int(index.group(1))].name.split(" ", 1)[0]
+        if medium in MEDIA:
+            found.setdefault(medium, fc.driver.variables[0].targets[0].id)
+    return found.get("Enamel"), found.get("Dentin")
+
+
+def follow_materials(enamels) -> list:
+    """Teeth (enamel shells) whose Blend Volume is driven by other materials than the ones their enamel and dentin
+    wear now (an artist gave the dentin another material, e.g. a library Dentin Shade) get the new ones linked: the
+    Blend Volume takes their parameters and they stop carrying a medium of their own, which the dentin would
+    otherwise hold twice. A tooth whose new material is not an Enamel/Dentin material, or that comes from another
+    file, is left alone. Returns the enamel shells relinked."""
+    done = []
+    for enamel in enamels:
+        obj = blend_object(enamel) if enamel.library is None else None
+        dentin = enamel.ms_tooth.partner
+        if obj is None or obj.active_material is None or dentin is None:
+            continue
+        em, dm = enamel.active_material, dentin.active_material
+        if group_node(em) is None or group_node(dm) is None:
+            continue
+        spread = group_node(obj.active_material)
+        on = spread is not None and spread.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
+        stale = [m for m in (em, dm) if m.library is None and BLEND_INPUT in group_node(m).inputs
+                 and (group_node(m).inputs[BLEND_INPUT].default_value == 1.0) != on]
+        if linked_materials(obj.active_material) != (em, dm) or stale:
+            ensure_blend(enamel)
+            done.append(enamel)
+    return done
 
 
 def upgrade_after_load() -> None:

@@ -1,0 +1,41 @@
+"""Handlers of the teeth: a tooth's Blend Volume follows the materials its enamel and dentin wear (depsgraph,
+render_pre), so a material the artist assigns, e.g. a library Dentin Shade, renders as that material."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from .blend_volume import follow_materials
+
+
+def _enamel_of(obj):
+    ms = getattr(obj, "ms_tooth", None)
+    if ms is None:
+        return None
+    if ms.role == "ENAMEL":
+        return obj
+    return ms.partner if ms.role == "DENTIN" else None
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph) -> None:
+    enamels = {}
+    for update in depsgraph.updates:
+        if isinstance(update.id, bpy.types.Object):
+            enamel = _enamel_of(update.id.original)
+            if enamel is not None:
+                enamels[enamel.name_full] = enamel
+    if enamels:
+        follow_materials(enamels.values())
+
+
+@persistent
+def on_render_pre(scene, *_args) -> None:
+    follow_materials([o for o in scene.objects if _enamel_of(o) is o])
+
+
+TEETH_HANDLERS = [
+    (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
+    (bpy.app.handlers.render_pre, on_render_pre),
+]
