@@ -1,5 +1,6 @@
 """Handlers of the teeth: a tooth's Blend Volume follows the materials its enamel and dentin wear (depsgraph,
-render_pre), so a material the artist assigns, e.g. a library Dentin Shade, renders as that material."""
+render_pre; after a file is opened and after an undo or redo, every tooth), so a material the artist assigns, e.g.
+a library Dentin Shade, renders as that material."""
 
 from __future__ import annotations
 
@@ -35,7 +36,16 @@ def on_render_pre(scene, *_args) -> None:
     follow_materials([o for o in scene.objects if _enamel_of(o) is o])
 
 
+@persistent
+def on_file_change(*_args) -> None:
+    """A file opened (one saved before the handlers, or by a Blender without the extension) or restored by undo."""
+    follow_materials([o for o in bpy.data.objects if _enamel_of(o) is o])
+
+
 TEETH_HANDLERS = [
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
+    (bpy.app.handlers.load_post, on_file_change),
+    (bpy.app.handlers.undo_post, on_file_change),
+    (bpy.app.handlers.redo_post, on_file_change),
 ]

@@ -592,3 +592,33 @@ def test_a_dentin_material_given_to_a_tooth_renders_as_that_dentin(addon_module)
     the assigned material added its medium to the Blend Volume's (the old dentin's): +1.1 %, +4.6 %, +7.3 %."""
     given, in_place = _render_shade(assign=True), _render_shade(assign=False)
     assert given == pytest.approx(in_place, rel=0.01)
+
+
+def test_a_file_saved_with_another_dentin_material_opens_with_it_linked(addon_module, tmp_path):
+    """A file whose tooth wears a Dentin material its Blend Volume does not follow (saved by a Blender without the
+    extension, or before it followed materials) opens with the Blend Volume following it."""
+    from material_structures.addon.teeth.blend_volume import BLEND_INPUT, blend_object, linked_materials
+    from material_structures.addon.teeth.materials import group_node, new_teeth_material
+
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
+    shade = new_teeth_material("Dentin", "Shade", scene=bpy.context.scene)
+    handlers = bpy.app.handlers
+    saved = [(h, f) for h in (handlers.depsgraph_update_post, handlers.render_pre) for f in list(h)
+             if f.__module__.endswith("teeth.handlers")]
+    for h, f in saved:
+        h.remove(f)
+    try:
+        enamel.ms_tooth.partner.data.materials[0] = shade
+        bpy.context.view_layer.update()
+        assert linked_materials(blend_object(enamel).active_material)[1].name != "Shade"
+        path = str(tmp_path / "teeth.blend")
+        bpy.ops.wm.save_as_mainfile(filepath=path)
+    finally:
+        for h, f in saved:
+            h.append(f)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
+    shade = bpy.data.materials["Shade"]
+    assert linked_materials(blend_object(enamel).active_material) == (enamel.active_material, shade)
+    assert group_node(shade).inputs[BLEND_INPUT].default_value == 1.0
