@@ -424,8 +424,8 @@ def follow_materials(enamels) -> list:
         em, dm = enamel.active_material, dentin.active_material
         if group_node(em) is None or group_node(dm) is None:
             continue
-        spread = group_node(obj.active_material)
-        on = spread is not None and spread.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
+        blend_node = group_node(obj.active_material)
+        on = blend_node is not None and blend_node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
         stale = [m for m in (em, dm) if m.library is None and BLEND_INPUT in group_node(m).inputs
                  and (group_node(m).inputs[BLEND_INPUT].default_value == 1.0) != on]
         if linked_materials(obj.active_material) != (em, dm) or stale:

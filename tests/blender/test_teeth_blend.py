@@ -4,6 +4,7 @@ with the dentin shape keys live."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 import bpy
@@ -523,6 +524,21 @@ def test_smile_blender_bench_on_a_small_kept_smile(addon_module, monkeypatch, tm
     assert out["tooth_mean_rel_err_median"] <= 0.10, out
 
 
+@contextlib.contextmanager
+def _without_teeth_handlers(off: bool = True):
+    """The teeth's depsgraph and render_pre handlers out while inside (``off``), as in a Blender without them."""
+    handlers = bpy.app.handlers
+    saved = [(h, f) for h in (handlers.depsgraph_update_post, handlers.render_pre) for f in list(h)
+             if off and f.__module__.endswith("teeth.handlers")]
+    for h, f in saved:
+        h.remove(f)
+    try:
+        yield
+    finally:
+        for h, f in saved:
+            h.append(f)
+
+
 def _render_shade(assign: bool, follow: bool = True) -> np.ndarray:
     """The one-tooth check scene (default spread, 32 x 20 px, 64 spp) with a dense, dark dentin: given by a new
     Dentin material assigned to the dentin (``assign``; the handlers relink its Blend Volume unless ``follow`` is
@@ -540,28 +556,17 @@ def _render_shade(assign: bool, follow: bool = True) -> np.ndarray:
     V.dark_world(scene)
     out = V.build_teeth_scene(ts, scene.collection, mm_per_unit=1.0)
     dentin = out["teeth"][0][1]
-    if assign:
-        mat = new_teeth_material("Dentin", "Dark Shade", scene=scene, volume=shade, mm_per_unit=1.0)
-        handlers = bpy.app.handlers
-        saved = [(h, f) for h in (handlers.depsgraph_update_post, handlers.render_pre) for f in list(h)
-                 if not follow and f.__module__.endswith("teeth.handlers")]
-        for h, f in saved:
-            h.remove(f)
-        try:
-            dentin.data.materials[0] = mat
+    with _without_teeth_handlers(off=assign and not follow):
+        if assign:
+            dentin.data.materials[0] = new_teeth_material("Dentin", "Dark Shade", scene=scene, volume=shade,
+                                                          mm_per_unit=1.0)
             bpy.context.view_layer.update()
-            V.add_camera(scene, cam, mm_per_unit=1.0)
-            V.add_point_light(scene, light, mm_per_unit=1.0)
-            V.configure_teeth_cycles(scene, 64, 0, 64)
-            return render_to_array(scene)[:, :, :3].mean(axis=(0, 1))
-        finally:
-            for h, f in saved:
-                h.append(f)
-    set_volume(dentin.active_material, shade)
-    V.add_camera(scene, cam, mm_per_unit=1.0)
-    V.add_point_light(scene, light, mm_per_unit=1.0)
-    V.configure_teeth_cycles(scene, 64, 0, 64)
-    return render_to_array(scene)[:, :, :3].mean(axis=(0, 1))
+        else:
+            set_volume(dentin.active_material, shade)
+        V.add_camera(scene, cam, mm_per_unit=1.0)
+        V.add_point_light(scene, light, mm_per_unit=1.0)
+        V.configure_teeth_cycles(scene, 64, 0, 64)
+        return render_to_array(scene)[:, :, :3].mean(axis=(0, 1))
 
 
 def test_a_dentin_material_given_to_a_tooth_drives_its_blend_volume(addon_module):
@@ -605,22 +610,15 @@ def test_a_file_saved_with_another_dentin_material_opens_with_it_linked(addon_mo
     assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
     enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
     shade = new_teeth_material("Dentin", "Shade", scene=bpy.context.scene)
-    handlers = bpy.app.handlers
-    saved = [(h, f) for h in (handlers.depsgraph_update_post, handlers.render_pre) for f in list(h)
-             if f.__module__.endswith("teeth.handlers")]
-    for h, f in saved:
-        h.remove(f)
-    try:
+    with _without_teeth_handlers():
         enamel.ms_tooth.partner.data.materials[0] = shade
         bpy.context.view_layer.update()
         assert linked_materials(blend_object(enamel).active_material)[1].name != "Shade"
         path = str(tmp_path / "teeth.blend")
         bpy.ops.wm.save_as_mainfile(filepath=path)
-    finally:
-        for h, f in saved:
-            h.append(f)
     bpy.ops.wm.open_mainfile(filepath=path)
     enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
     shade = bpy.data.materials["Shade"]
     assert linked_materials(blend_object(enamel).active_material) == (enamel.active_material, shade)
     assert group_node(shade).inputs[BLEND_INPUT].default_value == 1.0
+
