@@ -622,3 +622,31 @@ def test_a_file_saved_with_another_dentin_material_opens_with_it_linked(addon_mo
     assert linked_materials(blend_object(enamel).active_material) == (enamel.active_material, shade)
     assert group_node(shade).inputs[BLEND_INPUT].default_value == 1.0
 
+
+
+def test_undo_and_redo_of_a_dentin_material_keep_the_blend_volume_on_it(addon_module):
+    """Ctrl+Z of giving a tooth's dentin another Dentin material brings back the old one with its Blend Volume
+    on it; Ctrl+Shift+Z gives the new one back, followed."""
+    from material_structures.addon.teeth.blend_volume import blend_object, linked_materials
+    from material_structures.addon.teeth.materials import new_teeth_material
+
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    shade = new_teeth_material("Dentin", "Shade", scene=bpy.context.scene)
+    shade.use_fake_user = True
+    bpy.ops.ed.undo_push(message="Set Up")
+    enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
+    old = enamel.ms_tooth.partner.active_material.name
+    enamel.ms_tooth.partner.data.materials[0] = shade
+    bpy.context.view_layer.update()
+    bpy.ops.ed.undo_push(message="Dentin Shade")
+
+    def worn_and_followed():
+        enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
+        worn = enamel.ms_tooth.partner.active_material
+        return worn.name, linked_materials(blend_object(enamel).active_material)[1].name
+
+    assert worn_and_followed() == ("Shade", "Shade")
+    bpy.ops.ed.undo()
+    assert worn_and_followed() == (old, old)
+    bpy.ops.ed.redo()
+    assert worn_and_followed() == ("Shade", "Shade")
