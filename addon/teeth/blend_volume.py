@@ -413,16 +413,27 @@ def follow_materials(enamels) -> list:
     """Teeth (enamel shells) whose Blend Volume is driven by other materials than the ones their enamel and dentin
     wear now (an artist gave the dentin another material, e.g. a library Dentin Shade) get the new ones linked: the
     Blend Volume takes their parameters and they stop carrying a medium of their own, which the dentin would
-    otherwise hold twice. A tooth whose new material is not an Enamel/Dentin material, or that comes from another
-    file, is left alone. Returns the enamel shells relinked."""
+    otherwise hold twice. A tooth without a Blend Volume whose materials expect one (a Shift+D copy) gets its own. A
+    tooth whose new material is not an Enamel/Dentin material, or that comes from another file, is left alone.
+    Returns the enamel shells relinked or given a Blend Volume."""
     done = []
     for enamel in enamels:
-        obj = blend_object(enamel) if enamel.library is None else None
         dentin = enamel.ms_tooth.partner
-        if obj is None or obj.active_material is None or dentin is None:
+        if enamel.library is not None or dentin is None:
             continue
         em, dm = enamel.active_material, dentin.active_material
         if group_node(em) is None or group_node(dm) is None:
+            continue
+        obj = blend_object(enamel)
+        if obj is None:
+            # a copy (Shift+D) of a tooth, its Blend Volume not selected (it cannot be): its materials give their
+            # medium to a Blend Volume, so it gets its own, at the spread of the tooth it was copied from
+            if any(BLEND_INPUT in group_node(m).inputs and group_node(m).inputs[BLEND_INPUT].default_value == 1.0
+                   for m in (em, dm)):
+                ensure_blend(enamel, _twin_spread(em, dm))
+                done.append(enamel)
+            continue
+        if obj.active_material is None:
             continue
         blend_node = group_node(obj.active_material)
         on = blend_node is not None and blend_node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
@@ -432,6 +443,16 @@ def follow_materials(enamels) -> list:
             ensure_blend(enamel)
             done.append(enamel)
     return done
+
+
+def _twin_spread(enamel_mat, dentin_mat) -> float | None:
+    """The spread of a Blend Volume that ``enamel_mat`` and ``dentin_mat`` drive (None where none does)."""
+    for obj in bpy.data.objects:
+        if getattr(obj, "ms_tooth", None) is not None and obj.ms_tooth.role == "BLEND" and obj.active_material:
+            node = group_node(obj.active_material)
+            if node is not None and linked_materials(obj.active_material) == (enamel_mat, dentin_mat):
+                return float(node.inputs[SPREAD].default_value)
+    return None
 
 
 def upgrade_after_load() -> None:

@@ -650,3 +650,29 @@ def test_undo_and_redo_of_a_dentin_material_keep_the_blend_volume_on_it(addon_mo
     assert worn_and_followed() == (old, old)
     bpy.ops.ed.redo()
     assert worn_and_followed() == ("Shade", "Shade")
+
+
+def test_a_shift_d_copy_of_a_tooth_gets_its_own_blend_volume(addon_module):
+    """Shift+D of a tooth (its enamel and dentin; the Blend Volume cannot be selected) gives the copy a Blend Volume
+    of its own at the original's spread, following its materials (a single-user copy of its dentin's too): without
+    one the copy's materials, which give their medium to a Blend Volume, rendered a hollow tooth."""
+    from material_structures.addon.teeth.blend_volume import SPREAD, blend_object, linked_materials, set_spread
+    from material_structures.addon.teeth.materials import group_node
+
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    scene = bpy.context.scene
+    enamel = next(o for o in scene.objects if o.ms_tooth.role == "ENAMEL")
+    set_spread(enamel, 0.5)
+    tooth = [o for o in scene.objects if o.ms_tooth.role in ("ENAMEL", "DENTIN")]
+    with bpy.context.temp_override(selected_objects=tooth, selected_editable_objects=tooth, active_object=enamel):
+        assert bpy.ops.object.duplicate() == {"FINISHED"}
+    bpy.context.view_layer.update()
+    copy = next(o for o in scene.objects if o.ms_tooth.role == "ENAMEL" and o != enamel)
+    blend = blend_object(copy)
+    assert blend is not None and blend != blend_object(enamel)
+    assert group_node(blend.active_material).inputs[SPREAD].default_value == pytest.approx(0.5)
+    dentin = copy.ms_tooth.partner
+    dentin.data.materials[0] = dentin.active_material.copy()  # single-user copy
+    bpy.context.view_layer.update()
+    assert linked_materials(blend.active_material) == (copy.active_material, dentin.active_material)
+    assert linked_materials(blend_object(enamel).active_material)[1] == enamel.ms_tooth.partner.active_material
