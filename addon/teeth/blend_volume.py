@@ -44,7 +44,7 @@ import bpy
 from ...core.teeth.blend_spread import DEFAULT_SPREAD_MM
 from ...render import material_output, new_material
 from ..common import add_group_input
-from .materials import INNER_ATTRIBUTE, MARKER, describe_teeth_sockets, group_node
+from .materials import BLEND_ATTRIBUTE, INNER_ATTRIBUTE, MARKER, describe_teeth_sockets, group_node
 
 BLEND_INPUT = "Blend Volume"  # Enamel/Dentin group input: 1 = the Blend Volume carries the medium
 BLEND_GROUP = "Tooth Blend"
@@ -336,10 +336,19 @@ def blend_object(enamel):
 
 def set_blending(mat, on: bool) -> None:
     """An Enamel/Dentin material attenuates only (``on``: its tooth's Blend Volume scatters) or is whole. A material
-    linked from another file is left as it is (its data cannot change here)."""
+    linked from another file is left as it is (its data cannot change here: :func:`set_tooth_blending` does it)."""
     node = group_node(mat)
     if node is not None and BLEND_INPUT in node.inputs and mat.library is None:
         node.inputs[BLEND_INPUT].default_value = 1.0 if on else 0.0
+
+
+def set_tooth_blending(obj, on: bool) -> None:
+    """The tooth object's own say (``materials.BLEND_ATTRIBUTE``): ``on`` empties the medium of whatever Enamel/Dentin
+    material it wears, one linked from a library included (its Blend Volume carries the medium)."""
+    value = 1.0 if on else 0.0
+    if obj.library is None and obj.get(BLEND_ATTRIBUTE) != value:
+        obj[BLEND_ATTRIBUTE] = value
+        obj.update_tag()
 
 
 def set_spread(enamel, spread: float) -> None:
@@ -389,6 +398,8 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
     on = node is not None and node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
     set_blending(em, on)
     set_blending(dm, on)
+    set_tooth_blending(enamel, on)
+    set_tooth_blending(dentin, on)
     obj.hide_render = not on
     return obj
 
@@ -413,8 +424,9 @@ def follow_materials(enamels) -> list:
     """Teeth (enamel shells) whose Blend Volume is driven by other materials than the ones their enamel and dentin
     wear now (an artist gave the dentin another material, e.g. a library Dentin Shade) get the new ones linked: the
     Blend Volume takes their parameters and they stop carrying a medium of their own, which the dentin would
-    otherwise hold twice. A tooth without a Blend Volume whose materials expect one (a Shift+D copy) gets its own. A
-    tooth whose new material is not an Enamel/Dentin material, or that comes from another file, is left alone.
+    otherwise hold twice (a material linked from a library included: the tooth object's own property empties it). A
+    tooth without a Blend Volume whose materials or objects expect one (a Shift+D copy) gets its own. A tooth whose
+    new material is not an Enamel/Dentin material, or that comes from another file, is left alone.
     Returns the enamel shells relinked or given a Blend Volume."""
     done = []
     for enamel in enamels:
@@ -429,7 +441,7 @@ def follow_materials(enamels) -> list:
             # a copy (Shift+D) of a tooth, its Blend Volume not selected (it cannot be): its materials give their
             # medium to a Blend Volume, so it gets its own, at the spread of the tooth it was copied from
             if any(BLEND_INPUT in group_node(m).inputs and group_node(m).inputs[BLEND_INPUT].default_value == 1.0
-                   for m in (em, dm)):
+                   for m in (em, dm)) or any(o.get(BLEND_ATTRIBUTE) == 1.0 for o in (enamel, dentin)):
                 ensure_blend(enamel, _twin_spread(em, dm))
                 done.append(enamel)
             continue
@@ -439,6 +451,7 @@ def follow_materials(enamels) -> list:
         on = blend_node is not None and blend_node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
         stale = [m for m in (em, dm) if m.library is None and BLEND_INPUT in group_node(m).inputs
                  and (group_node(m).inputs[BLEND_INPUT].default_value == 1.0) != on]
+        stale += [o for o in (enamel, dentin) if o.library is None and o.get(BLEND_ATTRIBUTE, 0.0) != float(on)]
         if linked_materials(obj.active_material) != (em, dm) or stale:
             ensure_blend(enamel)
             done.append(enamel)

@@ -44,11 +44,16 @@ BLENDED_GROUPS = ("Enamel", "Dentin")  # blended by a tooth's Blend Volume (blen
 BLEND_ROW = ("Blend Volume", "NodeSocketFloat", 0.0, 0.0, 1.0)
 # Layout 2 only: the Dentin's input for the sharp step of the extinction its mesh carried (removed on upgrade)
 STEP_ROW = ("Enamel Sigma_t", "NodeSocketVector", DEFAULTS["Enamel"]["sigma_t"], 1e-3, 1e3)
-# the volume subgraph's layout: 3 = under Blend Volume, Enamel and Dentin only bound the medium (the Blend
-# Volume carries it whole, its extinction step included); 2 = the Dentin's mesh carried the step; 1 = as 3,
-# before the step input existed
+# The tooth object's say in it: the object custom property of this name (1 where the tooth's Blend Volume renders,
+# set by blend_volume.ensure_blend) empties the medium like the input does. A material linked from another file (a
+# library shade) cannot have its input changed here; its tooth's property still hands the medium to the Blend Volume.
+BLEND_ATTRIBUTE = "ms_blend_volume"
+BLEND_ATTRIBUTE_NODE = "Tooth Has Blend Volume"
+# the volume subgraph's layout: 4 = as 3, the medium also emptied by the tooth object's BLEND_ATTRIBUTE; 3 = under
+# Blend Volume, Enamel and Dentin only bound the medium (the Blend Volume carries it whole, its extinction step
+# included); 2 = the Dentin's mesh carried the step; 1 = as 3, before the step input existed
 VOLUME_VERSION_KEY = "ms_volume_version"
-VOLUME_VERSION = 3
+VOLUME_VERSION = 4
 
 # What each socket of the teeth groups means, by name (a medium's name, "Enamel " or "Dentin ", may lead it).
 SOCKET_WORDS = {
@@ -62,7 +67,8 @@ SOCKET_WORDS = {
     "At": "Transmittance of the thin boundary layer per colour channel (0-1, no unit)",
     "mm per Unit": "Millimetres per Blender unit (1000: the scene is in metres; 1: a unit is a millimetre)",
     "Blend Volume": "On (1): the tooth's Blend Volume object carries the medium with the blended enamel/dentin "
-                    "boundary and this mesh only bounds it; off (0): this mesh's homogeneous medium",
+                    "boundary and this mesh only bounds it; off (0): this mesh's homogeneous medium, unless the "
+                    "tooth wearing it has a Blend Volume",
     "Spread (mm)": "Width of the enamel/dentin transition in millimetres (the sigmoid's spread)",
     "Surface": "The boundary's surface shader (connect to the material output's Surface)",
     "Volume": "The medium (connect to the material output's Volume)",
@@ -110,8 +116,9 @@ def _load_boundary_script(tree, scene):
 def _volume_subgraph(group, gin):
     """sigma_t, albedo, g1, g2, beta -> two-lobe HG scattering + absorption (returns the shader socket).
 
-    With the input ``Blend Volume`` on, the tooth's Blend Volume object carries the whole medium over the tooth
-    (``blend_volume``): the Enamel's and the Dentin's volumes are empty, their meshes only bound it.
+    With the input ``Blend Volume`` on, or the tooth object's :data:`BLEND_ATTRIBUTE` property, the tooth's Blend
+    Volume object carries the whole medium over the tooth (``blend_volume``): the Enamel's and the Dentin's volumes
+    are empty, their meshes only bound it.
     """
     nodes, links = group.nodes, group.links
     group[VOLUME_VERSION_KEY] = VOLUME_VERSION
@@ -124,10 +131,19 @@ def _volume_subgraph(group, gin):
     links.new(gin.outputs["Albedo"], ss.inputs[0])
     links.new(st.outputs[0], ss.inputs[1])
     if BLEND_ROW[0] in gin.outputs:
+        has = nodes.new("ShaderNodeAttribute")  # the object's property; 0 where it has none
+        has.attribute_type = "OBJECT"
+        has.attribute_name = BLEND_ATTRIBUTE
+        has.name = has.label = BLEND_ATTRIBUTE_NODE
+        either = nodes.new("ShaderNodeMath")
+        either.operation = "MAXIMUM"
+        links.new(gin.outputs[BLEND_ROW[0]], either.inputs[0])
+        links.new(has.outputs["Fac"], either.inputs[1])
         keep = nodes.new("ShaderNodeMath")
         keep.operation = "SUBTRACT"
         keep.inputs[0].default_value = 1.0
-        links.new(gin.outputs[BLEND_ROW[0]], keep.inputs[1])
+        links.new(either.outputs[0], keep.inputs[1])
+        has.location, either.location = (-660, -560), (-480, -500)
         for i, name in enumerate(("st", "ss")):
             own = nodes.new("ShaderNodeVectorMath")
             own.operation = "SCALE"
@@ -232,7 +248,7 @@ def ensure_blend_input(group) -> bool:
     :data:`VOLUME_VERSION` (a Dentin of layout 2 loses its step input ``Enamel Sigma_t`` and the drivers that fed
     it). Returns whether it changed the group (a current one is left untouched)."""
     kind = group.get(MARKER)
-    if kind not in BLENDED_GROUPS:
+    if kind not in BLENDED_GROUPS or group.library is not None:  # linked: not ours to change
         return False
     have = {s.name for s in group.interface.items_tree if s.item_type == "SOCKET" and s.in_out == "INPUT"}
     if BLEND_ROW[0] in have and group.get(VOLUME_VERSION_KEY, 1) >= VOLUME_VERSION:
@@ -244,7 +260,7 @@ def ensure_blend_input(group) -> bool:
     keep = {"GROUP_INPUT", "GROUP_OUTPUT", "SCRIPT", "ATTRIBUTE"}
     gout = next(n for n in group.nodes if n.type == "GROUP_OUTPUT")
     volume_nodes = _upstream(gout.inputs["Volume"])
-    for node in [n for n in volume_nodes if n.type not in keep]:
+    for node in [n for n in volume_nodes if n.type not in keep or n.name == BLEND_ATTRIBUTE_NODE]:
         group.nodes.remove(node)
     gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
     group.links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
