@@ -23,7 +23,18 @@ from .scene_build import (
     fit_targets,
     map_teeth_by_position,
     no_mapping_message,
+    raise_light_paths,
 )
+
+LIGHT_PATHS_WORDS = ("Raise the scene's Cycles light-path limits (Total, Volume, Transmission and Transparent "
+                     "bounces) to 256 where they are lower: light scatters hundreds of times inside teeth, which "
+                     "render about 80 % too dark under Blender's default limits")
+
+
+def _report_light_paths(op, scene) -> None:
+    changed = raise_light_paths(scene) if op.light_paths else ""
+    if changed:
+        op.report({"INFO"}, f"Light Paths raised for the teeth: {changed}")
 
 # enum identifiers are the core's template names upper-cased (execute() lower-cases them back)
 TOOTH_KINDS = [("INCISOR", "Incisor", ""), ("CANINE", "Canine", ""), ("PREMOLAR", "Premolar", ""),
@@ -94,6 +105,7 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
                                                   "smoother, slower renders)")
     smooth: bpy.props.BoolProperty(name="Smooth Shading", default=True,
                                    description="Shade the tooth meshes smooth")
+    light_paths: bpy.props.BoolProperty(name="Set Light Paths", default=True, description=LIGHT_PATHS_WORDS)
 
     def execute(self, context):
         from ...core.teeth.tooth_mesh import make_tooth
@@ -139,6 +151,7 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
             o.select_set(False)
         e_obj.select_set(True)
         context.view_layer.objects.active = e_obj
+        _report_light_paths(self, scene)
         return {"FINISHED"}
 
 
@@ -447,6 +460,7 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
     filepath: bpy.props.StringProperty(name="Scene File", subtype="FILE_PATH",
                                        description="A teeth scene.json (or a fit's scene_fit.json): meshes and media")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
+    light_paths: bpy.props.BoolProperty(name="Set Light Paths", default=True, description=LIGHT_PATHS_WORDS)
 
     def execute(self, context):
         from ...core.teeth.scene import load_scene
@@ -458,6 +472,21 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
             return {"CANCELLED"}
         build_teeth_scene(ts, context.collection or context.scene.collection, _mm_per_unit(context.scene),
                           smooth=True)
+        _report_light_paths(self, context.scene)
+        return {"FINISHED"}
+
+
+class MS_OT_teeth_light_paths(bpy.types.Operator):
+    """Raise the scene's Cycles light-path limits where they cut the teeth's scattering short (teeth render too dark
+    under Blender's default limits)"""
+
+    bl_idname = "material_structures.teeth_light_paths"
+    bl_label = "Set Light Paths for Teeth"
+    bl_options = {"REGISTER", "UNDO"}
+    light_paths = True
+
+    def execute(self, context):
+        _report_light_paths(self, context.scene)
         return {"FINISHED"}
 
 
@@ -465,4 +494,4 @@ CLASSES: list[type] = [MS_OT_teeth_add_tooth, MS_OT_teeth_set_dentin, MS_OT_teet
                        *GROUP_OPERATORS, MS_OT_teeth_read_capture_teeth, MS_OT_teeth_map_by_position,
                        MS_OT_teeth_apply_fit_file,
                        MS_OT_teeth_fit, MS_OT_teeth_fit_cancel,
-                       MS_OT_teeth_import_scene]
+                       MS_OT_teeth_import_scene, MS_OT_teeth_light_paths]

@@ -9,6 +9,7 @@ from ...core.teeth.fit_checkpoint import stopped_fit
 from ..common import SidebarPanel
 from ..operators import osl_ready
 from .properties import CHECK_IMAGE_NAME, fit_out_dir, owner
+from .scene_build import short_light_paths
 
 
 class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
@@ -21,6 +22,10 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
         row.operator("material_structures.teeth_add_tooth", text="Add Tooth", icon="ADD").source = "TEMPLATE"
         row.operator("material_structures.teeth_add_tooth", text="From Mesh", icon="MESH_DATA").source = "MESH"
         layout.operator("material_structures.teeth_import_scene", icon="IMPORT")
+        if short_light_paths(context.scene) and any(o.ms_tooth.role == "ENAMEL" for o in context.scene.objects):
+            row = layout.row()
+            row.label(text="Light Paths too short: teeth render too dark", icon="ERROR")
+            row.operator("material_structures.teeth_light_paths", text="Set Light Paths")
         if not osl_ready(context.scene):  # nothing switches the engine unasked: the artist may, here
             row = layout.row()
             row.label(text="Exact enamel surface:", icon="INFO")

@@ -258,6 +258,34 @@ def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, target
     return done
 
 
+# Cycles' light-path limits under which teeth render as the core's all-bounce model: light scatters in enamel and
+# dentin hundreds of times (albedos near 1) and crosses their boundaries as transmission (the enamel surface) and
+# transparent (the dentin's) bounces. Blender's factory limits (Total 12, Volume 0, Transparent 8) render a tooth
+# about 80 % too dark (docs/teeth-showcase.md, "Light paths").
+TEETH_LIGHT_PATHS = (("max_bounces", "Total"), ("volume_bounces", "Volume"), ("transmission_bounces", "Transmission"),
+                     ("transparent_max_bounces", "Transparent"))
+TEETH_MIN_BOUNCES = 256
+
+
+def short_light_paths(scene) -> list[tuple[str, str, int]]:
+    """The scene's Cycles light-path limits that cut the teeth's scattering short: (property, its name in Blender's
+    Light Paths panel, value) for each below :data:`TEETH_MIN_BOUNCES`."""
+    cyc = getattr(scene, "cycles", None)
+    if cyc is None:  # Cycles not enabled: nothing to set
+        return []
+    return [(prop, label, int(getattr(cyc, prop))) for prop, label in TEETH_LIGHT_PATHS
+            if getattr(cyc, prop) < TEETH_MIN_BOUNCES]
+
+
+def raise_light_paths(scene) -> str:
+    """Raise (never lower) the light-path limits :func:`short_light_paths` names to :data:`TEETH_MIN_BOUNCES`;
+    returns what changed in words ("" when nothing did). Other limits (diffuse, glossy) stay the artist's."""
+    short = short_light_paths(scene)
+    for prop, _, _ in short:
+        setattr(scene.cycles, prop, TEETH_MIN_BOUNCES)
+    return ", ".join(f"{label} {old} -> {TEETH_MIN_BOUNCES}" for _, label, old in short)
+
+
 def configure_teeth_cycles(scene, samples: int, seed: int = 0, bounces: int = 256) -> None:
     """Cycles settings under which the Cycles render and the core path tracer estimate the same integral:
     CPU + OSL, box pixel filter of width 1 (the core's), no clamping, no light culling, no caustic

@@ -280,6 +280,79 @@ def test_making_teeth_leaves_the_render_engine_alone(addon_module, tmp_path):
         assert (scene.render.engine, scene.cycles.shading_system) == (engine, False)
 
 
+FACTORY_LIGHT_PATHS = {"max_bounces": 12, "volume_bounces": 0, "transmission_bounces": 12, "transparent_max_bounces": 8}
+
+
+def _factory_light_paths(scene) -> None:
+    for k, v in FACTORY_LIGHT_PATHS.items():
+        setattr(scene.cycles, k, v)
+
+
+def test_teeth_in_a_default_scene_get_light_paths_long_enough_and_ctrl_z_gives_the_old_ones_back(addon_module,
+                                                                                                  tmp_path):
+    """Blender's factory light paths (Volume 0 bounces) render a tooth about 80 % too dark. Add Tooth, From Mesh and
+    Import Teeth Scene raise the limits that cut the teeth's scattering short to 256 (never lower one; diffuse and
+    glossy stay the artist's) and say so; Ctrl+Z gives the old limits back; unticked in Adjust Last Operation they
+    stay; the panel's Set Light Paths does the same for teeth that came another way (appended)."""
+    from material_structures.addon.teeth.scene_build import TEETH_MIN_BOUNCES, short_light_paths
+
+    _, path = _scene_file(tmp_path, 0.34)
+    # the new file of every test is Blender's startup file (the bpy module has no user one): the factory limits
+    assert {k: getattr(bpy.context.scene.cycles, k) for k in FACTORY_LIGHT_PATHS} == FACTORY_LIGHT_PATHS
+    diffuse, glossy = bpy.context.scene.cycles.diffuse_bounces, bpy.context.scene.cycles.glossy_bounces
+    raised = dict.fromkeys(FACTORY_LIGHT_PATHS, TEETH_MIN_BOUNCES)
+    for call in (lambda: bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="MOLAR", resolution=12),
+                 lambda: bpy.ops.material_structures.teeth_import_scene(filepath=path)):
+        _factory_light_paths(bpy.context.scene)
+        bpy.ops.ed.undo_push(message="Factory Light Paths")
+        assert call() == {"FINISHED"}
+        bpy.ops.ed.undo_push(message="Teeth")  # the step the operator's UNDO flag makes in Blender's UI
+        cyc = bpy.context.scene.cycles
+        assert {k: getattr(cyc, k) for k in FACTORY_LIGHT_PATHS} == raised
+        assert (cyc.diffuse_bounces, cyc.glossy_bounces) == (diffuse, glossy)
+        assert short_light_paths(bpy.context.scene) == []
+        bpy.ops.ed.undo()
+        assert {k: getattr(bpy.context.scene.cycles, k) for k in FACTORY_LIGHT_PATHS} == FACTORY_LIGHT_PATHS
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="MOLAR", resolution=12,
+                                                       light_paths=False) == {"FINISHED"}
+    assert [p for p, _, _ in short_light_paths(bpy.context.scene)] == list(FACTORY_LIGHT_PATHS)
+    assert bpy.ops.material_structures.teeth_light_paths() == {"FINISHED"}
+    assert short_light_paths(bpy.context.scene) == []
+    bpy.context.scene.cycles.volume_bounces = 1000  # an artist's higher limit stays
+    assert bpy.ops.material_structures.teeth_light_paths() == {"FINISHED"}
+    assert bpy.context.scene.cycles.volume_bounces == 1000
+
+
+@pytest.mark.slow
+def test_a_tooth_imported_into_a_default_scene_renders_as_under_the_verified_settings(addon_module, tmp_path):
+    """Nightly. A tooth brought by Import Teeth Scene into a scene with Blender's factory light paths (raised by the
+    operator) renders the mean colour it renders under configure_teeth_cycles (the settings every Cycles-vs-core
+    figure uses) within 1 %; with the factory light paths kept it rendered about 80 % darker."""
+    from material_structures.addon.teeth import verify as V
+    from material_structures.render import render_to_array
+
+    ts, path = _scene_file(tmp_path, 0.34)
+    _, cam, light = V.check_scene(1, 16, 32, 20)
+    means = {}
+    for raise_paths in (True, False, None):
+        scene = V.reset_scene()
+        _factory_light_paths(scene)
+        assert bpy.ops.material_structures.teeth_import_scene(filepath=path, light_paths=bool(raise_paths)) \
+            == {"FINISHED"}
+        V.dark_world(scene)
+        V.add_camera(scene, cam)
+        V.add_point_light(scene, light)
+        paths = {k: getattr(scene.cycles, k) for k in FACTORY_LIGHT_PATHS}
+        V.configure_teeth_cycles(scene, 64, 0, 256)  # the verified settings ...
+        if raise_paths is not None:  # ... but the light paths the operator left
+            for k, v in paths.items():
+                setattr(scene.cycles, k, v)
+        means[raise_paths] = render_to_array(scene)[:, :, :3].mean(axis=(0, 1))
+    print("factory / verified - 1:", means[False] / means[None] - 1.0, "raised:", means[True] / means[None] - 1.0)
+    assert means[True] == pytest.approx(means[None], rel=0.01)
+    assert np.all(means[False] < 0.5 * means[None])
+
+
 @pytest.mark.parametrize("content", ['{"lights": [], "cameras": []}', '{"format": "something/1", "teeth": []}'])
 def test_import_teeth_scene_of_another_json_says_so_in_one_line(addon_module, tmp_path, content):
     path = os.path.join(str(tmp_path), "capture.json")
