@@ -420,18 +420,41 @@ def linked_materials(blend_mat) -> tuple:
     return found.get("Enamel"), found.get("Dentin")
 
 
+def own_dentin(enamel):
+    """The dentin core of ``enamel``. A copy of an enamel shell alone (Shift+D or Alt+D of what a click on a tooth
+    selects: the dentin, a child of the original, is not copied with it) points at the original's dentin; it gets a
+    copy of that dentin of its own, parented to it (a new mesh where the enamel's mesh was copied, the same where it
+    is shared, as Alt+D shares it), so editing the copy never changes the original tooth. None without a dentin."""
+    dentin = enamel.ms_tooth.partner
+    original = dentin.ms_tooth.partner if dentin is not None else None
+    if original is None or original == enamel or dentin.ms_tooth.role != "DENTIN" or dentin.library is not None:
+        return dentin
+    copy = dentin.copy()  # its parent inverse too: the same place in the copy's frame
+    if enamel.data is not original.data:
+        copy.data = dentin.data.copy()
+    for coll in enamel.users_collection:
+        coll.objects.link(copy)
+    copy.parent = enamel
+    copy.ms_tooth.partner = enamel
+    enamel.ms_tooth.partner = copy
+    return copy
+
+
 def follow_materials(enamels) -> list:
     """Teeth (enamel shells) whose Blend Volume is driven by other materials than the ones their enamel and dentin
     wear now (an artist gave the dentin another material, e.g. a library Dentin Shade) get the new ones linked: the
     Blend Volume takes their parameters and they stop carrying a medium of their own, which the dentin would
     otherwise hold twice (a material linked from a library included: the tooth object's own property empties it). A
-    tooth without a Blend Volume whose materials or objects expect one (a Shift+D copy) gets its own. A tooth whose
+    tooth without a Blend Volume whose materials or objects expect one (a Shift+D copy) gets its own (a copy of the
+    enamel alone first its own dentin: :func:`own_dentin`). A tooth whose
     new material is not an Enamel/Dentin material, or that comes from another file, is left alone.
     Returns the enamel shells relinked or given a Blend Volume."""
     done = []
     for enamel in enamels:
-        dentin = enamel.ms_tooth.partner
-        if enamel.library is not None or dentin is None:
+        if enamel.library is not None:
+            continue
+        dentin = own_dentin(enamel)
+        if dentin is None:
             continue
         em, dm = enamel.active_material, dentin.active_material
         if group_node(em) is None or group_node(dm) is None:

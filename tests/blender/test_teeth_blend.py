@@ -817,3 +817,39 @@ def test_a_shift_d_copy_of_a_tooth_gets_its_own_blend_volume(addon_module):
     bpy.context.view_layer.update()
     assert linked_materials(blend.active_material) == (copy.active_material, dentin.active_material)
     assert linked_materials(blend_object(enamel).active_material)[1] == enamel.ms_tooth.partner.active_material
+
+
+@pytest.mark.parametrize("linked", [False, True])
+def test_a_copy_of_the_enamel_alone_gets_a_dentin_of_its_own(addon_module, linked):
+    """Shift+D (Alt+D: ``linked``) of the enamel shell alone, what a click on a tooth selects: the dentin, a child of
+    the original, is not copied with it, and the copy pointed at the original's dentin, whose shape keys its sliders
+    then moved and from which its Blend Volume was built. The copy gets a dentin of its own (its own mesh after
+    Shift+D, the shared one after Alt+D, as Alt+D shares the enamel's), in the same place in its frame; the
+    original keeps its dentin and shape."""
+    from material_structures.addon.teeth.blend_volume import blend_object, linked_materials
+
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    scene = bpy.context.scene
+    enamel = next(o for o in scene.objects if o.ms_tooth.role == "ENAMEL")
+    dentin = enamel.ms_tooth.partner
+    with bpy.context.temp_override(selected_objects=[enamel], selected_editable_objects=[enamel],
+                                   active_object=enamel):
+        assert bpy.ops.object.duplicate(linked=linked) == {"FINISHED"}
+    bpy.context.view_layer.update()
+    copy = next(o for o in scene.objects if o.ms_tooth.role == "ENAMEL" and o != enamel)
+    own = copy.ms_tooth.partner
+    assert own is not None and own != dentin and own.parent == copy and own.ms_tooth.partner == copy
+    assert (enamel.ms_tooth.partner, dentin.ms_tooth.partner) == (dentin, enamel)
+    assert (own.data == dentin.data) == linked
+    copy.location.x += 0.02
+    bpy.context.view_layer.update()
+    offset = np.array(own.matrix_world.translation) - np.array(copy.matrix_world.translation)
+    np.testing.assert_allclose(offset, np.array(dentin.matrix_world.translation)
+                               - np.array(enamel.matrix_world.translation), atol=1e-7)
+    blend = blend_object(copy)
+    assert blend is not None and linked_materials(blend.active_material) == (copy.active_material,
+                                                                             own.active_material)
+    if not linked:
+        copy.ms_tooth.buccal = 0.7
+        assert own.data.shape_keys.key_blocks["buccal"].value == pytest.approx(0.7)
+        assert dentin.data.shape_keys.key_blocks["buccal"].value == 0.0
