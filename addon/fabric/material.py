@@ -527,7 +527,11 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
     if update_matrices:
         for layer in scene.view_layers:
             layer.update()
-    pairs = scene_shader_lamps(scene)
+    receivers = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
+    # a lamp whose light linking cannot change here (linked from another file) is evaluated by the shader only where
+    # it already leaves every receiver out; elsewhere Cycles lights the fabric with it, as without the exact path
+    pairs = [(obj, lamp) for obj, lamp in scene_shader_lamps(scene)
+             if not _linking_fixed(obj) or _excludes(obj, receivers)]
     lamps = [lamp for _, lamp in pairs]
     nodes = list(fabric_script_nodes())
     for node in nodes:
@@ -537,12 +541,28 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
             scene, tables=exact_path_renders(scene))
         for node in nodes:
             write_world_inputs(node, folder, width, height, rotation, strength)
-    receivers = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
-    in_shader = {obj.name for obj, _ in pairs}
+    in_shader = {obj.name_full for obj, _ in pairs}
     for obj in scene.objects:
-        if obj.type == "LIGHT":
-            _link_off(obj, receivers if obj.name in in_shader else [])
+        if obj.type == "LIGHT" and not _linking_fixed(obj):
+            _link_off(obj, receivers if obj.name_full in in_shader else [])
     return len(lamps)
+
+
+def _linking_fixed(lamp_obj) -> bool:
+    """Whether the lamp's light linking cannot change in this file (the lamp, or its receiver collection, is linked
+    from another file: its data is read-only here and a change would not be saved)."""
+    coll = lamp_obj.light_linking.receiver_collection
+    return lamp_obj.library is not None or (coll is not None and coll.library is not None)
+
+
+def _excludes(lamp_obj, receivers) -> bool:
+    """Whether the lamp's light linking leaves out every object of ``receivers``."""
+    coll = lamp_obj.light_linking.receiver_collection
+    if coll is None:
+        return not receivers
+    excluded = {obj.name_full for obj, entry in zip(coll.objects, coll.collection_objects, strict=True)
+                if entry.light_linking.link_state == "EXCLUDE"}
+    return all(obj.name_full in excluded for obj in receivers)
 
 
 LINKS_MADE = "material_structures_links"  # on a receiver collection the add-on made for a lamp

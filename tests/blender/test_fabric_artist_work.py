@@ -221,3 +221,46 @@ def test_viewport_samples_in_the_tab_are_cycles_own(addon_module):
     assert scene.cycles.preview_samples == 7
     scene.cycles.preview_samples = 19
     assert scene.material_structures.preview_samples == 19
+
+
+def _link_objects(path, names) -> list:
+    with bpy.data.libraries.load(path, link=True) as (_, dst):
+        dst.objects = list(names)
+    for obj in dst.objects:
+        bpy.context.scene.collection.objects.link(obj)
+    return dst.objects
+
+
+def test_a_lamp_linked_from_another_file_is_left_as_it_is_and_lights_the_fabric_once(addon_module, tmp_path):
+    """A lamp linked from another file: its light linking is read-only here (a change would not be saved, and the
+    handlers raised trying). The fabric leaves it as it is: one without light links lights the fabric through Cycles'
+    closures only (the exact path would light it a second time) and no link collection is made for it; one whose
+    file already leaves the fabric out (the fabric made that link there) is evaluated by the exact path; with OSL
+    off nothing is written either."""
+    from material_structures.addon.fabric.material import sync_fabric_lamps
+
+    scene, obj, light = _lit_scene()
+    lamp_only = str(tmp_path / "lamp.blend")
+    bpy.data.libraries.write(lamp_only, {light}, fake_user=True)
+    bpy.data.objects.remove(light)
+    (linked,) = _link_objects(lamp_only, ["Key"])
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    collections = len(bpy.data.collections)
+    assert sync_fabric_lamps(scene) == 0
+    bpy.context.view_layer.update()
+    assert linked.light_linking.receiver_collection is None and len(bpy.data.collections) == collections
+
+    scene, obj, light = _lit_scene()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    assert _excluded(light, obj)
+    both = str(tmp_path / "set.blend")
+    bpy.data.libraries.write(both, {light, obj}, fake_user=True)
+    scene, _, light = _lit_scene()
+    for o in (light, bpy.data.objects["Cloth"]):
+        bpy.data.objects.remove(o)
+    cloth, lamp = sorted(_link_objects(both, ["Cloth", "Key"]), key=lambda o: o.type != "MESH")
+    assert lamp.library is not None and _excluded(lamp, cloth)
+    assert sync_fabric_lamps(scene) == 1
+    scene.cycles.shading_system = False
+    assert sync_fabric_lamps(scene) == 1  # evaluated nowhere now; its links stay as its file has them
+    assert _excluded(lamp, cloth)
