@@ -304,7 +304,12 @@ class MS_OT_scratch_draw(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return material_set(object_scratch_material(context.active_object)) is not None
+        mat = object_scratch_material(context.active_object)
+        if mat is not None and mat.library is not None:  # as Blender keeps linked data from edits
+            cls.poll_message_set(f"'{mat.name}' is linked from another file: make it local (Object > Relations > "
+                                 "Make Local) to draw on it")
+            return False
+        return material_set(mat) is not None
 
     def execute(self, context):
         obj = context.active_object

@@ -419,3 +419,25 @@ def test_draw_stroke_that_misses_or_adds_nothing_is_cancelled(scene):
     on = [{"name": "", "location": (-0.4 + 0.2 * i, 0.1, 0.0), "uv": (0, 0), "pressure": 1.0} for i in range(5)]
     assert bpy.ops.material_structures.scratch_draw(stroke=on, stroke_space="WORLD") == {"FINISHED"}
     assert _set_of(a).n_scratches == n_before + 1
+
+
+def test_draw_on_a_material_linked_from_another_file_says_make_it_local(scene, tmp_path):
+    """A scratched metal linked (not appended) from another file is read-only here, as Blender keeps linked data:
+    a stroke drawn on it was kept in memory only and lost on save. Draw Scratches is unavailable on it and says why
+    in one line; the linked set is unchanged."""
+    a = _plane(scene, "A")
+    assert bpy.ops.material_structures.scratch_generate(count=20, seed=1) == {"FINISHED"}
+    mat = a.active_material
+    name = mat.name
+    lib = str(tmp_path / "metals.blend")
+    bpy.data.libraries.write(lib, {mat}, fake_user=True)
+    a.data.materials.clear()
+    bpy.data.materials.remove(mat)
+    with bpy.data.libraries.load(lib, link=True) as (_, dst):
+        dst.materials = [name]
+    a.data.materials.append(dst.materials[0])
+    before = _digest(_set_of(a))
+    stroke = [{"name": "", "location": (0, 0, 0), "uv": (0.1 + 0.1 * i, 0.5), "pressure": 1.0} for i in range(5)]
+    with pytest.raises(RuntimeError, match="linked from another file: make it local"):
+        bpy.ops.material_structures.scratch_draw(stroke=stroke)
+    assert _digest(_set_of(a)) == before
