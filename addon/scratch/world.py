@@ -118,11 +118,19 @@ def world_environment(scene):
     key, load, rotation = world_source(scene)
     if key is None or key[0] != "image":
         return None
-    try:
-        rgb = load()  # linear, row 0 = bottom
-    except EnvironmentMapError:
-        return None
-    return downsample(np.asarray(rgb[::-1], np.float64)) * world_strength(scene), rotation
+    env = _downsampled.get(key)
+    if env is None:  # read and reduced once per image (a lamp drag updates the lamps on every step)
+        try:
+            rgb = load()  # linear, row 0 = bottom
+        except EnvironmentMapError:
+            return None
+        env = downsample(np.asarray(rgb[::-1], np.float64))
+        _downsampled.clear()  # one world at a time is plenty
+        _downsampled[key] = env
+    return env * world_strength(scene), rotation
+
+
+_downsampled: dict = {}  # world_source key (the image, its file, size, colour space, edits) -> downsampled map
 
 
 def world_lamp_count(scene) -> int:
