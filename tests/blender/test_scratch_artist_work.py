@@ -257,6 +257,17 @@ def _env_world(scene):
     env_world(scene, pack=True)  # saved with the file
 
 
+def _scratched_plane_under_an_environment(scene):
+    """Plane "A" with a 20-scratch metal, the world an environment image (World Lights left off)."""
+    if scene.world is None:
+        scene.world = bpy.data.worlds.new("World")
+        if scene.world.node_tree is None:  # 4.5
+            scene.world.use_nodes = True
+    _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(count=20, seed=1)
+    _env_world(scene)
+
+
 def test_world_lights_is_a_setting_drawn_always_and_read_by_the_shader(scene):
     from types import SimpleNamespace
 
@@ -295,13 +306,7 @@ def test_world_lights_read_the_environment_once_not_on_every_lamp_move(scene, mo
     from material_structures.addon.scratch import world as W
     from material_structures.addon.scratch.material import scratch_script_nodes, sync_scratch_lamps
 
-    if scene.world is None:
-        scene.world = bpy.data.worlds.new("World")
-        if scene.world.node_tree is None:  # 4.5
-            scene.world.use_nodes = True
-    _plane(scene, "A")
-    bpy.ops.material_structures.scratch_generate(count=20, seed=1)
-    _env_world(scene)
+    _scratched_plane_under_an_environment(scene)
     scene.material_structures.scratch_world_lamps = 2
     reads = []
     real = E.image_radiance
@@ -330,13 +335,7 @@ RESULT = [scene.material_structures.scratch_world_lamps, next(scratch_script_nod
 
 
 def test_world_lights_set_the_old_way_keep_working_after_reopen(scene, tmp_path):
-    if scene.world is None:
-        scene.world = bpy.data.worlds.new("World")
-        if scene.world.node_tree is None:  # 4.5
-            scene.world.use_nodes = True
-    _plane(scene, "A")
-    bpy.ops.material_structures.scratch_generate(count=20, seed=1)
-    _env_world(scene)
+    _scratched_plane_under_an_environment(scene)
     scene["ms_scratch_world_lamps"] = 1  # how files and scripts set it before
     path = str(tmp_path / "old_world.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
