@@ -318,6 +318,9 @@ def use(zip_path: str, work: str) -> None:
         round(x, 6) for x in target.ms_tooth.fitted)
     op("teeth_apply_fit_file", filepath=job.result_path)
     op("teeth_import_scene", filepath=job.result_path)  # the fitted scene beside the others
+    scene.cycles.volume_bounces = 0  # Blender's default: the panel's Set Light Paths raises it again
+    op("teeth_light_paths")
+    assert scene.cycles.volume_bounces == 256, scene.cycles.volume_bounces
     t = time.perf_counter()
     job = tf.FitJob(capture, os.path.join(work, "teeth_fit_cancelled"), iterations=1000, init="scene").start()
     tf.set_current_job(job)
