@@ -25,6 +25,7 @@ from ..common import (
     MeshUVLookup,
     SyncLamps,
     assign_material,
+    push_undo,
     require_uv_mesh,
     stroke_property,
     stroke_space_property,
@@ -176,7 +177,10 @@ def _watch(job, scene_name: str, obj_name: str | None):
             return 0.5
         scene = bpy.data.scenes.get(scene_name)
         if scene is not None and not job.settled:
-            finish_fabric_fit(job, scene, bpy.data.objects.get(obj_name) if obj_name else None, job.poll())
+            state = job.poll()
+            finish_fabric_fit(job, scene, bpy.data.objects.get(obj_name) if obj_name else None, state)
+            if state == "FINISHED":  # the fitted material, one step of its own: Ctrl+Z takes back only it
+                push_undo("Fabric Fit")
         return None
 
     return tick

@@ -264,3 +264,27 @@ def test_a_lamp_linked_from_another_file_is_left_as_it_is_and_lights_the_fabric_
     scene.cycles.shading_system = False
     assert sync_fabric_lamps(scene) == 1  # evaluated nowhere now; its links stay as its file has them
     assert _excluded(lamp, cloth)
+
+
+def test_a_finished_background_fit_is_an_undo_step_of_its_own(addon_module, tmp_path):
+    """Fit BTF runs in the background and makes its material when the fit ends, after the operator returned: that
+    material is one undo step of its own (Edit > Undo History: Fabric Fit). Without it, Ctrl+Z took the fitted
+    material back together with the artist's last edit before it."""
+    from types import SimpleNamespace
+
+    from material_structures import render as R
+    from material_structures.addon.fabric.operators import _watch
+
+    fit = _fit_folder(tmp_path)
+    scene = R.reset_scene()
+    cloth = _plane(scene, "Cloth")
+    bpy.ops.ed.undo_push(message="Cloth")
+    cloth.location.x = 1.0
+    bpy.ops.ed.undo_push(message="Move")
+    job = SimpleNamespace(out_dir=fit, log_path="fit_log.txt", last_line="", settled=False, outcome="",
+                          is_alive=lambda: False, poll=lambda: "FINISHED")
+    assert _watch(job, scene.name, "Cloth")() is None  # the timer's last tick: the fit has ended
+    assert bpy.data.objects["Cloth"].active_material is not None
+    bpy.ops.ed.undo()  # Ctrl+Z: the fitted material goes, the move stays
+    assert bpy.data.objects["Cloth"].active_material is None
+    assert bpy.data.objects["Cloth"].location.x == 1.0
