@@ -66,7 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="samples per masked (tooth) pixel; with --renderer mitsuba, per pixel")
     s.add_argument("--samples-background", type=between(0, 1 << 24, int), default=2,
                    help="samples per other pixel (0: black)")
-    s.add_argument("--mesh-resolution", type=between(4, 1024, int), default=32,
+    s.add_argument("--mesh-resolution", type=between(8, 1024, int), default=32,
                    help="tooth mesh resolution of the built-in jaw section (grid cells a side)")
     s.add_argument("--seed", type=seed, default=12345, help="random seed of the path samples")
     s.add_argument("--renderer", choices=("ours", "mitsuba"), default="ours",
@@ -166,6 +166,8 @@ def run_synth(args: argparse.Namespace) -> int:
     if args.out is None:
         raise UsageError("teeth synth: the following arguments are required: --out")
     refuse_unwritable_folder(args.out)
+    if args.scene:
+        refuse_output_over_inputs(args.out, [args.scene])
     scene, cams, lights = synth_truth(args)
     if args.renderer == "mitsuba":
         from ..core.teeth.mitsuba_capture import import_mitsuba, render_capture_mitsuba

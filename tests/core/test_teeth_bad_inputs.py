@@ -172,10 +172,23 @@ def test_render_refuses_to_write_over_its_inputs(capture_dir, tmp_path, capsys):
     assert _digest(cap) == before
 
 
+def test_synth_refuses_to_write_over_the_scene_it_renders(capture_dir, tmp_path, capsys):
+    """``teeth synth --scene CAP/scene.json --out CAP`` replaced the capture it read its scene from (and left its
+    other images stale)."""
+    cap = _copy(capture_dir, tmp_path)
+    before = _digest(cap)
+    assert main(["teeth", "synth", "--out", str(cap), "--scene", str(cap / "scene.json"), "--lights", "1",
+                 "--cameras", "1", "--width", "8", "--height", "8", "--samples", "1"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "would write over the input" in err and err.count("\n") == 1, err
+    assert _digest(cap) == before
+
+
 @pytest.mark.parametrize("argv, said", [
     (["synth", "--out", "OUT", "--cameras", "0"], "argument --cameras: must be >= 1, got 0"),
     (["synth", "--out", "OUT", "--samples", "-3"], "argument --samples: must be >= 1, got -3"),
     (["synth", "--out", "OUT", "--width", "2"], "argument --width: must be >= 4, got 2"),
+    (["synth", "--out", "OUT", "--mesh-resolution", "4"], "argument --mesh-resolution: must be >= 8, got 4"),
     (["render", "S", "C", "--out", "O", "--samples", "0"], "argument --samples: must be >= 1, got 0"),
     (["sensitivity", "C", "--noise-variance", "nan"], "argument --noise-variance: 'nan' is not a finite number"),
     (["sensitivity", "C", "--capture-samples", "4", "--block", "0"], "argument --block: must be >= 1, got 0"),
