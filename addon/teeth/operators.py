@@ -290,11 +290,12 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
     def execute(self, context):
-        if not os.path.isfile(self.filepath):
+        path = bpy.path.abspath(self.filepath)  # "//": beside the .blend, as Blender's file fields mean it
+        if not os.path.isfile(path):
             self.report({"ERROR"}, f"file not found: {self.filepath}")
             return {"CANCELLED"}
         try:
-            done, names = apply_fit_file(context, self.filepath)
+            done, names = apply_fit_file(context, path)
         except (ValueError, KeyError, OSError) as exc:
             self.report({"ERROR"}, _read_error(self.filepath, exc, "cannot apply"))
             return {"CANCELLED"}
@@ -466,7 +467,7 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
         from ...core.teeth.scene import load_scene
 
         try:
-            ts = load_scene(self.filepath)
+            ts = load_scene(bpy.path.abspath(self.filepath))  # "//": beside the .blend
         except (OSError, ValueError, KeyError) as exc:
             self.report({"ERROR"}, _read_error(self.filepath, exc))
             return {"CANCELLED"}

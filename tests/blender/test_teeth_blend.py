@@ -853,3 +853,13 @@ def test_a_copy_of_the_enamel_alone_gets_a_dentin_of_its_own(addon_module, linke
         copy.ms_tooth.buccal = 0.7
         assert own.data.shape_keys.key_blocks["buccal"].value == pytest.approx(0.7)
         assert dentin.data.shape_keys.key_blocks["buccal"].value == 0.0
+
+
+def test_teeth_file_operators_take_paths_relative_to_the_blend(addon_module, tmp_path):
+    """Import Teeth Scene and Apply Fit Result read "//scene.json" beside the saved .blend, as every Blender file
+    field means "//" (they answered "file not found: //...")."""
+    _, path = _scene_file(tmp_path, 0.34)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "teeth.blend"))
+    assert bpy.ops.material_structures.teeth_import_scene(filepath="//scene.json") == {"FINISHED"}
+    assert any(o.ms_tooth.role == "ENAMEL" for o in bpy.context.scene.objects)
+    assert bpy.ops.material_structures.teeth_apply_fit_file(filepath="//scene.json") == {"FINISHED"}
