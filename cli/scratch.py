@@ -116,6 +116,9 @@ def run_generate(args: argparse.Namespace) -> int:
 
         check_schema(curves, "scratch-curves", args.curves)  # core/schemas/scratch-curves.schema.json
         s = sc.from_curves([_curve(args.curves, k, c) for k, c in enumerate(curves)], patch, uv=True, **kw)
+        if s.n_segments == 0:  # an empty set would be written without a word
+            raise UserError(f"{args.curves}: no curve adds a scratch (each lies outside the UV square [0, 1]^2 or "
+                            "has no length)")
     elif args.kind == "wear":
         s = sc.uniform_wear(args.count, patch, **kw)
     elif args.kind == "polish":

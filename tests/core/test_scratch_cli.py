@@ -45,6 +45,13 @@ def test_curves_and_errors(tmp_path, capsys):
     assert "not valid JSON" in capsys.readouterr().err
     assert main(["scratch", "generate", "--kind", "curves", "--out", str(npz)]) == 2  # a usage error
     capsys.readouterr()
+    (tmp_path / "outside.json").write_text(json.dumps([[[5, 5], [6, 6]], [[0.3, 0.3], [0.3, 0.3]]]))
+    before = npz.read_bytes()
+    assert main(["scratch", "generate", "--kind", "curves", "--curves", str(tmp_path / "outside.json"),
+                 "--out", str(npz)]) == 1  # no scratch: not an empty set written without a word
+    err = capsys.readouterr().err
+    assert "no curve adds a scratch" in err and err.count("\n") == 1, err
+    assert npz.read_bytes() == before
     assert main(["scratch", "generate", "--kind", "spiral", "--out", str(npz)]) == 2  # one line, no traceback
     assert capsys.readouterr().err.count("\n") == 1
     assert os.path.exists(npz)
