@@ -44,11 +44,14 @@ def run_material(args: argparse.Namespace) -> int:
     build_preview_scene(scene, mat)
     out = os.path.abspath(args.out or os.path.join(params_dir, "fabric.blend"))
     os.makedirs(os.path.dirname(out), exist_ok=True)
+    try:  # the .blend first: a preview without its .blend is half an output
+        bpy.ops.wm.save_as_mainfile(filepath=out, compress=True)
+    except RuntimeError as exc:  # Blender's "Cannot open file ... for writing: Permission denied"
+        raise UserError(f"cannot write {out}: {' '.join(str(exc).split())}") from None
+    print(out)
     if args.render:
         from .render import save_image
 
         save_image(args.render, render_to_array(scene))
         print(args.render)
-    bpy.ops.wm.save_as_mainfile(filepath=out, compress=True)
-    print(out)
     return 0

@@ -98,6 +98,8 @@ def render_blend(path: str, resolution, samples, seed):
         detail = " ".join(str(exc).split()) or "Blender cannot read it"
         raise UserError(f"{path}: not a readable .blend file ({detail})") from None
     scene = bpy.context.scene
+    if scene.camera is None:  # Blender's "Cannot render, no camera" would come out as a traceback
+        raise UserError(f"{path}: its scene {scene.name!r} has no camera to render from")
     res = resolution or (scene.render.resolution_x, scene.render.resolution_y)
     configure_cycles(scene, resolution=res, samples=samples or scene.cycles.samples, seed=seed)
     return render_to_array(scene)

@@ -243,3 +243,25 @@ def test_syncing_an_unchanged_scene_writes_nothing(addon_module, tmp_path):
     finally:
         bpy.app.handlers.depsgraph_update_post.remove(spy)
     assert not seen, seen
+
+
+def test_cli_writes_that_blender_refuses_are_one_line(addon_module, tmp_path, capsys):
+    """``render --blend`` of a file whose scene has no camera, ``fabric material --out`` where Blender cannot write
+    (here a folder of that name): one line each, no traceback; no preview left without its .blend."""
+    from material_structures.cli import main
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    empty = tmp_path / "empty.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(empty))
+    assert main(["render", "--blend", str(empty), "--out", str(tmp_path / "r.png"), "--resolution", "8x8"]) == 1
+    err = capsys.readouterr().err
+    assert "has no camera" in err and err.count("\n") == 1 and "Traceback" not in err, err
+    _write_fit(tmp_path / "fit")
+    (tmp_path / "m.blend").mkdir()
+    preview = tmp_path / "m.png"
+    assert main(["fabric", "material", str(tmp_path / "fit"), "--out", str(tmp_path / "m.blend"),
+                 "--render", str(preview), "--samples", "1"]) == 1
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("error: ")]
+    assert lines and "cannot write" in lines[-1] and "Traceback" not in err, err
+    assert not preview.exists() and not (tmp_path / "r.png").exists()
