@@ -148,14 +148,18 @@ def refuse_output_over_inputs(out: str, inputs: list[str]) -> None:
 
 
 def refuse_unwritable_folder(path: str, flag: str = "--out") -> None:
-    """Refuse, before the work, an output folder that cannot be made: an existing file at ``path`` or at a
-    folder above it (the work would end in "Not a directory" after minutes)."""
+    """Refuse, before the work, an output folder that cannot be made or written: an existing file at ``path`` or
+    at a folder above it (the work would end in "Not a directory" after minutes), or a nearest existing folder this
+    user may not write in (the work would end in "Permission denied", another output perhaps written already)."""
     p = os.path.abspath(path)
     while True:
         if os.path.exists(p):
             if not os.path.isdir(p):
                 what = "is a file" if p == os.path.abspath(path) else f"lies under the file {p!r}"
                 raise UserError(f"{flag} {path!r} {what}, not a folder; choose another output")
+            if not os.access(p, os.W_OK | os.X_OK):
+                raise UserError(f"{flag} {path!r}: the folder {p!r} is not writable (permission denied); choose "
+                                "another output")
             return
         parent = os.path.dirname(p)
         if parent == p:

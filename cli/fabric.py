@@ -164,9 +164,9 @@ def run_synth(args: argparse.Namespace) -> int:
     from ..core.fabric.parameter_maps import save_params
     from ..core.fabric.synthetic_btf import light_view_pairs, render_btf, synthetic_maps
 
-    for out in (args.out, args.gt_out):
-        if out:
-            refuse_unwritable_folder(out if not out.lower().endswith(".npz") else os.path.dirname(out) or ".")
+    for flag, out in (("--out", args.out), ("--gt-out", args.gt_out)):
+        if out:  # both before either is written
+            refuse_unwritable_folder(out if not out.lower().endswith(".npz") else os.path.dirname(out) or ".", flag)
     # the BTF is rendered in memory (float64 while rendering) before it is written
     check_memory(args.width * args.height * args.lights * args.views * 3 * 8 * 2,
                  f"a {args.width} x {args.height} BTF of {args.lights * args.views} light/view pairs")

@@ -59,3 +59,29 @@ def test_blender_backed_commands_leave_no_temp_dirs(tmp_path):
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith("ms-blender-user-")] == []
+
+
+@pytest.mark.parametrize("which", ["a file", "not writable"])
+def test_synth_checks_both_outputs_before_writing_either(inputs, tmp_path, capsys, monkeypatch, which):
+    """``fabric synth --out BTF --gt-out GT`` where GT cannot be written: one line naming --gt-out, and the BTF
+    folder as it was (it was replaced before the ground truth failed). Not writable is simulated (tests may run
+    as root, whom permissions do not stop)."""
+    import os
+    import shutil
+
+    btf = tmp_path / "btf"
+    shutil.copytree(inputs / "btf", btf)
+    before = _sha(btf / "btf.json")
+    gt = tmp_path / "gt"
+    if which == "a file":
+        gt.write_text("")
+    else:
+        gt.mkdir()
+        real = os.access
+        monkeypatch.setattr(os, "access", lambda p, mode: False if os.path.abspath(p) == str(gt) else real(p, mode))
+    assert main(["fabric", "synth", "--out", str(btf), "--gt-out", str(gt), "--width", "3", "--height", "3",
+                 "--lights", "2", "--views", "2"]) == 1
+    err = capsys.readouterr().err
+    said = "is a file" if which == "a file" else "not writable"
+    assert err.startswith("error: --gt-out ") and said in err and err.count("\n") == 1, err
+    assert _sha(btf / "btf.json") == before
