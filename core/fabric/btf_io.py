@@ -318,9 +318,22 @@ def save_btf(path: str | os.PathLike, values: np.ndarray, wi: np.ndarray, wo: np
 def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Directions ``(wi, wo)`` from a ``btf.json`` (images need not exist) or a ``.npz``."""
     path = os.fspath(path)
-    if path.endswith(".npz"):
-        hdr = read_btf_header(path)
-        return hdr.wi, hdr.wo
+    if path.endswith(".npz"):  # wi and wo are enough: a BTF's values need not be there
+        if not os.path.isfile(path):
+            raise MissingFileError(f"directions file not found: {path}", path)
+        try:
+            with np.load(path) as z:
+                missing = [k for k in ("wi", "wo") if k not in z.files]
+                if missing:
+                    raise UserError(f"{path}: missing array {missing[0]!r}; has {sorted(z.files)}")
+                wi, wo = z["wi"], z["wo"]
+        except UserError:
+            raise
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # not an .npz, damaged
+            raise UserError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+        if wi.dtype.kind not in "iuf" or wo.dtype.kind not in "iuf":
+            raise UserError(f"{path}: wi and wo must hold numbers, got {wi.dtype} and {wo.dtype}")
+        return validate_directions(wi, wo, path)
     _, jpath = _json_path(path)
     if not os.path.isfile(jpath):
         raise MissingFileError(f"directions file not found: {jpath}", jpath)

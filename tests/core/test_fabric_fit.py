@@ -9,6 +9,7 @@ import os
 import numpy as np
 import pytest
 
+from material_structures.core.errors import UserError
 from material_structures.core.exr_io import write_exr
 from material_structures.core.fabric.btf_fitter import fit_btf
 from material_structures.core.fabric.btf_io import load_btf, read_directions, save_btf
@@ -61,6 +62,13 @@ def test_btf_folder_and_npz_roundtrip(tmp_path):
     desc = json.loads((tmp_path / "f" / "btf.json").read_text())
     assert set(desc) == {"width", "height", "samples"} and desc["width"] == 5 and desc["height"] == 4
     assert np.allclose(read_directions(tmp_path / "f" / "btf.json")[0], wi)
+    assert np.allclose(read_directions(tmp_path / "b.npz")[1], wo)
+    np.savez(tmp_path / "dirs.npz", wi=wi, wo=wo)  # directions alone: what `fabric eval --directions` says suffices
+    got_wi, got_wo = read_directions(tmp_path / "dirs.npz")
+    assert np.allclose(got_wi, wi) and np.allclose(got_wo, wo)
+    np.savez(tmp_path / "half.npz", wi=wi)
+    with pytest.raises(UserError, match="missing array 'wo'"):
+        read_directions(tmp_path / "half.npz")
 
 
 def _folder(tmp_path, samples, w=3, h=2):
