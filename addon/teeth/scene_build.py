@@ -112,15 +112,28 @@ def tooth_objects(scene=None) -> dict:
 # (``Scene.ms_teeth_fit.tooth_map``), read from the capture and pre-filled where the names match.
 
 def _capture_teeth(capture_dir: str) -> list[dict]:
-    """The ``teeth`` entries of a capture folder's ``scene.json``."""
+    """The ``teeth`` entries of a capture folder's ``scene.json``, each with a name; a file that is not a teeth
+    scene is refused in one line naming it and what is wrong (``UserError``)."""
     import json
     import os
+
+    from ...core.errors import UserError
 
     path = os.path.join(capture_dir, "scene.json")
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no scene.json in {capture_dir!r}")
-    with open(path, encoding="utf-8") as f:
-        return json.load(f)["teeth"]
+    try:
+        with open(path, encoding="utf-8") as f:
+            d = json.load(f)
+    except ValueError as exc:  # not JSON, cut short, or not text
+        raise UserError(f"{path}: not a JSON file ({exc})") from None
+    teeth = d.get("teeth") if isinstance(d, dict) else None
+    if not isinstance(teeth, list):
+        raise UserError(f"{path}: not a teeth scene (no 'teeth' list)")
+    for k, t in enumerate(teeth):
+        if not isinstance(t, dict) or "name" not in t:
+            raise UserError(f"{path}: tooth {k} has no 'name'")
+    return teeth
 
 
 def capture_tooth_names(capture_dir: str) -> list[str]:

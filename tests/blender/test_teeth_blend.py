@@ -863,3 +863,19 @@ def test_teeth_file_operators_take_paths_relative_to_the_blend(addon_module, tmp
     assert bpy.ops.material_structures.teeth_import_scene(filepath="//scene.json") == {"FINISHED"}
     assert any(o.ms_tooth.role == "ENAMEL" for o in bpy.context.scene.objects)
     assert bpy.ops.material_structures.teeth_apply_fit_file(filepath="//scene.json") == {"FINISHED"}
+
+
+@pytest.mark.parametrize("content, said", [('{"teeth": [{"na', "scene.json: not a JSON file"),
+                                           ('{"lights": []}', "scene.json: not a teeth scene (no 'teeth' list)"),
+                                           ('{"teeth": [{"c": [0, 0, 0]}]}', "scene.json: tooth 0 has no 'name'")])
+def test_reading_a_capture_with_a_broken_scene_json_names_the_file(addon_module, tmp_path, content, said):
+    """Read Capture Teeth (and Map by Position, the fit) on a capture whose scene.json is cut short, of another kind
+    or without tooth names: one line naming the file and what is wrong (was "Expecting value: line 1 column 401"
+    or just "'teeth'")."""
+    (tmp_path / "scene.json").write_text(content)
+    bpy.context.scene.ms_teeth_fit.capture_dir = str(tmp_path)
+    for op in (bpy.ops.material_structures.teeth_read_capture_teeth, bpy.ops.material_structures.teeth_map_by_position):
+        with pytest.raises(RuntimeError) as err:
+            op()
+        message = str(err.value).strip()
+        assert said in message and message.count("\n") == 0, message
