@@ -660,15 +660,26 @@ def run_render(args: argparse.Namespace) -> int:
     refuse_output_over_inputs(args.out, [args.capture, args.scene])
     scene = load_scene(args.scene)
     cap = Capture.load(args.capture)
+    import tempfile
+
     os.makedirs(args.out, exist_ok=True)
-    for l0 in range(0, len(cap.lights), 9):
-        ids = np.arange(l0, min(l0 + 9, len(cap.lights)))
-        res = render(scene, cap.cameras, cap.lights, RenderSettings(spp=args.samples, seed=args.seed + l0),
-                     light_ids=ids)
-        for c in range(len(cap.cameras)):
-            for k, li in enumerate(ids):
-                write_exr(os.path.join(args.out, f"cam{c}_light{li}.exr"), res.images[c, k])
-    print(f"wrote {len(cap.cameras) * len(cap.lights)} images to {args.out}")
+    names = [f"cam{c}_light{li}.exr" for c in range(len(cap.cameras)) for li in range(len(cap.lights))]
+    blocked = next((n for n in names if os.path.isdir(os.path.join(args.out, n))), None)
+    if blocked is not None:
+        raise UserError(f"--out {args.out!r}: {blocked} is a folder there; choose another output")
+    # every image into a folder of its own first, moved into --out only once all are rendered: a render that
+    # fails or is stopped half-way leaves --out as it was, not half new and half old
+    with tempfile.TemporaryDirectory(dir=args.out, prefix=".teeth-render-") as work:
+        for l0 in range(0, len(cap.lights), 9):
+            ids = np.arange(l0, min(l0 + 9, len(cap.lights)))
+            res = render(scene, cap.cameras, cap.lights, RenderSettings(spp=args.samples, seed=args.seed + l0),
+                         light_ids=ids)
+            for c in range(len(cap.cameras)):
+                for k, li in enumerate(ids):
+                    write_exr(os.path.join(work, f"cam{c}_light{li}.exr"), res.images[c, k])
+        for name in names:
+            os.replace(os.path.join(work, name), os.path.join(args.out, name))
+    print(f"wrote {len(names)} images to {args.out}")
     return 0
 
 

@@ -437,3 +437,37 @@ def test_a_damaged_checkpoint_is_one_line(capture_dir, tmp_path, capsys, content
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "checkpoint.json" in err and said in err and err.count("\n") == 1, err
     assert _digest(out) == before
+
+
+def test_a_render_that_fails_half_way_leaves_its_output_as_it_was(tmp_path, capsys, monkeypatch):
+    """``teeth render`` wrote each batch of lights as it went: a failure after the first batch left --out half new,
+    half old. Now nothing of a failed render reaches --out; an image name taken by a folder is refused first."""
+    from material_structures.core.teeth import path_tracer
+
+    cap = tmp_path / "cap"  # 10 lights: two batches of 9
+    assert main(["teeth", "synth", "--out", str(cap), "--teeth", "1", "--width", "12", "--height", "10",
+                 "--lights", "10", "--cameras", "1", "--samples", "1", "--samples-background", "0",
+                 "--mesh-resolution", "10"]) == 0
+    out = tmp_path / "out"
+    argv = ["teeth", "render", str(cap / "scene.json"), str(cap), "--out", str(out), "--samples", "1"]
+    assert main(argv) == 0
+    before = _digest(out)
+    calls = []
+    real = path_tracer.render
+
+    def fail_on_second(*a, **kw):
+        calls.append(1)
+        if len(calls) > 1:
+            raise OSError("disk full")
+        return real(*a, **kw)
+
+    monkeypatch.setattr(path_tracer, "render", fail_on_second)
+    assert main([*argv, "--seed", "7"]) == 1
+    assert "disk full" in capsys.readouterr().err
+    assert _digest(out) == before and len(calls) == 2 and sorted(os.listdir(out))[0] == "cam0_light0.exr"
+    monkeypatch.setattr(path_tracer, "render", real)
+    (out / "cam0_light0.exr").unlink()
+    (out / "cam0_light0.exr").mkdir()
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "cam0_light0.exr is a folder there" in err and err.count("\n") == 1, err
