@@ -214,8 +214,16 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
             self.report({"ERROR"}, "A fabric fit is already running")
             return {"CANCELLED"}
         try:
+            # what the fit command checks first, checked here before its folder and log are made: a bad BTF or an
+            # output over the input leaves nothing behind
+            from ...cli.checks import refuse_output_over_inputs
+            from ...core.fabric.btf_io import read_btf_header
+
+            if os.path.isfile(os.path.join(btf, "btf.json")):  # without one the job says "no btf.json in ..."
+                read_btf_header(btf)
+            refuse_output_over_inputs(out, [btf])
             job = fit_job.FabricFitJob(btf, out, workers=usable_cores()).start()
-        except (FileNotFoundError, OSError) as exc:
+        except (FileNotFoundError, OSError, ValueError) as exc:  # UserError is a ValueError
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         fit_job.set_current_job(job)

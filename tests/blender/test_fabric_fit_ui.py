@@ -51,6 +51,17 @@ def test_fit_btf_cancel_and_errors(addon_module, btf_dir, tmp_path):
     _plane()
     with pytest.raises(RuntimeError, match="no btf.json"):
         bpy.ops.material_structures.fabric_fit_btf(directory=str(tmp_path))
+    # a BTF that is not one, an output over the input: refused before the output folder and its log are made
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "btf.json").write_text("{")
+    with pytest.raises(RuntimeError, match="not valid JSON"):
+        bpy.ops.material_structures.fabric_fit_btf(directory=str(bad), out_dir=str(tmp_path / "bad_fit"))
+    assert not (tmp_path / "bad_fit").exists()
+    before = sorted(os.listdir(btf_dir))
+    with pytest.raises(RuntimeError, match="would write over the input"):
+        bpy.ops.material_structures.fabric_fit_btf(directory=btf_dir, out_dir=btf_dir)
+    assert sorted(os.listdir(btf_dir)) == before  # no fit_log.txt in the BTF
     assert bpy.ops.material_structures.fabric_fit_cancel() == {"CANCELLED"}  # a warning: nothing runs
     job = fit_job.FabricFitJob(btf_dir, str(tmp_path / "cancelled"), workers=1).start()
     fit_job.set_current_job(job)
