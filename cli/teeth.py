@@ -688,6 +688,10 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     from ..core.teeth.scene import load_scene
     from ..core.teeth.sensitivity import capture_sensitivity, cramer_rao_std, default_directions
 
+    if args.out:  # before minutes of renders, not after
+        if os.path.isdir(args.out):
+            raise UserError(f"--out {args.out!r} is a folder; give a .json file name")
+        refuse_unwritable_folder(os.path.dirname(os.path.abspath(args.out)))
     cap = Capture.load(args.capture)
     scene = load_scene(args.scene or os.path.join(args.capture, "scene.json"))
     names, directions = default_directions(scene)

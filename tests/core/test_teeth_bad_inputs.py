@@ -471,3 +471,15 @@ def test_a_render_that_fails_half_way_leaves_its_output_as_it_was(tmp_path, caps
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert "cam0_light0.exr is a folder there" in err and err.count("\n") == 1, err
+
+
+def test_sensitivity_checks_its_output_before_the_renders(capture_dir, tmp_path, capsys, monkeypatch):
+    """``teeth sensitivity --out`` that is a folder was found only after the renders (and named a temp file)."""
+    from material_structures.core.teeth import sensitivity
+
+    monkeypatch.setattr(sensitivity, "capture_sensitivity", lambda *a, **k: pytest.fail("rendered first"))
+    (tmp_path / "taken").mkdir()
+    assert main(["teeth", "sensitivity", str(capture_dir), "--capture-samples", "1", "--out",
+                 str(tmp_path / "taken")]) == 1
+    err = capsys.readouterr().err
+    assert "is a folder; give a .json file name" in err and err.count("\n") == 1, err
