@@ -303,6 +303,11 @@ class AddGroupNode:
         return {"FINISHED"}
 
 
+# path properties of operators: "//" is beside the saved .blend, as in every Blender file field (the
+# operators resolve it with bpy.path.abspath; Blender 4.5+ warns about "//" on a property without it)
+BLEND_RELATIVE = {"PATH_SUPPORTS_BLEND_RELATIVE"}
+
+
 class FilePicker(ImportHelper):
     """Base of the operators that read a file (``filepath``; subclasses may set ``filter_glob``): INVOKE opens
     Blender's file browser, EXEC does the work (scripts and tests call EXEC with the path)."""
@@ -312,7 +317,7 @@ class FolderPicker(ImportHelper):
     """Base of the operators that read or write a folder (``directory``): INVOKE opens Blender's file browser
     showing folders only, EXEC does the work."""
 
-    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH")
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", options=BLEND_RELATIVE)
     filter_folder: bpy.props.BoolProperty(default=True, options={"HIDDEN"})
 
 

@@ -19,6 +19,7 @@ from ...core.fabric.closure_fit import save_closure_maps
 from ...core.fabric.parameter_maps import save_params
 from ..background_job import usable_cores
 from ..common import (
+    BLEND_RELATIVE,
     AddGroupNode,
     CancelBackgroundJob,
     FolderPicker,
@@ -80,7 +81,7 @@ class MS_OT_fabric_import_maps(FolderPicker, bpy.types.Operator):
     bl_label = "Import Fitted Fabric Maps"
     bl_options = {"REGISTER", "UNDO"}
 
-    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", options=BLEND_RELATIVE,
                                         description="A fit's output folder (kd, ks, sigma, basis maps, params.json)")
 
     def execute(self, context):
@@ -117,7 +118,7 @@ class MS_OT_fabric_save_maps(FolderPicker, bpy.types.Operator):
     bl_label = "Save Fabric Maps"
     bl_options = {"REGISTER"}
 
-    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", options=BLEND_RELATIVE,
                                         description="Folder the maps are written to (EXR maps and params.json)")
 
     @classmethod
@@ -194,9 +195,9 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
     bl_label = "Fit BTF"
     bl_options = {"REGISTER"}
 
-    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", options=BLEND_RELATIVE,
                                         description="The measured BTF folder (btf.json and its images)")
-    out_dir: bpy.props.StringProperty(name="Output Folder", subtype="DIR_PATH",
+    out_dir: bpy.props.StringProperty(name="Output Folder", subtype="DIR_PATH", options=BLEND_RELATIVE,
                                       description="Where the fitted maps are written (default: beside the BTF "
                                                   "folder, its name + _fit)")
 
@@ -216,12 +217,13 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
         try:
             # what the fit command checks first, checked here before its folder and log are made: a bad BTF or an
             # output over the input leaves nothing behind
-            from ...cli.checks import refuse_output_over_inputs
             from ...core.fabric.btf_io import read_btf_header
 
             if os.path.isfile(os.path.join(btf, "btf.json")):  # without one the job says "no btf.json in ..."
                 read_btf_header(btf)
-            refuse_output_over_inputs(out, [btf])
+            o, i = os.path.realpath(out), os.path.realpath(btf)
+            if o == i or o.startswith(i + os.sep) or i.startswith(o + os.sep):
+                raise ValueError(f"the Output Folder {out!r} would write over the BTF folder; choose another")
             job = fit_job.FabricFitJob(btf, out, workers=usable_cores()).start()
         except (FileNotFoundError, OSError, ValueError) as exc:  # UserError is a ValueError
             self.report({"ERROR"}, str(exc))

@@ -16,6 +16,7 @@ import bpy
 
 from ...core.scratch.scratch_io import EXR_FILES, load_scratch_set, save_kind, save_scratch_set
 from ..common import (
+    BLEND_RELATIVE,
     FilePicker,
     FileSaver,
     MeshUVLookup,
@@ -417,7 +418,7 @@ class MS_OT_scratch_import(FilePicker, bpy.types.Operator):
     bl_label = "Import Scratch Set"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(name="File or Folder", subtype="FILE_PATH",
+    filepath: bpy.props.StringProperty(name="File or Folder", subtype="FILE_PATH", options=BLEND_RELATIVE,
                                        description="A scratch set's .npz file, or its folder of EXR tables")
     set_name: bpy.props.StringProperty(name="Set Name", default="",
                                        description="Name of a new material's set (empty: the file's name)")
@@ -447,7 +448,7 @@ class MS_OT_scratch_export(FileSaver, bpy.types.Operator):
     bl_options = {"REGISTER"}
 
     filepath: bpy.props.StringProperty(
-        name="File", subtype="FILE_PATH",
+        name="File", subtype="FILE_PATH", options=BLEND_RELATIVE,
         description="Where to write: a path ending .npz writes one file, a path without an extension a folder "
         "of EXR tables",
     )

@@ -9,7 +9,7 @@ import bpy
 from ...core.teeth.anatomy import SPECS as ANATOMY_SPECS
 from ...core.teeth.anatomy import make_anatomical_tooth
 from ...core.teeth.fit_checkpoint import stopped_fit
-from ..common import AddGroupNode, CancelBackgroundJob, FilePicker, end_modal_progress
+from ..common import BLEND_RELATIVE, AddGroupNode, CancelBackgroundJob, FilePicker, end_modal_progress
 from . import fit_job
 from .fit_job import FitJob, current_job, job_running, set_current_job, usable_cores
 from .geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
@@ -285,7 +285,7 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
     bl_label = "Apply Fit Result"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(name="Fit Result", subtype="FILE_PATH",
+    filepath: bpy.props.StringProperty(name="Fit Result", subtype="FILE_PATH", options=BLEND_RELATIVE,
                                        description="A fit's result file, scene_fit.json in the fit's output folder")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
 
@@ -458,7 +458,7 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
     bl_label = "Import Teeth Scene"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(name="Scene File", subtype="FILE_PATH",
+    filepath: bpy.props.StringProperty(name="Scene File", subtype="FILE_PATH", options=BLEND_RELATIVE,
                                        description="A teeth scene.json (or a fit's scene_fit.json): meshes and media")
     filter_glob: bpy.props.StringProperty(default="*.json", options={"HIDDEN"})
     light_paths: bpy.props.BoolProperty(name="Set Light Paths", default=True, description=LIGHT_PATHS_WORDS)

@@ -59,7 +59,7 @@ def test_fit_btf_cancel_and_errors(addon_module, btf_dir, tmp_path):
         bpy.ops.material_structures.fabric_fit_btf(directory=str(bad), out_dir=str(tmp_path / "bad_fit"))
     assert not (tmp_path / "bad_fit").exists()
     before = sorted(os.listdir(btf_dir))
-    with pytest.raises(RuntimeError, match="would write over the input"):
+    with pytest.raises(RuntimeError, match="Output Folder .* would write over the BTF folder"):
         bpy.ops.material_structures.fabric_fit_btf(directory=btf_dir, out_dir=btf_dir)
     assert sorted(os.listdir(btf_dir)) == before  # no fit_log.txt in the BTF
     assert bpy.ops.material_structures.fabric_fit_cancel() == {"CANCELLED"}  # a warning: nothing runs
