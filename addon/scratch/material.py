@@ -228,12 +228,17 @@ def update_scratch_group(group, scratch_set, scene=None) -> bpy.types.ShaderNode
 
 def material_scratch_group(mat) -> bpy.types.ShaderNodeTree | None:
     """The node group of ``mat``'s scratch set, made ``mat``'s own first: when other materials use the
-    same group (Blender's material copies share node groups), ``mat`` gets a copy of it (its images
-    become its own on the next :func:`update_scratch_group`)."""
+    same group (Blender's material copies share node groups), or the group is linked from another file (a
+    material made local keeps it linked: read-only data, an edit would be lost on save), ``mat`` gets a copy
+    of it (its images become its own on the next :func:`update_scratch_group`)."""
     node = group_node(mat)
     if node is None:
         return None
     group = node.node_tree
+    if group is not None and group.library is not None and mat.library is None:
+        copy = group.copy()
+        node.node_tree = copy
+        return copy
     for other in bpy.data.materials:
         if other == mat:
             continue

@@ -474,3 +474,14 @@ def test_draw_on_a_material_linked_from_another_file_says_make_it_local(scene, t
     with pytest.raises(RuntimeError, match="linked from another file: make it local"):
         bpy.ops.material_structures.scratch_draw(stroke=stroke)
     assert _digest(_set_of(a)) == before
+    # as the message says: Make Local (the material; its node group, which holds the set, stays linked until the
+    # first edit gives the material its own copy), then the stroke is kept through save and reopen
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o == a)
+    assert bpy.ops.object.make_local(type="SELECT_OBDATA_MATERIAL") == {"FINISHED"}
+    assert bpy.ops.material_structures.scratch_draw(stroke=stroke) == {"FINISHED"}
+    n = _set_of(a).n_scratches
+    path = str(tmp_path / "local.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert _set_of(bpy.data.objects["A"]).n_scratches == n == 21
