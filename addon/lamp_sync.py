@@ -84,11 +84,12 @@ def shader_lamp(
     )
 
 
-def scene_shader_lamps(scene) -> list:
-    """(object, ShaderLamp) of the scene's visible point/sun/spot/area lamps, by name, at most MAX_LAMPS."""
+def scene_shader_lamps(scene, keep=None) -> list:
+    """(object, ShaderLamp) of the scene's visible point/sun/spot/area lamps (those ``keep(obj)`` accepts, where
+    given), by name, at most MAX_LAMPS."""
     out = []
     for obj in sorted(scene.objects, key=lambda o: o.name):
-        if obj.type != "LIGHT" or obj.hide_render:
+        if obj.type != "LIGHT" or obj.hide_render or (keep is not None and not keep(obj)):
             continue
         data = obj.data
         mw = obj.matrix_world

@@ -530,8 +530,7 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
     receivers = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
     # a lamp whose light linking cannot change here (linked from another file) is evaluated by the shader only where
     # it already leaves every receiver out; elsewhere Cycles lights the fabric with it, as without the exact path
-    pairs = [(obj, lamp) for obj, lamp in scene_shader_lamps(scene)
-             if not _linking_fixed(obj) or _excludes(obj, receivers)]
+    pairs = scene_shader_lamps(scene, keep=lambda obj: not _linking_fixed(obj) or _excludes(obj, receivers))
     lamps = [lamp for _, lamp in pairs]
     nodes = list(fabric_script_nodes())
     for node in nodes:

@@ -423,8 +423,10 @@ def linked_materials(blend_mat) -> tuple:
 def own_dentin(enamel):
     """The dentin core of ``enamel``. A copy of an enamel shell alone (Shift+D or Alt+D of what a click on a tooth
     selects: the dentin, a child of the original, is not copied with it) points at the original's dentin; it gets a
-    copy of that dentin of its own, parented to it (a new mesh where the enamel's mesh was copied, the same where it
-    is shared, as Alt+D shares it), so editing the copy never changes the original tooth. None without a dentin."""
+    copy of that dentin of its own, parented to it, so the copy's Blend Volume is built from its own dentin. After
+    Shift+D the new dentin has a mesh of its own (the copy's sliders leave the original's shape alone); after Alt+D
+    it shares the original dentin's mesh, as the enamel's is shared, and with it the shape keys: a linked duplicate's
+    dentin shape moves with the original's, as its enamel mesh does. None without a dentin."""
     dentin = enamel.ms_tooth.partner
     original = dentin.ms_tooth.partner if dentin is not None else None
     if original is None or original == enamel or dentin.ms_tooth.role != "DENTIN" or dentin.library is not None:

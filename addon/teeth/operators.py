@@ -28,7 +28,7 @@ from .scene_build import (
 
 LIGHT_PATHS_WORDS = ("Raise the scene's Cycles light-path limits (Total, Volume, Transmission and Transparent "
                      "bounces) to 256 where they are lower: light scatters hundreds of times inside teeth, which "
-                     "render about 80 % too dark under Blender's default limits")
+                     "render more than half too dark under Blender's default limits (54-65 % measured)")
 
 
 def _report_light_paths(op, scene) -> None:

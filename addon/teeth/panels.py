@@ -22,7 +22,8 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
         row.operator("material_structures.teeth_add_tooth", text="Add Tooth", icon="ADD").source = "TEMPLATE"
         row.operator("material_structures.teeth_add_tooth", text="From Mesh", icon="MESH_DATA").source = "MESH"
         layout.operator("material_structures.teeth_import_scene", icon="IMPORT")
-        if short_light_paths(context.scene) and any(o.ms_tooth.role == "ENAMEL" for o in context.scene.objects):
+        if (context.scene.render.engine == "CYCLES" and short_light_paths(context.scene)
+                and any(o.ms_tooth.role == "ENAMEL" for o in context.scene.objects)):
             row = layout.row()
             row.label(text="Light Paths too short: teeth render too dark", icon="ERROR")
             row.operator("material_structures.teeth_light_paths", text="Set Light Paths")

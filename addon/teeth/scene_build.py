@@ -274,7 +274,7 @@ def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, target
 # Cycles' light-path limits under which teeth render as the core's all-bounce model: light scatters in enamel and
 # dentin hundreds of times (albedos near 1) and crosses their boundaries as transmission (the enamel surface) and
 # transparent (the dentin's) bounces. Blender's factory limits (Total 12, Volume 0, Transparent 8) render a tooth
-# about 80 % too dark (docs/teeth-showcase.md, "Light paths").
+# 54-65 % too dark (docs/teeth-showcase.md, "Light paths").
 TEETH_LIGHT_PATHS = (("max_bounces", "Total"), ("volume_bounces", "Volume"), ("transmission_bounces", "Transmission"),
                      ("transparent_max_bounces", "Transparent"))
 TEETH_MIN_BOUNCES = 256

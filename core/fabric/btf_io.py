@@ -322,7 +322,10 @@ def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if not os.path.isfile(path):
             raise MissingFileError(f"directions file not found: {path}", path)
         try:
-            with np.load(path) as z:
+            z = np.load(path)
+            if not isinstance(z, np.lib.npyio.NpzFile):  # a single array (.npy) under an .npz name
+                raise UserError(f"{path}: a single array, not an .npz archive with wi and wo")
+            with z:
                 missing = [k for k in ("wi", "wo") if k not in z.files]
                 if missing:
                     raise UserError(f"{path}: missing array {missing[0]!r}; has {sorted(z.files)}")

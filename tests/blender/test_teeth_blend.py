@@ -290,7 +290,7 @@ def _factory_light_paths(scene) -> None:
 
 def test_teeth_in_a_default_scene_get_light_paths_long_enough_and_ctrl_z_gives_the_old_ones_back(addon_module,
                                                                                                   tmp_path):
-    """Blender's factory light paths (Volume 0 bounces) render a tooth about 80 % too dark. Add Tooth, From Mesh and
+    """Blender's factory light paths (Volume 0 bounces) render a tooth 54-65 % too dark. Add Tooth, From Mesh and
     Import Teeth Scene raise the limits that cut the teeth's scattering short to 256 (never lower one; diffuse and
     glossy stay the artist's) and say so; Ctrl+Z gives the old limits back; unticked in Adjust Last Operation they
     stay; the panel's Set Light Paths does the same for teeth that came another way (appended)."""
@@ -327,7 +327,7 @@ def test_teeth_in_a_default_scene_get_light_paths_long_enough_and_ctrl_z_gives_t
 def test_a_tooth_imported_into_a_default_scene_renders_as_under_the_verified_settings(addon_module, tmp_path):
     """Nightly. A tooth brought by Import Teeth Scene into a scene with Blender's factory light paths (raised by the
     operator) renders the mean colour it renders under configure_teeth_cycles (the settings every Cycles-vs-core
-    figure uses) within 1 %; with the factory light paths kept it rendered about 80 % darker."""
+    figure uses) within 1 %; with the factory light paths kept it rendered 54-65 % darker."""
     from material_structures.addon.teeth import verify as V
     from material_structures.render import render_to_array
 

@@ -69,6 +69,10 @@ def test_btf_folder_and_npz_roundtrip(tmp_path):
     np.savez(tmp_path / "half.npz", wi=wi)
     with pytest.raises(UserError, match="missing array 'wo'"):
         read_directions(tmp_path / "half.npz")
+    with open(tmp_path / "one.npz", "wb") as f:  # np.save: one array, whatever the name
+        np.save(f, wi)
+    with pytest.raises(UserError, match="a single array, not an .npz archive"):
+        read_directions(tmp_path / "one.npz")
 
 
 def _folder(tmp_path, samples, w=3, h=2):
