@@ -10,6 +10,7 @@ import math
 import os
 
 from ..core.errors import UserError
+from ..core.output_paths import input_written_over
 
 
 class UsageError(UserError):
@@ -140,11 +141,9 @@ def positive_float(text: str) -> float:
 
 def refuse_output_over_inputs(out: str, inputs: list[str]) -> None:
     """Refuse an output path that is one of ``inputs``, lies inside an input folder, or holds an input."""
-    o = os.path.realpath(out)
-    for inp in inputs:
-        i = os.path.realpath(inp)
-        if o == i or o.startswith(i + os.sep) or i.startswith(o + os.sep):
-            raise UserError(f"--out {out!r} would write over the input {inp!r}; choose another output")
+    inp = input_written_over(out, inputs)
+    if inp is not None:
+        raise UserError(f"--out {out!r} would write over the input {inp!r}; choose another output")
 
 
 def refuse_unwritable_folder(path: str, flag: str = "--out") -> None:

@@ -650,6 +650,8 @@ def run_fit(args: argparse.Namespace) -> int:
 
 
 def run_render(args: argparse.Namespace) -> int:
+    import tempfile
+
     import numpy as np
 
     from ..core.exr_io import write_exr
@@ -660,8 +662,6 @@ def run_render(args: argparse.Namespace) -> int:
     refuse_output_over_inputs(args.out, [args.capture, args.scene])
     scene = load_scene(args.scene)
     cap = Capture.load(args.capture)
-    import tempfile
-
     os.makedirs(args.out, exist_ok=True)
     names = [f"cam{c}_light{li}.exr" for c in range(len(cap.cameras)) for li in range(len(cap.lights))]
     blocked = next((n for n in names if os.path.isdir(os.path.join(args.out, n))), None)

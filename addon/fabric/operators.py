@@ -218,11 +218,11 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
             # what the fit command checks first, checked here before its folder and log are made: a bad BTF or an
             # output over the input leaves nothing behind
             from ...core.fabric.btf_io import read_btf_header
+            from ...core.output_paths import input_written_over
 
             if os.path.isfile(os.path.join(btf, "btf.json")):  # without one the job says "no btf.json in ..."
                 read_btf_header(btf)
-            o, i = os.path.realpath(out), os.path.realpath(btf)
-            if o == i or o.startswith(i + os.sep) or i.startswith(o + os.sep):
+            if input_written_over(out, [btf]) is not None:
                 raise ValueError(f"the Output Folder {out!r} would write over the BTF folder; choose another")
             job = fit_job.FabricFitJob(btf, out, workers=usable_cores()).start()
         except (FileNotFoundError, OSError, ValueError) as exc:  # UserError is a ValueError

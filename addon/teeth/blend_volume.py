@@ -448,9 +448,9 @@ def follow_materials(enamels) -> list:
     Blend Volume takes their parameters and they stop carrying a medium of their own, which the dentin would
     otherwise hold twice (a material linked from a library included: the tooth object's own property empties it). A
     tooth without a Blend Volume whose materials or objects expect one (a Shift+D copy) gets its own (a copy of the
-    enamel alone first its own dentin: :func:`own_dentin`). A tooth whose
-    new material is not an Enamel/Dentin material, or that comes from another file, is left alone.
-    Returns the enamel shells relinked or given a Blend Volume."""
+    enamel alone first its own dentin: :func:`own_dentin`). A tooth whose new material is not an Enamel/Dentin
+    material, or that comes from another file, is left alone. Returns the enamel shells relinked or given a Blend
+    Volume."""
     done = []
     for enamel in enamels:
         if enamel.library is not None:

@@ -85,3 +85,17 @@ def test_synth_checks_both_outputs_before_writing_either(inputs, tmp_path, capsy
     said = "is a file" if which == "a file" else "not writable"
     assert err.startswith("error: --gt-out ") and said in err and err.count("\n") == 1, err
     assert _sha(btf / "btf.json") == before
+
+
+def test_input_written_over_follows_links_and_nesting(tmp_path):
+    """The one rule the CLI and the add-on share: the output is the input, inside it, or holds it."""
+    import os
+
+    from material_structures.core.output_paths import input_written_over
+
+    (tmp_path / "in").mkdir()
+    os.symlink(tmp_path / "in", tmp_path / "alias")
+    for out in ("in", "in/sub", "alias/x"):  # the input, inside it, inside it through a link
+        assert input_written_over(tmp_path / out, [tmp_path / "other", tmp_path / "in"]) == str(tmp_path / "in")
+    assert input_written_over(tmp_path, [tmp_path / "in"]) == str(tmp_path / "in")  # holding it
+    assert input_written_over(tmp_path / "in2", [tmp_path / "in"]) is None  # a prefix of the name is not inside
