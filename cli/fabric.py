@@ -110,12 +110,22 @@ def _event(**fields) -> None:
 
 
 def run_fit(args: argparse.Namespace) -> int:
-    from ..core.fabric.btf_fitter import check_btf, fit_btf
-    from ..core.fabric.tile_fit import FitOptions
-
     if args.no_dask and args.scheduler:
         raise UsageError("--no-dask and --scheduler exclude each other")
     refuse_output_over_inputs(args.out, [args.btf])
+    made_out = not os.path.exists(args.out)
+    try:
+        return _fit(args)
+    except BaseException:  # a fit that fails or is stopped before writing anything leaves no empty --out behind
+        if made_out and os.path.isdir(args.out) and not os.listdir(args.out):
+            os.rmdir(args.out)
+        raise
+
+
+def _fit(args: argparse.Namespace) -> int:
+    from ..core.fabric.btf_fitter import check_btf, fit_btf
+    from ..core.fabric.tile_fit import FitOptions
+
     options = FitOptions(weighting=args.weighting)
     if args.scheduler and os.environ.get(PROGRESS_ENV) != "json":
         from ..scaleout.cluster import check_scheduler

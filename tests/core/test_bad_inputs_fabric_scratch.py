@@ -139,6 +139,11 @@ def test_an_unreadable_btf_image_leaves_no_cache_behind(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "0005.exr" in err and err.count("\n") == 1, err
     assert not (tmp_path / "fit" / ".fit_cache").exists()
+    assert not (tmp_path / "fit").exists()  # nor the (empty) output folder this fit made
+    (tmp_path / "kept").mkdir()  # an output folder that was there before stays
+    assert main(["fabric", "fit", str(btf), "--out", str(tmp_path / "kept"), "--no-dask", "--workers", "1",
+                 "--no-progress"]) == 1
+    assert (tmp_path / "kept").is_dir()
 
 
 def test_a_size_the_machine_cannot_hold_is_one_line(monkeypatch, capsys):
