@@ -91,30 +91,43 @@ def _json_path(path: str) -> tuple[str, str]:
     raise MissingFileError(f"BTF not found: {path} (expected a folder with btf.json, a btf.json or a .npz)", path)
 
 
+_NPZ_DAMAGE = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error)  # not an .npz, truncated, damaged
+
+
+def _npz_directions(path: str, keys: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The checked directions ``(wi, wo)`` of an existing ``.npz`` that must hold the arrays ``keys``; anything
+    else about it (not an archive, a key missing, damage, non-numbers) is a one-line ``UserError``."""
+    try:
+        z = np.load(path)
+        if not isinstance(z, np.lib.npyio.NpzFile):  # a single array (.npy) under an .npz name
+            raise UserError(f"{path}: a single array, not an .npz archive with {', '.join(keys)}")
+        with z:
+            missing = [k for k in keys if k not in z.files]
+            if missing:
+                raise UserError(f"{path}: missing array {missing[0]!r}; has {sorted(z.files)}")
+            wi, wo = z["wi"], z["wo"]
+    except UserError:
+        raise
+    except _NPZ_DAMAGE as exc:
+        raise UserError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+    if wi.dtype.kind not in "iuf" or wo.dtype.kind not in "iuf":
+        raise UserError(f"{path}: wi and wo must hold numbers, got {wi.dtype} and {wo.dtype}")
+    return validate_directions(wi, wo, path)
+
+
 def read_btf_header(path: str | os.PathLike) -> BtfHeader:
     """Read and validate the layout and directions of a BTF folder / ``btf.json`` / ``.npz``."""
     path = os.fspath(path)
     if path.endswith(".npz"):
         if not os.path.isfile(path):
             raise MissingFileError(f"BTF file not found: {path}", path)
+        wi, wo = _npz_directions(path, ("values", "wi", "wo"))
         try:
-            z = np.load(path)
-        except Exception as exc:
-            raise UserError(f"{path}: not a readable .npz file ({exc})") from exc
-        try:
-            with z:
-                for key in ("values", "wi", "wo"):
-                    if key not in z.files:
-                        raise UserError(f"{path}: missing array {key!r}; has {sorted(z.files)}")
-                wi, wo = z["wi"], z["wo"]
             shape = _npz_shape(path, "values")
         except UserError:
             raise
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # truncated, damaged
+        except _NPZ_DAMAGE as exc:
             raise UserError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
-        if wi.dtype.kind not in "iuf" or wo.dtype.kind not in "iuf":
-            raise UserError(f"{path}: wi and wo must hold numbers, got {wi.dtype} and {wo.dtype}")
-        wi, wo = validate_directions(wi, wo, path)
         if len(shape) != 4 or shape[3] != 3:
             raise UserError(f"{path}: values must have shape (N, H, W, 3), got {shape}")
         if shape[0] != wi.shape[0]:
@@ -321,22 +334,7 @@ def read_directions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if path.endswith(".npz"):  # wi and wo are enough: a BTF's values need not be there
         if not os.path.isfile(path):
             raise MissingFileError(f"directions file not found: {path}", path)
-        try:
-            z = np.load(path)
-            if not isinstance(z, np.lib.npyio.NpzFile):  # a single array (.npy) under an .npz name
-                raise UserError(f"{path}: a single array, not an .npz archive with wi and wo")
-            with z:
-                missing = [k for k in ("wi", "wo") if k not in z.files]
-                if missing:
-                    raise UserError(f"{path}: missing array {missing[0]!r}; has {sorted(z.files)}")
-                wi, wo = z["wi"], z["wo"]
-        except UserError:
-            raise
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # not an .npz, damaged
-            raise UserError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
-        if wi.dtype.kind not in "iuf" or wo.dtype.kind not in "iuf":
-            raise UserError(f"{path}: wi and wo must hold numbers, got {wi.dtype} and {wo.dtype}")
-        return validate_directions(wi, wo, path)
+        return _npz_directions(path, ("wi", "wo"))
     _, jpath = _json_path(path)
     if not os.path.isfile(jpath):
         raise MissingFileError(f"directions file not found: {jpath}", jpath)

@@ -73,6 +73,8 @@ def test_btf_folder_and_npz_roundtrip(tmp_path):
         np.save(f, wi)
     with pytest.raises(UserError, match="a single array, not an .npz archive"):
         read_directions(tmp_path / "one.npz")
+    with pytest.raises(UserError, match="a single array, not an .npz archive"):  # as a BTF too (was a TypeError)
+        load_btf(tmp_path / "one.npz")
 
 
 def _folder(tmp_path, samples, w=3, h=2):
