@@ -109,6 +109,15 @@ def _one_line(text: str) -> str:
     return " ".join(text.split()) or "bad input"
 
 
+def _end_progress_lines() -> None:
+    """Close the progress bars (tqdm's) a failed command left open: its message then starts a line of its own
+    instead of ending the bar's."""
+    std = sys.modules.get("tqdm.std")
+    if std is not None:
+        for bar in list(getattr(std.tqdm, "_instances", ())):
+            bar.close()
+
+
 def _bug(exc: BaseException) -> int:
     """An unexpected exception: a bug. Its traceback on stderr and exit status 1."""
     traceback.print_exception(exc)
@@ -130,7 +139,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     previous = _interrupt_on_sigterm()
     try:
-        return int(args.func(args) or 0)
+        try:
+            return int(args.func(args) or 0)
+        except BaseException:
+            _end_progress_lines()
+            raise
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -146,6 +146,27 @@ def test_an_unreadable_btf_image_leaves_no_cache_behind(tmp_path, capsys):
     assert (tmp_path / "kept").is_dir()
 
 
+def test_an_error_after_the_progress_bar_started_is_a_line_of_its_own(tmp_path, capsys, monkeypatch):
+    """A fit that fails with its tile bar on screen: the bar's line is ended first, the error is one line below."""
+    from material_structures.core.errors import UserError
+    from material_structures.core.fabric import btf_fitter
+
+    def fail_after_one_tile(values, hdr, cache, todo, runner, done):
+        done((todo[0], None, 3))
+        raise UserError("a tile of the BTF could not be fitted")
+
+    btf = tmp_path / "btf"
+    assert main(["fabric", "synth", "--out", str(btf), "--width", "4", "--height", "4", "--lights", "8", "--views",
+                 "8"]) == 0
+    monkeypatch.setattr(btf_fitter, "fit_all_bands", fail_after_one_tile)
+    capsys.readouterr()
+    assert main(["fabric", "fit", str(btf), "--out", str(tmp_path / "fit"), "--no-dask", "--workers", "1",
+                 "--tile", "2"]) == 1
+    err = capsys.readouterr().err
+    assert "fit tiles" in err and "1/4" in err, err  # the bar was drawn
+    assert err.endswith("\nerror: a tile of the BTF could not be fitted\n"), err
+
+
 def test_a_size_the_machine_cannot_hold_is_one_line(monkeypatch, capsys):
     import material_structures.cli.scratch as scratch_cli
 
