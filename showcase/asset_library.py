@@ -24,6 +24,7 @@ import uuid
 import bpy
 from PIL import Image
 
+from ..addon.teeth.materials import gate_for_linking
 from ..core.imaging import to_display_uint8
 from ..render import reset_scene
 from .library import MATERIALS, available_materials, render_material_preview
@@ -137,6 +138,7 @@ def build_asset_library(folder: str, preview_size: int = PREVIEW_SIZE, samples: 
     for image in bpy.data.images:
         if image.packed_file is None and image.source in {"GENERATED", "FILE"} and image.has_data:
             image.pack()
+    gate_for_linking()  # a shade linked from the library still hands its medium to its tooth's Blend Volume
     write_catalogs(folder, [MATERIALS[n].catalog for n in names])
     out = os.path.join(folder, LIBRARY_BLEND)
     # Written under a temporary name, then renamed: no half-written library, and no ".blend1" backup

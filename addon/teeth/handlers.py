@@ -8,6 +8,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from .blend_volume import follow_materials
+from .materials import gate_for_linking
 
 
 def _enamel_of(obj):
@@ -42,7 +43,15 @@ def on_file_change(*_args) -> None:
     follow_materials([o for o in bpy.data.objects if _enamel_of(o) is o])
 
 
+@persistent
+def on_save_pre(*_args) -> None:
+    """The Enamel/Dentin groups a file saves are gated for linking where a material marked as an asset uses them
+    (``materials.gate_as_used``): another file may link that shade."""
+    gate_for_linking()
+
+
 TEETH_HANDLERS = [
+    (bpy.app.handlers.save_pre, on_save_pre),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
     (bpy.app.handlers.load_post, on_file_change),
