@@ -367,11 +367,11 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
     dm = dentin.active_material if dentin is not None else None
     if dentin is None or group_node(em) is None or group_node(dm) is None:
         return None
-    from .materials import ensure_blend_input, gate_as_used
+    from .materials import ensure_blend_input, set_gate
 
     for m in (em, dm):
         ensure_blend_input(group_node(m).node_tree)
-        gate_as_used(group_node(m).node_tree)  # e.g. a shade appended from the library: its tooth sets its input
+        set_gate(group_node(m).node_tree, False)  # a shade appended from a file: its input is set here
     obj = blend_object(enamel)
     name = enamel.ms_tooth.tooth_name or enamel.name
     if obj is None:

@@ -8,7 +8,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from .blend_volume import follow_materials
-from .materials import gate_for_linking
+from .materials import gate_for_linking, ungate_local
 
 
 def _enamel_of(obj):
@@ -40,18 +40,25 @@ def on_render_pre(scene, *_args) -> None:
 @persistent
 def on_file_change(*_args) -> None:
     """A file opened (one saved before the handlers, or by a Blender without the extension) or restored by undo."""
+    ungate_local()  # written gated (on_save_pre)
     follow_materials([o for o in bpy.data.objects if _enamel_of(o) is o])
 
 
 @persistent
 def on_save_pre(*_args) -> None:
-    """The Enamel/Dentin groups a file saves are gated for linking where a material marked as an asset uses them
-    (``materials.gate_as_used``): another file may link that shade."""
+    """The file as written: its Enamel/Dentin groups read the tooth object's property (``materials.set_gate``), so
+    that a shade another file links from it hands its medium to that tooth's Blend Volume."""
     gate_for_linking()
+
+
+@persistent
+def on_save_post(*_args) -> None:
+    ungate_local()
 
 
 TEETH_HANDLERS = [
     (bpy.app.handlers.save_pre, on_save_pre),
+    (bpy.app.handlers.save_post, on_save_post),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
     (bpy.app.handlers.load_post, on_file_change),

@@ -47,18 +47,18 @@ STEP_ROW = ("Enamel Sigma_t", "NodeSocketVector", DEFAULTS["Enamel"]["sigma_t"],
 # The tooth object's say in it: the object custom property of this name (1 where the tooth's Blend Volume renders,
 # set by blend_volume.ensure_blend) empties the medium like the input does. A material linked from another file (a
 # library shade) cannot have its input changed here; its tooth's property still hands the medium to the Blend Volume.
-# Only the groups of a file made to be linked from (the asset library: GATED_KEY, :func:`gate_for_linking`) read the
-# property: an Attribute node in a volume makes Cycles treat the medium as varying in space, and it then builds a
-# 128^3 density octree for every mesh wearing it (3.3 s of a one-tooth render that takes 0.4 s without).
+# The property is read only in the file as written (the gate's link, :func:`set_gate`, made before every save and
+# taken out after it and after a file is opened): an Attribute node in a volume makes Cycles treat the medium as
+# varying in space and build a 128^3 density octree for every mesh wearing it (3.3 s of a one-tooth render that takes
+# 0.4 s without), and this file's own materials have their input set.
 BLEND_ATTRIBUTE = "ms_blend_volume"
 BLEND_ATTRIBUTE_NODE = "Tooth Has Blend Volume"
-GATED_KEY = "ms_gated_for_linking"
-# the volume subgraph's layout: 5 = as 3, and as 4 only in a group marked GATED_KEY; 4 = as 3, the medium also
-# emptied by the tooth object's BLEND_ATTRIBUTE; 3 = under Blend Volume, Enamel and Dentin only bound the medium (the
-# Blend Volume carries it whole, its extinction step included); 2 = the Dentin's mesh carried the step; 1 = as 3,
-# before the step input existed
+GATE_NODE = "Tooth Gate"  # max(Blend Volume input, the object's property) where the gate is linked
+# the volume subgraph's layout: 4 = as 3, the medium also emptied by the tooth object's BLEND_ATTRIBUTE; 3 = under
+# Blend Volume, Enamel and Dentin only bound the medium (the Blend Volume carries it whole, its extinction step
+# included); 2 = the Dentin's mesh carried the step; 1 = as 3, before the step input existed
 VOLUME_VERSION_KEY = "ms_volume_version"
-VOLUME_VERSION = 5
+VOLUME_VERSION = 4
 
 # What each socket of the teeth groups means, by name (a medium's name, "Enamel " or "Dentin ", may lead it).
 SOCKET_WORDS = {
@@ -121,7 +121,7 @@ def _load_boundary_script(tree, scene):
 def _volume_subgraph(group, gin):
     """sigma_t, albedo, g1, g2, beta -> two-lobe HG scattering + absorption (returns the shader socket).
 
-    With the input ``Blend Volume`` on, or in a group marked :data:`GATED_KEY` the tooth object's
+    With the input ``Blend Volume`` on, or (in the file as written: :func:`set_gate`) the tooth object's
     :data:`BLEND_ATTRIBUTE` property, the tooth's Blend Volume object carries the whole medium over the tooth
     (``blend_volume``): the Enamel's and the Dentin's volumes are empty, their meshes only bound it.
     """
@@ -136,18 +136,17 @@ def _volume_subgraph(group, gin):
     links.new(gin.outputs["Albedo"], ss.inputs[0])
     links.new(st.outputs[0], ss.inputs[1])
     if BLEND_ROW[0] in gin.outputs:
-        given = gin.outputs[BLEND_ROW[0]]
-        if group.get(GATED_KEY):
-            has = nodes.new("ShaderNodeAttribute")  # the object's property; 0 where it has none
-            has.attribute_type = "OBJECT"
-            has.attribute_name = BLEND_ATTRIBUTE
-            has.name = has.label = BLEND_ATTRIBUTE_NODE
-            either = nodes.new("ShaderNodeMath")
-            either.operation = "MAXIMUM"
-            links.new(given, either.inputs[0])
-            links.new(has.outputs["Fac"], either.inputs[1])
-            has.location, either.location = (-660, -560), (-480, -500)
-            given = either.outputs[0]
+        has = nodes.new("ShaderNodeAttribute")  # the object's property; 0 where it has none
+        has.attribute_type = "OBJECT"
+        has.attribute_name = BLEND_ATTRIBUTE
+        has.name = has.label = BLEND_ATTRIBUTE_NODE
+        either = nodes.new("ShaderNodeMath")
+        either.operation = "MAXIMUM"
+        either.name = either.label = GATE_NODE
+        either.inputs[1].default_value = 0.0  # where the property is not read (set_gate)
+        links.new(gin.outputs[BLEND_ROW[0]], either.inputs[0])
+        has.location, either.location = (-660, -560), (-480, -500)
+        given = either.outputs[0]
         keep = nodes.new("ShaderNodeMath")
         keep.operation = "SUBTRACT"
         keep.inputs[0].default_value = 1.0
@@ -271,51 +270,55 @@ def ensure_blend_input(group) -> bool:
 
 
 def _rebuild_volume(group) -> None:
-    """The volume subgraph of an Enamel/Dentin ``group`` made again (the current layout, gated or not as the group is
-    marked); its surface nodes stay."""
+    """The volume subgraph of an Enamel/Dentin ``group`` made again (the current layout, the gate unlinked); its
+    surface nodes stay."""
     keep = {"GROUP_INPUT", "GROUP_OUTPUT", "SCRIPT", "ATTRIBUTE"}
     gout = next(n for n in group.nodes if n.type == "GROUP_OUTPUT")
     volume_nodes = _upstream(gout.inputs["Volume"])
-    for node in [n for n in volume_nodes if n.type not in keep or n.name == BLEND_ATTRIBUTE_NODE]:
+    gate = [n for n in group.nodes if n.name == BLEND_ATTRIBUTE_NODE]  # read or not (set_gate)
+    for node in [n for n in volume_nodes if n.type not in keep] + gate:
         group.nodes.remove(node)
     gin = next(n for n in group.nodes if n.type == "GROUP_INPUT")
     group.links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
 
 
-def _linkable(group) -> bool:
-    """Whether a material of this file that another file may link (one marked as an asset) uses ``group``."""
-    for mat in bpy.data.materials:
-        node = group_node(mat) if mat.library is None and mat.asset_data is not None else None
-        if node is not None and node.node_tree == group:
-            return True
-    return False
-
-
-def gate_as_used(group) -> bool:
-    """A local Enamel/Dentin ``group`` reads the wearing object's :data:`BLEND_ATTRIBUTE` where a material marked as
-    an asset uses it: another file may link that material and cannot set its Blend Volume input, and the object's
-    say still hands the medium to the tooth's Blend Volume there. Every other group leaves it out (the materials of
-    this file have their input set), and with it the cost of a medium Cycles treats as varying in space. Returns
-    whether it changed the group. A group of an older layout is left as it is (opening the file upgrades it)."""
-    if (group.get(MARKER) not in BLENDED_GROUPS or group.library is not None
-            or group.get(VOLUME_VERSION_KEY, 1) < VOLUME_VERSION):
+def set_gate(group, on: bool) -> bool:
+    """Link (``on``) or unlink the tooth object's :data:`BLEND_ATTRIBUTE` into a local Enamel/Dentin ``group``'s
+    medium. Linked in the file as written, so that a material another file links, whose Blend Volume input cannot
+    be set there, still hands its medium to the tooth's Blend Volume; unlinked here, where this file's materials have
+    their input set and an unread Attribute node costs Cycles nothing. Only the link changes (no node is made or
+    removed). Returns whether it changed the group."""
+    has = group.nodes.get(BLEND_ATTRIBUTE_NODE)
+    if group.library is not None or group.get(MARKER) not in BLENDED_GROUPS or has is None:
         return False
-    want = _linkable(group)
-    if bool(group.get(GATED_KEY)) == want:
+    out = has.outputs["Fac"]
+    if out.links:  # linked (a file of layout 4 names its Maximum node only here)
+        either = out.links[0].to_node
+        if either.name != GATE_NODE:
+            either.name = either.label = GATE_NODE
+        if on:
+            return False
+        group.links.remove(out.links[0])
+        either.inputs[1].default_value = 0.0  # unread: the input alone decides
+        return True
+    either = group.nodes.get(GATE_NODE)
+    if not on or either is None:
         return False
-    if want:
-        group[GATED_KEY] = True
-    elif GATED_KEY in group:
-        del group[GATED_KEY]
-    _rebuild_volume(group)
+    group.links.new(out, either.inputs[1])
     return True
 
 
 def gate_for_linking() -> None:
-    """Every Enamel/Dentin group of this file as :func:`gate_as_used` says: before the file is written (the asset
-    library; any file saved, so that an artist's own library of shades links right too)."""
-    for group in list(bpy.data.node_groups):
-        gate_as_used(group)
+    """Before a file is written: every local Enamel/Dentin group reads the wearing object's property (a shade another
+    file links from it hands its medium to the tooth's Blend Volume there)."""
+    for group in bpy.data.node_groups:
+        set_gate(group, True)
+
+
+def ungate_local() -> None:
+    """After a file is written or opened: this file's own Enamel/Dentin groups leave the property out."""
+    for group in bpy.data.node_groups:
+        set_gate(group, False)
 
 
 def _remove_step_input(group) -> None:

@@ -613,16 +613,13 @@ def _without_teeth_handlers(off: bool = True):
 
 
 def _linked_from_a_library(mat, folder) -> bpy.types.Material:
-    """``mat`` written into a library file in ``folder`` and linked back from it (the local one removed), as the
-    Asset Browser's Link import brings a library shade: marked as an asset, its group gated as a save gates it."""
-    from material_structures.addon.teeth.materials import gate_for_linking
-
+    """``mat`` saved in a library file in ``folder`` (Save Copy of this file, as any file an artist links from) and
+    linked back from it (the local one removed), as File > Link or the Asset Browser's Link import brings a shade."""
     os.makedirs(str(folder), exist_ok=True)
     path = os.path.join(str(folder), "shades.blend")
     name = mat.name
-    mat.asset_mark()
-    gate_for_linking()
-    bpy.data.libraries.write(path, {mat}, fake_user=True)
+    mat.use_fake_user = True
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
     bpy.data.materials.remove(mat)
     with bpy.data.libraries.load(path, link=True) as (_, dst):
         dst.materials = [name]
@@ -709,7 +706,6 @@ def test_a_dentin_material_linked_from_a_library_gives_its_medium_to_the_blend_v
     from material_structures.addon.teeth.blend_volume import BLEND_INPUT, blend_object, linked_materials
     from material_structures.addon.teeth.materials import (
         BLEND_ATTRIBUTE,
-        BLEND_ATTRIBUTE_NODE,
         group_node,
         new_teeth_material,
     )
@@ -720,7 +716,7 @@ def test_a_dentin_material_linked_from_a_library_gives_its_medium_to_the_blend_v
     shade = new_teeth_material("Dentin", "Library Shade", scene=bpy.context.scene)
     group_node(shade).inputs["Sigma_t"].default_value = (4.0, 5.0, 6.0)
     linked = _linked_from_a_library(shade, tmp_path)
-    assert group_node(linked).node_tree.nodes.get(BLEND_ATTRIBUTE_NODE) is not None
+    assert _gate_read(group_node(linked).node_tree)
     dentin.data.materials[0] = linked
     bpy.context.view_layer.update()
     blend = blend_object(enamel).active_material
@@ -731,50 +727,53 @@ def test_a_dentin_material_linked_from_a_library_gives_its_medium_to_the_blend_v
     assert tuple(group_node(blend).inputs["Dentin Sigma_t"].default_value) == pytest.approx((4.0, 5.0, 6.0))
 
 
-def _object_gate(group) -> bool:
+def _gate_read(group) -> bool:
     from material_structures.addon.teeth.materials import BLEND_ATTRIBUTE_NODE
 
-    return group.nodes.get(BLEND_ATTRIBUTE_NODE) is not None
+    node = group.nodes.get(BLEND_ATTRIBUTE_NODE)
+    return node is not None and bool(node.outputs["Fac"].links)
 
 
-def test_only_shades_another_file_may_link_read_the_tooth_object(addon_module, tmp_path):
-    """The object's say (an Attribute node in the volume) makes Cycles treat a medium as varying in space and build a
-    128^3 density octree for each mesh wearing it: 3.3 s of a one-tooth render that takes 0.4 s without. A tooth's own
-    Enamel and Dentin groups leave it out; a group used by a material marked as an asset (another file may link it)
-    has it once the file is saved, and loses it when the asset mark goes; a library shade appended and put on a tooth
-    loses it too (its Blend Volume input is set here), and the tooth still renders it through its Blend Volume."""
+def test_the_tooth_object_is_read_in_the_file_as_written_not_in_this_one(addon_module, tmp_path):
+    """Reading the object's property (an Attribute node in the volume) makes Cycles treat a medium as varying in space
+    and build a 128^3 density octree for each mesh wearing it: 3.3 s of a one-tooth render that takes 0.4 s without.
+    A file's own Enamel and Dentin groups leave it out here, before and after a save and after opening; the file as
+    written reads it (a shade linked from it hands its medium to the Blend Volume there); a shade appended from it
+    and put on a tooth leaves it out again (its Blend Volume input is set here). Only the link changes: the group
+    keeps every node, an artist's own included."""
     from material_structures.addon.teeth.blend_volume import BLEND_INPUT, blend_object, linked_materials
-    from material_structures.addon.teeth.materials import GATED_KEY, group_node, new_teeth_material
+    from material_structures.addon.teeth.materials import group_node, new_teeth_material
 
     assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
     enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
     dentin = enamel.ms_tooth.partner
     own = [group_node(m).node_tree for m in (enamel.active_material, dentin.active_material)]
-    assert not any(_object_gate(g) for g in own)
+    assert own[0] != own[1] and not any(_gate_read(g) for g in own)
+    artists = own[1].nodes.new("ShaderNodeValue")  # an artist's node in the group
+    artists.name = "Artist's Value"
+    nodes_before = sorted(n.name for n in own[1].nodes)
     shade = new_teeth_material("Dentin", "Own Shade", scene=bpy.context.scene)
-    shade.asset_mark()
+    shade.use_fake_user = True
     path = str(tmp_path / "shades.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
-    assert _object_gate(group_node(shade).node_tree) and group_node(shade).node_tree.get(GATED_KEY)
-    assert not _object_gate(own[0])  # the Enamel group: no shade of it is an asset
-    shade.asset_clear()
-    bpy.ops.wm.save_mainfile()
-    assert not _object_gate(group_node(shade).node_tree)
+    assert not any(_gate_read(g) for g in own) and sorted(n.name for n in own[1].nodes) == nodes_before
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert not any(_gate_read(group_node(bpy.data.materials[n]).node_tree) for n in ("Own Shade",))
+    assert "Artist's Value" in group_node(bpy.data.materials["Own Shade"]).node_tree.nodes
 
-    shade.asset_mark()
-    bpy.ops.wm.save_mainfile()
     bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(path, link=True) as (_, dst):  # File > Link
+        dst.materials = ["Own Shade"]
+    assert _gate_read(group_node(dst.materials[0]).node_tree)  # as written
     assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
     enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
     dentin = enamel.ms_tooth.partner
-    # the Asset Browser's Append: a local copy, its asset mark cleared
-    assert bpy.ops.wm.append(directory=path + "/Material/", filename="Own Shade", clear_asset_data=True) \
-        == {"FINISHED"}
-    appended = bpy.data.materials["Own Shade"]
-    assert appended.library is None and appended.asset_data is None and _object_gate(group_node(appended).node_tree)
+    assert bpy.ops.wm.append(directory=path + "/Material/", filename="Own Shade") == {"FINISHED"}  # File > Append
+    appended = next(m for m in bpy.data.materials if m.name.startswith("Own Shade") and m.library is None)
+    assert _gate_read(group_node(appended).node_tree)  # as written
     dentin.data.materials[0] = appended
     bpy.context.view_layer.update()
-    assert not _object_gate(group_node(appended).node_tree)
+    assert not _gate_read(group_node(appended).node_tree)
     assert group_node(appended).inputs[BLEND_INPUT].default_value == 1.0
     assert linked_materials(blend_object(enamel).active_material) == (enamel.active_material, appended)
 
