@@ -53,12 +53,14 @@ def on_save_pre(*_args) -> None:
 
 @persistent
 def on_save_post(*_args) -> None:
+    """Written (or the write failed): the file in memory leaves the property out again."""
     ungate_local()
 
 
 TEETH_HANDLERS = [
     (bpy.app.handlers.save_pre, on_save_pre),
     (bpy.app.handlers.save_post, on_save_post),
+    (bpy.app.handlers.save_post_fail, on_save_post),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
     (bpy.app.handlers.load_post, on_file_change),

@@ -258,7 +258,8 @@ def ensure_blend_input(group) -> bool:
     if kind not in BLENDED_GROUPS or group.library is not None:  # linked: not ours to change
         return False
     have = {s.name for s in group.interface.items_tree if s.item_type == "SOCKET" and s.in_out == "INPUT"}
-    if BLEND_ROW[0] in have and group.get(VOLUME_VERSION_KEY, 1) >= VOLUME_VERSION:
+    if (BLEND_ROW[0] in have and group.get(VOLUME_VERSION_KEY, 1) >= VOLUME_VERSION
+            and group.nodes.get(BLEND_ATTRIBUTE_NODE) is not None):
         return False
     if BLEND_ROW[0] not in have:
         add_group_input(group, *BLEND_ROW)
@@ -354,8 +355,9 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
     if kind not in DEFAULTS:
         raise ValueError(f"unknown teeth node group {kind!r}; use one of {', '.join(GROUP_NAMES)}")
     scene = scene or bpy.context.scene
-    group = bpy.data.node_groups.get(kind)
-    if group is not None and group.get(MARKER):
+    # this file's own (a shade linked from another file brings that file's group of the same name)
+    group = next((g for g in bpy.data.node_groups if g.name == kind and g.library is None and g.get(MARKER)), None)
+    if group is not None:
         describe_teeth_sockets(group)  # a group from a file made before the sockets had words
         return group
     group = bpy.data.node_groups.new(kind, "ShaderNodeTree")

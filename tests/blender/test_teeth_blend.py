@@ -728,10 +728,18 @@ def test_a_dentin_material_linked_from_a_library_gives_its_medium_to_the_blend_v
 
 
 def _gate_read(group) -> bool:
-    from material_structures.addon.teeth.materials import BLEND_ATTRIBUTE_NODE
+    """Whether the group reads the tooth object's property: its Attribute node feeds the gate's second input; where
+    it does not, that input is 0 (the group's Blend Volume input alone decides)."""
+    from material_structures.addon.teeth.materials import BLEND_ATTRIBUTE_NODE, GATE_NODE
 
-    node = group.nodes.get(BLEND_ATTRIBUTE_NODE)
-    return node is not None and bool(node.outputs["Fac"].links)
+    node, gate = group.nodes.get(BLEND_ATTRIBUTE_NODE), group.nodes.get(GATE_NODE)
+    assert node is not None and gate is not None
+    links = node.outputs["Fac"].links
+    if not links:
+        assert gate.inputs[1].default_value == 0.0
+        return False
+    assert len(links) == 1 and links[0].to_socket == gate.inputs[1]
+    return True
 
 
 def test_the_tooth_object_is_read_in_the_file_as_written_not_in_this_one(addon_module, tmp_path):
@@ -742,13 +750,20 @@ def test_the_tooth_object_is_read_in_the_file_as_written_not_in_this_one(addon_m
     and put on a tooth leaves it out again (its Blend Volume input is set here). Only the link changes: the group
     keeps every node, an artist's own included."""
     from material_structures.addon.teeth.blend_volume import BLEND_INPUT, blend_object, linked_materials
-    from material_structures.addon.teeth.materials import group_node, new_teeth_material
+    from material_structures.addon.teeth.materials import GATE_NODE, group_node, new_teeth_material, set_gate
 
     assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
     enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
     dentin = enamel.ms_tooth.partner
     own = [group_node(m).node_tree for m in (enamel.active_material, dentin.active_material)]
     assert own[0] != own[1] and not any(_gate_read(g) for g in own)
+    # a group as the previous version wrote it: the property read, the Maximum unnamed, its input at Blender's 0.5
+    set_gate(own[1], True)
+    old_max = own[1].nodes[GATE_NODE]
+    old_max.name, old_max.inputs[1].default_value = "Math", 0.5
+    with pytest.raises(RuntimeError):  # a save that fails (no such folder) leaves this file as it was
+        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "missing" / "x.blend"))
+    assert not any(_gate_read(g) for g in own)
     artists = own[1].nodes.new("ShaderNodeValue")  # an artist's node in the group
     artists.name = "Artist's Value"
     nodes_before = sorted(n.name for n in own[1].nodes)
@@ -758,7 +773,7 @@ def test_the_tooth_object_is_read_in_the_file_as_written_not_in_this_one(addon_m
     bpy.ops.wm.save_as_mainfile(filepath=path)
     assert not any(_gate_read(g) for g in own) and sorted(n.name for n in own[1].nodes) == nodes_before
     bpy.ops.wm.open_mainfile(filepath=path)
-    assert not any(_gate_read(group_node(bpy.data.materials[n]).node_tree) for n in ("Own Shade",))
+    assert not any(_gate_read(g) for g in bpy.data.node_groups if g.name in ("Enamel", "Dentin"))
     assert "Artist's Value" in group_node(bpy.data.materials["Own Shade"]).node_tree.nodes
 
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -768,6 +783,9 @@ def test_the_tooth_object_is_read_in_the_file_as_written_not_in_this_one(addon_m
     assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
     enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
     dentin = enamel.ms_tooth.partner
+    # the new tooth's groups are this file's own, not the linked file's of the same name
+    assert all(group_node(m).node_tree.library is None and not _gate_read(group_node(m).node_tree)
+               for m in (enamel.active_material, dentin.active_material))
     assert bpy.ops.wm.append(directory=path + "/Material/", filename="Own Shade") == {"FINISHED"}  # File > Append
     appended = next(m for m in bpy.data.materials if m.name.startswith("Own Shade") and m.library is None)
     assert _gate_read(group_node(appended).node_tree)  # as written
