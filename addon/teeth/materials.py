@@ -355,8 +355,10 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
     if kind not in DEFAULTS:
         raise ValueError(f"unknown teeth node group {kind!r}; use one of {', '.join(GROUP_NAMES)}")
     scene = scene or bpy.context.scene
-    # this file's own (a shade linked from another file brings that file's group of the same name)
-    group = next((g for g in bpy.data.node_groups if g.name == kind and g.library is None and g.get(MARKER)), None)
+    # this file's own (a shade linked from another file brings that file's group of the same name), by that name
+    # where it has it (an artist's own group may hold the name)
+    mine = [g for g in bpy.data.node_groups if g.library is None and g.get(MARKER) == kind]
+    group = next((g for g in mine if g.name == kind), mine[0] if mine else None)
     if group is not None:
         describe_teeth_sockets(group)  # a group from a file made before the sockets had words
         return group

@@ -796,6 +796,18 @@ def test_the_tooth_object_is_read_in_the_file_as_written_not_in_this_one(addon_m
     assert linked_materials(blend_object(enamel).active_material) == (enamel.active_material, appended)
 
 
+def test_new_teeth_share_one_dentin_group_whatever_else_holds_its_name(addon_module):
+    """An artist's own node group named "Dentin" (not a teeth group): the teeth added after it share one Dentin group
+    of the extension's (before: a new group for every tooth)."""
+    from material_structures.addon.teeth.materials import MARKER, group_node
+
+    bpy.data.node_groups.new("Dentin", "ShaderNodeTree")
+    for kind in ("INCISOR", "MOLAR"):
+        assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind=kind, resolution=12) == {"FINISHED"}
+    groups = {group_node(o.active_material).node_tree for o in bpy.context.scene.objects if o.ms_tooth.role == "DENTIN"}
+    assert len(groups) == 1 and next(iter(groups)).get(MARKER) == "Dentin"
+
+
 @pytest.mark.slow
 def test_a_dentin_material_linked_from_a_library_renders_as_that_dentin(addon_module, tmp_path):
     """Nightly. The tooth with the dense, dark Dentin material linked from a library file renders as the tooth whose
