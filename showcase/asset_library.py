@@ -138,7 +138,9 @@ def build_asset_library(folder: str, preview_size: int = PREVIEW_SIZE, samples: 
     for image in bpy.data.images:
         if image.packed_file is None and image.source in {"GENERATED", "FILE"} and image.has_data:
             image.pack()
-    gate_for_linking()  # a shade linked from the library still hands its medium to its tooth's Blend Volume
+    # a shade linked from the library still hands its medium to its tooth's Blend Volume: the save's handler gates
+    # the groups too, but only where the extension's handlers are registered; this build must not depend on that
+    gate_for_linking()
     write_catalogs(folder, [MATERIALS[n].catalog for n in names])
     out = os.path.join(folder, LIBRARY_BLEND)
     # Written under a temporary name, then renamed: no half-written library, and no ".blend1" backup
