@@ -8,9 +8,15 @@ Blender), the ``OpenImageIO`` module that Blender bundles. Both give identical a
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import io
 import os
-from collections.abc import Sequence
+import re
+import sys
+import tempfile
+import threading
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -111,6 +117,7 @@ def _read_channels(path: str | os.PathLike) -> dict[str, np.ndarray]:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise ExrError(f"EXR file not found: {path}")
+    said = _HeldLines()
     try:
         if _backend() == "oiio":
             import OpenImageIO as oiio
@@ -127,10 +134,65 @@ def _read_channels(path: str | os.PathLike) -> dict[str, np.ndarray]:
                 raise RuntimeError(oiio.geterror())
             pixels = np.asarray(pixels).reshape(pixels.shape[0], pixels.shape[1], -1)
             return {n: pixels[:, :, i] for i, n in enumerate(names)}
-        f = _import_openexr().File(path, separate_channels=True)
-        return {name: ch.pixels for name, ch in f.channels().items()}
+        with _library_lines_held(said):
+            f = _import_openexr().File(path, separate_channels=True)
+            return {name: ch.pixels for name, ch in f.channels().items()}
     except Exception as exc:  # the libraries raise RuntimeError/ValueError variants
-        raise ExrError(f"not a readable OpenEXR file: {path} ({exc})") from exc
+        # the C library's own line names the damage ("PATH: (EXR_ERR_...) ... corrupt leader ..."), where the
+        # binding's exception says only that the file has no parts
+        named = [ln[len(path) + 2:] for ln in said.text.splitlines() if ln.startswith(f"{path}: ")]
+        reason = re.sub(r"^\(EXR_ERR_\w+\)\s*", "", named[0]) if named else str(exc)
+        raise ExrError(f"not a readable OpenEXR file: {path} ({reason})") from exc
+
+
+class _HeldLines:
+    """What the C library printed while a file was read."""
+
+    def __init__(self) -> None:
+        self.text = ""
+
+
+_HOLD_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _library_lines_held(said: _HeldLines) -> Iterator[None]:
+    """The OpenEXR library prints its own lines when a file is damaged: its error on the process's stderr, then
+    the binding's warning through ``sys.stdout``. Hold what it prints while a file is read: on failure the caller
+    names the damage in its one-line error; on success anything held goes to stderr, unchanged."""
+    failed = True
+    python_lines = io.StringIO()  # the binding's warning goes through Python's sys.stdout
+    with _HOLD_LOCK, tempfile.TemporaryFile() as held:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        saved = [os.dup(1), os.dup(2)]
+        try:
+            os.dup2(held.fileno(), 1)
+            os.dup2(held.fileno(), 2)
+            with contextlib.redirect_stdout(python_lines), contextlib.redirect_stderr(python_lines):
+                yield
+            failed = False
+        finally:
+            _flush_c_streams()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            held.seek(0)
+            said.text = held.read().decode("utf-8", "replace") + python_lines.getvalue()
+    if said.text and not failed:
+        sys.stderr.write(said.text)
+
+
+def _flush_c_streams() -> None:
+    """fflush(NULL): C stdio buffers written while the descriptors were redirected stay in the held file."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no C runtime by that name (Windows): nothing buffered to lose
+        pass
 
 
 def read_exr(

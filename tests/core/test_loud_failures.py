@@ -163,6 +163,25 @@ def test_a_truncated_btf_npz_is_one_line(btf, tmp_path, capsys):
     assert _tree(tmp_path) == before
 
 
+def test_a_cut_short_btf_image_is_one_line_with_the_damage_named(btf, tmp_path, capfd):
+    """The OpenEXR C library prints its own two lines about a damaged file on the process's stdout and stderr;
+    the user sees one line that names the damage."""
+    import shutil
+
+    shutil.copytree(btf, tmp_path / "btf")
+    image = sorted((tmp_path / "btf").glob("*.exr"))[3]
+    data = image.read_bytes()
+    image.write_bytes(data[:-16])  # its last scanline's pixels
+    before = _tree(tmp_path)
+    capfd.readouterr()
+    assert main(["fabric", "fit", str(tmp_path / "btf"), "--out", str(tmp_path / "fit"), "--no-dask"]) == 1
+    out, err = capfd.readouterr()
+    said = err.split("\n")[-2]  # the line after the progress bar, closed first
+    assert said.startswith(f"error: BTF sample 3: not a readable OpenEXR file: {image} (") and err.endswith("\n"), err
+    assert "corrupt" in err and "EXR_ERR" not in err and "Warning" not in out + err, (out, err)
+    assert _tree(tmp_path) == before
+
+
 # ---- scratch sets
 
 def _scratch_npz(tmp_path, **change):
