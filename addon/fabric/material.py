@@ -564,6 +564,29 @@ def _excludes(lamp_obj, receivers) -> bool:
     return all(obj.name_full in excluded for obj in receivers)
 
 
+def lamps_leaving_fabric_unlit(scene) -> list[tuple[bpy.types.Object, list[bpy.types.Object]]]:
+    """Lamps linked from another file whose light links leave fabric objects out where nothing here lights them
+    instead (no exact path: Cycles without OSL, EEVEE, Fast Preview, or a lamp the shader does not evaluate):
+    ``[(lamp, [fabric objects it leaves unlit])]``. Their file made the links for its own exact path; they are
+    read-only here, so the panel says so."""
+    exact = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
+    fabric = fabric_objects(scene)
+    out = []
+    for lamp in scene.objects:
+        if lamp.type != "LIGHT" or not _linking_fixed(lamp):
+            continue
+        coll = lamp.light_linking.receiver_collection
+        if coll is None:
+            continue
+        excluded = {obj.name_full for obj, entry in zip(coll.objects, coll.collection_objects, strict=True)
+                    if entry.light_linking.link_state == "EXCLUDE"}
+        evaluated = {obj.name_full for obj in exact} if _excludes(lamp, exact) else set()
+        unlit = [obj for obj in fabric if obj.name_full in excluded and obj.name_full not in evaluated]
+        if unlit:
+            out.append((lamp, unlit))
+    return out
+
+
 LINKS_MADE = "material_structures_links"  # on a receiver collection the add-on made for a lamp
 LINKS_ADDED = "material_structures_excluded"  # names of the objects the add-on excluded in a user's one
 

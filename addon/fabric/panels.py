@@ -7,11 +7,35 @@ import bpy
 
 from ..common import MaterialPanel, SidebarPanel, draw_group_inputs, draw_shader_path
 from . import fit_job
-from .material import GROUP_NAME, MARKER, fabric_group_node, material_map_images
+from .material import (
+    GROUP_NAME,
+    MARKER,
+    exact_path_renders,
+    fabric_group_node,
+    lamps_leaving_fabric_unlit,
+    material_map_images,
+)
 from .world_light import world_light_status
 
 MULTIPLIERS = (("Tint", "Tint"), ("SigmaScale", "Roughness Scale"), ("Anisotropy", "Anisotropy"),
                ("FastPreview", "Fast Preview (closures only)"), ("ExactWorld", "Exact World Light"))
+
+
+def draw_unlit_warnings(layout, scene, obj) -> None:
+    """A lamp linked from another file that leaves this object unlit here: say which and what lights it."""
+    for lamp, unlit in lamps_leaving_fabric_unlit(scene):
+        if obj is None or any(o.name_full == obj.name_full for o in unlit):
+            col = layout.column(align=True)
+            col.alert = True
+            col.label(text=f"Lamp '{lamp.name}' from {_library_name(lamp)} leaves this object unlit here", icon="ERROR")
+            col.label(text="Its file's light links are for the exact path: turn on Open Shading Language"
+                      if not exact_path_renders(scene) else
+                      "Its file's light links are read-only here: make the lamp local (Object > Relations)")
+
+
+def _library_name(lamp) -> str:
+    lib = lamp.library or lamp.light_linking.receiver_collection.library
+    return bpy.path.basename(lib.filepath) if lib is not None else "another file"
 
 
 class MATERIAL_PT_material_structures_fabric(MaterialPanel, bpy.types.Panel):
@@ -27,6 +51,7 @@ class MATERIAL_PT_material_structures_fabric(MaterialPanel, bpy.types.Panel):
             layout.label(text=f"No '{GROUP_NAME}' node in this material", icon="ERROR")
             return
         draw_shader_path(layout, context.scene)
+        draw_unlit_warnings(layout, context.scene, context.object)
         draw_group_inputs(layout, node, [m for m in MULTIPLIERS if m[0] in node.inputs], linked="from a map")
         if "ExactWorld" in node.inputs and node.inputs["ExactWorld"].default_value:
             layout.label(text=world_light_status(context.scene), icon="WORLD")

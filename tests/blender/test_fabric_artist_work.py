@@ -266,6 +266,64 @@ def test_a_lamp_linked_from_another_file_is_left_as_it_is_and_lights_the_fabric_
     assert _excluded(lamp, cloth)
 
 
+class _Layout:
+    """Records what a panel's draw function writes."""
+
+    def __init__(self):
+        self.labels, self.alert = [], False
+
+    def column(self, align=False):
+        return self
+
+    def label(self, text="", icon="NONE"):
+        self.labels.append((text, icon))
+
+
+def test_a_linked_lamp_that_leaves_its_cloth_unlit_here_is_named_in_the_panel(addon_module, tmp_path):
+    """A lamp and a cloth linked together from a file where the fabric's exact path left the cloth out of the lamp's
+    light: here, without Open Shading Language, nothing lights the cloth with that lamp and its links are
+    read-only. The fabric panel names the lamp and what lights the cloth (OSL on, or the lamp made local); made
+    local, the lamp lights the cloth through Cycles' closures."""
+    from material_structures import render as R
+    from material_structures.addon.fabric.material import lamps_leaving_fabric_unlit, sync_fabric_lamps
+    from material_structures.addon.fabric.panels import draw_unlit_warnings
+
+    scene, obj, light = _lit_scene()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    assert _excluded(light, obj)
+    both = str(tmp_path / "set.blend")
+    bpy.data.libraries.write(both, {light, obj}, fake_user=True)
+    scene, _, light = _lit_scene()
+    for o in (light, bpy.data.objects["Cloth"]):
+        bpy.data.objects.remove(o)
+    cloth, lamp = sorted(_link_objects(both, ["Cloth", "Key"]), key=lambda o: o.type != "MESH")
+    assert scene.cycles.shading_system and sync_fabric_lamps(scene) == 1
+    assert lamps_leaving_fabric_unlit(scene) == []  # the exact path lights it
+    layout = _Layout()
+    draw_unlit_warnings(layout, scene, cloth)
+    assert layout.labels == []
+    lit = float(R.render_to_array(scene)[..., :3].mean())
+    assert lit > 0.01
+
+    scene.cycles.shading_system = False
+    sync_fabric_lamps(scene)
+    assert [(lamp_.name, [o.name for o in objs]) for lamp_, objs in lamps_leaving_fabric_unlit(scene)] == [
+        ("Key", ["Cloth"])]
+    assert float(R.render_to_array(scene)[..., :3].mean()) < 0.02 * lit  # unlit: what the panel warns of
+    draw_unlit_warnings(layout, scene, cloth)
+    assert layout.labels == [("Lamp 'Key' from set.blend leaves this object unlit here", "ERROR"),
+                             ("Its file's light links are for the exact path: turn on Open Shading Language",
+                              "NONE")] and layout.alert
+
+    with bpy.context.temp_override(selected_objects=[lamp], active_object=lamp):
+        assert bpy.ops.object.make_local(type="ALL") == {"FINISHED"}
+    lamp = bpy.data.objects["Key"]
+    assert lamp.library is None
+    sync_fabric_lamps(scene)
+    assert lamps_leaving_fabric_unlit(scene) == [] and not _excluded(lamp, bpy.data.objects["Cloth"])
+    assert float(R.render_to_array(scene)[..., :3].mean()) > 0.5 * lit  # the closures' light
+
+
 def test_a_finished_background_fit_is_an_undo_step_of_its_own(addon_module, tmp_path):
     """Fit BTF runs in the background and makes its material when the fit ends, after the operator returned: that
     material is one undo step of its own (Edit > Undo History: Fabric Fit). Without it, Ctrl+Z took the fitted
