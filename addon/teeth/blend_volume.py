@@ -87,7 +87,7 @@ def _math(nodes, links, op, a, b=None, loc=(0, 0)):
 def field_group(name: str, enamel, dentin, material) -> bpy.types.GeometryNodeTree:
     """A tooth's geometry-nodes group: (enamel, dentin) -> a volume with the grids ms_q, ms_o, ms_m and
     ``material``. The objects and the material sit in its nodes (no group inputs: the modifier's input API
-    differs between 4.5 and 5.x); its "Spread" value node is driven by the material's spread."""
+    differs between 4.5 and 5.x); its "Spread" value node holds the material's spread (:func:`sync_spread`)."""
     group = bpy.data.node_groups.new(name, "GeometryNodeTree")
     group[MARKER] = "BlendField"
     group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -149,9 +149,10 @@ def field_group(name: str, enamel, dentin, material) -> bpy.types.GeometryNodeTr
     links.new(setmat.outputs["Geometry"], gout.inputs["Geometry"])
     for i, node in enumerate(n for n in nodes if n.type != "GROUP_OUTPUT"):
         node.location = (-900 + 160 * (i % 10), -220 * (i // 10))
-    # the grids' band follows the material's spread
-    _add_driver(group, 'nodes["Spread"].outputs[0].default_value', -1, material,
-                f'node_tree.nodes["{BLEND_GROUP}"].inputs["{SPREAD}"].default_value')
+    # the grids' band follows the material's spread: set where it changes (sync_spread), not by a driver
+    node = group_node(material)
+    if node is not None:
+        spread.outputs[0].default_value = node.inputs[SPREAD].default_value
     describe_teeth_sockets(group)
     return group
 
@@ -352,11 +353,45 @@ def set_tooth_blending(obj, on: bool) -> None:
 
 
 def set_spread(enamel, spread: float) -> None:
-    """The blend spread s (mm) of a tooth: its Blend Volume material (the grids' band follows by a driver)."""
+    """The blend spread s (mm) of a tooth: its Blend Volume material, and the grids' band with it."""
     obj = blend_object(enamel)
     node = group_node(obj.active_material) if obj is not None else None
     if node is not None:
         node.inputs[SPREAD].default_value = float(spread)
+        sync_spread(obj.modifiers[MODIFIER].node_group)
+
+
+SPREAD_PATH = 'nodes["Spread"].outputs[0].default_value'
+
+
+def sync_spread(group) -> bool:
+    """The band of a Blend Volume's q grid follows its material's spread: the field group's "Spread" value is set
+    where it differs (True then). Not a driver: a driver reading the material re-evaluated the grids (0.4 s a tooth)
+    on every edit of the tooth's materials, whose parameters the blend material follows by drivers. A driver of a
+    file made by an earlier version is removed. A field group from another file is left as it is."""
+    if group.library is not None or group.get(MARKER) != "BlendField" or "Spread" not in group.nodes:
+        return False
+    setmat = group.nodes.get("Material")
+    material = setmat.inputs["Material"].default_value if setmat is not None else None
+    node = group_node(material) if material is not None else None
+    if node is None or SPREAD not in node.inputs:
+        return False
+    if group.animation_data is not None and group.animation_data.drivers.find(SPREAD_PATH) is not None:
+        group.driver_remove(SPREAD_PATH)
+    value = group.nodes["Spread"].outputs[0]
+    want = node.inputs[SPREAD].default_value
+    if value.default_value == want:
+        return False
+    value.default_value = want
+    return True
+
+
+def sync_spreads() -> None:
+    """:func:`sync_spread` for every field group of this file (before a depsgraph evaluates: a value set after it,
+    in ``depsgraph_update_post``, is not evaluated until something else changes)."""
+    for group in bpy.data.node_groups:
+        if group.get(MARKER) == "BlendField":
+            sync_spread(group)
 
 
 def ensure_blend(enamel, spread: float | None = None, collection=None):
@@ -395,6 +430,7 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
     link_materials(mat, em, dm)
     if spread is not None:
         set_spread(enamel, spread)
+    sync_spread(obj.modifiers[MODIFIER].node_group)
     node = group_node(mat)
     on = node is not None and node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
     set_blending(em, on)

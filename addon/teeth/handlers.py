@@ -7,7 +7,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from .blend_volume import follow_materials
+from .blend_volume import follow_materials, sync_spreads
 from .materials import gate_for_linking, ungate_local
 
 
@@ -33,8 +33,15 @@ def on_depsgraph_update(scene, depsgraph) -> None:
 
 
 @persistent
+def on_depsgraph_update_pre(*_args) -> None:
+    """A spread edited in a Blend Volume's material: its grids' band, evaluated in this update."""
+    sync_spreads()
+
+
+@persistent
 def on_render_pre(scene, *_args) -> None:
     follow_materials([o for o in scene.objects if _enamel_of(o) is o])
+    sync_spreads()
 
 
 @persistent
@@ -42,6 +49,7 @@ def on_file_change(*_args) -> None:
     """A file opened (one saved before the handlers, or by a Blender without the extension) or restored by undo."""
     ungate_local()  # written gated (on_save_pre)
     follow_materials([o for o in bpy.data.objects if _enamel_of(o) is o])
+    sync_spreads()
 
 
 @persistent
@@ -61,6 +69,7 @@ TEETH_HANDLERS = [
     (bpy.app.handlers.save_pre, on_save_pre),
     (bpy.app.handlers.save_post, on_save_post),
     (bpy.app.handlers.save_post_fail, on_save_post),
+    (bpy.app.handlers.depsgraph_update_pre, on_depsgraph_update_pre),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
     (bpy.app.handlers.load_post, on_file_change),

@@ -97,6 +97,41 @@ def test_apply_fit_result_drives_the_blend_and_shape_keys_move_it(addon_module, 
     assert np.abs(box_moved - box_fit).max() > 0.5
 
 
+def test_editing_a_tooth_material_leaves_its_grids_and_the_spread_moves_their_band(addon_module):
+    """The Blend Volume's grids (0.4 s a tooth to build) are built again when the dentin's shape or the spread
+    changes, not on every edit of the tooth's materials (a slider dragged on a smile's shared Dentin rebuilt them
+    all): the band of the q grid follows the spread without a driver on the materials."""
+    from material_structures.addon.teeth.blend_volume import SPREAD, blend_object
+    from material_structures.addon.teeth.materials import group_node
+
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
+    obj = blend_object(enamel)
+    _, box = _evaluated_grids(obj)
+    rebuilt = []
+
+    def watch(scene, depsgraph):
+        rebuilt.extend(u.id.name for u in depsgraph.updates if u.is_updated_geometry and u.id.name == obj.name)
+
+    bpy.app.handlers.depsgraph_update_post.append(watch)
+    try:
+        dentin_mat = enamel.ms_tooth.partner.active_material
+        g1 = group_node(dentin_mat).inputs["G1"]
+        g1.default_value = 0.5 * g1.default_value + 0.1
+        bpy.context.view_layer.update()
+        assert rebuilt == []
+        assert group_node(obj.active_material).inputs["Dentin G1"].default_value == pytest.approx(g1.default_value)
+        group_node(obj.active_material).inputs[SPREAD].default_value = 0.6  # band 4.8 mm against 2.72 mm
+        bpy.context.view_layer.update()
+        bpy.context.view_layer.update()  # the handler's change evaluated
+        assert rebuilt
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(watch)
+    _, wider = _evaluated_grids(obj)
+    grown = (wider.max(axis=0) - wider.min(axis=0)) - (box.max(axis=0) - box.min(axis=0))
+    assert grown.min() > 3.0, grown  # the q grid's band, both sides, in the tooth's mm
+
+
 def test_opening_a_current_file_rebuilds_nothing_and_an_older_one_is_upgraded(addon_module, tmp_path, monkeypatch):
     """Opening a file whose teeth have the current node layouts remakes none of their Blend Volumes (no driver
     added again, nothing for the file to have changed by); a file whose Dentin group is of an older layout gets
