@@ -135,15 +135,34 @@ def _chord_setup(p0: np.ndarray, p1: np.ndarray, x: np.ndarray, J: np.ndarray, J
 
 
 def _chord_length(setup, o: np.ndarray) -> np.ndarray:
-    """Length inside the ellipse of the segment shifted by o (broadcast over trailing node axes)."""
+    """Length inside the ellipse of the segment shifted by o (broadcast over trailing node axes).
+
+    The roots t = (-B_o -+ sqrt(B_o^2 - A C_o)) / A of |q0 + o e + t dq|^2 = 1, B_o = B + o e.dq,
+    C_o = C + o (2 q0.e + o e.e), clipped to the segment [0, 1]; computed in place (the arrays are points x
+    nodes: a dozen temporaries of that size cost more than the arithmetic)."""
     A, B, C, ed, qe, ee, length = (a[..., None] for a in setup[:7])
-    Bo = B + o * ed
-    Co = C + 2.0 * o * qe + o * o * ee
-    disc = Bo * Bo - A * Co
-    sq = np.sqrt(np.maximum(disc, 0.0))
-    t0 = np.clip((-Bo - sq) / A, 0.0, 1.0)
-    t1 = np.clip((-Bo + sq) / A, 0.0, 1.0)
-    return np.where(disc > 0, (t1 - t0) * length, 0.0)
+    Bo = o * ed
+    Bo += B
+    Co = o * ee
+    Co += 2.0 * qe
+    Co *= o
+    Co += C
+    disc = np.multiply(Bo, Bo)
+    Co *= A
+    disc -= Co  # disc = Bo^2 - A Co
+    inside = disc > 0
+    sq = np.sqrt(disc, out=Co, where=inside)  # Co's storage: garbage where outside, masked below
+    inv_a = 1.0 / A
+    Bo *= -inv_a  # -Bo / A
+    sq *= inv_a
+    t1 = np.add(Bo, sq)
+    np.clip(t1, 0.0, 1.0, out=t1)
+    Bo -= sq  # t0
+    np.clip(Bo, 0.0, 1.0, out=Bo)
+    t1 -= Bo
+    t1 *= length
+    t1[~inside] = 0.0
+    return t1
 
 
 def scratch_weighted_length(
@@ -177,14 +196,28 @@ def scratch_weighted_length(
         raise ValueError(f"unknown footprint rule {rule!r}; use one of {FOOTPRINT_RULES}")
     v0, V = setup[7][..., None], setup[8][..., None]
     th0 = np.arcsin(np.clip(v0 / V, -1.0, 1.0))
-    nodes, weights, span = _rule(n_nodes)
-    span = span * (cutoff / GAUSS_CUTOFF)
-    th1 = np.arcsin(np.clip((v0 + span * s_um) / V, -1.0, 1.0))  # (..., 2n)
-    half = 0.5 * np.abs(th1 - th0)
-    th = 0.5 * (th1 + th0) + half * nodes
-    v = V * np.sin(th)
-    o = v - v0
-    f = _chord_length(setup, o) * np.exp(-(o * o) / (s_um * s_um)) * (V * np.cos(th)) * (half * weights)
+    nodes, weights, _ = _rule(n_nodes)
+    # the two halves' far ends (the span is -cutoff for the first n nodes, +cutoff for the others)
+    ends = np.arcsin(np.clip((v0 + np.array([-cutoff, cutoff]) * s_um) / V, -1.0, 1.0))  # (..., 2)
+    th1 = np.repeat(ends, n_nodes, axis=-1)  # (..., 2n)
+    half = np.abs(th1 - th0)
+    half *= 0.5
+    th = th1
+    th += th0
+    th *= 0.5
+    th += half * nodes
+    o = np.sin(th)
+    o *= V
+    o -= v0
+    f = _chord_length(setup, o)
+    o *= o
+    o *= -1.0 / (s_um * s_um)
+    f *= np.exp(o, out=o)
+    c = np.cos(th, out=th)
+    c *= V
+    f *= c
+    half *= weights
+    f *= half
     return f.sum(axis=-1) / (s_um * np.sqrt(np.pi))
 
 
