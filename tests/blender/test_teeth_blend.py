@@ -61,7 +61,7 @@ def test_every_way_of_making_a_tooth_gives_it_a_blend_volume(addon_module, tmp_p
 def test_apply_fit_result_drives_the_blend_and_shape_keys_move_it(addon_module, tmp_path):
     """Apply Fit Result writes the fit into the Enamel/Dentin materials; the Blend Volume's material follows by
     drivers (exact to float32), takes the file's spread, and its grids follow the dentin's shape keys."""
-    from material_structures.addon.teeth.blend_volume import SPREAD, blend_object
+    from material_structures.addon.teeth.blend_volume import MODIFIER, SPREAD, VOXEL_MM, blend_object
     from material_structures.addon.teeth.materials import group_node
     from material_structures.core.teeth.scene import save_scene
 
@@ -81,6 +81,8 @@ def test_apply_fit_result_drives_the_blend_and_shape_keys_move_it(addon_module, 
     assert bpy.ops.material_structures.teeth_apply_fit_file(filepath=fit_path) == {"FINISHED"}
     enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
     obj = blend_object(enamel)
+    # the viewport's grids at the renders' voxel size: their bounds step by leaves of 8 voxels (2 mm at 0.25 mm)
+    obj.modifiers[MODIFIER].node_group.nodes["Viewport Voxel Size"].outputs[0].default_value = VOXEL_MM
     _, box_fit = _evaluated_grids(obj)
     node = group_node(obj.active_material)
     assert tuple(node.inputs["Enamel Sigma_t"].default_value) == pytest.approx((0.7, 0.8, 1.9), abs=1e-6)
@@ -130,6 +132,56 @@ def test_editing_a_tooth_material_leaves_its_grids_and_the_spread_moves_their_ba
     _, wider = _evaluated_grids(obj)
     grown = (wider.max(axis=0) - wider.min(axis=0)) - (box.max(axis=0) - box.min(axis=0))
     assert grown.min() > 3.0, grown  # the q grid's band, both sides, in the tooth's mm
+
+
+def _grid_voxels(obj) -> dict:
+    dg = bpy.context.evaluated_depsgraph_get()
+    dg.update()
+    return {g.name: round(g.matrix_object[0][0], 6) for inst in dg.object_instances
+            if inst.object.type == "VOLUME" and inst.object.original.name == obj.name for g in inst.object.data.grids}
+
+
+def test_the_viewport_builds_the_grids_coarser_and_a_file_of_an_earlier_version_gets_that(addon_module, tmp_path):
+    """In the viewport (where a tooth's grids rebuild each time it moves or its dentin changes shape) the grids have
+    0.25 mm voxels (0.08 s a tooth against 0.40 s); renders use 0.1 mm (the render regression of Dentin Shade A1
+    and the narrow-spread test render them). A field group saved by an earlier version, one voxel size everywhere,
+    gets the switch when the file opens."""
+    from material_structures.addon.teeth.blend_volume import MODIFIER, VIEWPORT_VOXEL_MM, VOXEL_MM, blend_object
+
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    enamel = next(o for o in bpy.context.scene.objects if o.ms_tooth.role == "ENAMEL")
+    obj = blend_object(enamel)
+    blend_name = obj.name
+    assert _grid_voxels(obj) == {"ms_m": VIEWPORT_VOXEL_MM, "ms_o": VIEWPORT_VOXEL_MM, "ms_q": VIEWPORT_VOXEL_MM}
+    group = obj.modifiers[MODIFIER].node_group
+    switch = group.nodes["Voxel Size Here"]
+    assert switch.inputs["False"].links[0].from_node.name == "Voxel Size"
+    assert group.nodes["Voxel Size"].outputs[0].default_value == pytest.approx(VOXEL_MM)
+
+    # as an earlier version made it: "Voxel Size" feeds the grids directly (written with the handler that upgrades
+    # such a group before each depsgraph update out of the way)
+    pre = [h for h in bpy.app.handlers.depsgraph_update_pre if h.__name__ == "on_depsgraph_update_pre"]
+    for h in pre:
+        bpy.app.handlers.depsgraph_update_pre.remove(h)
+    vox = group.nodes["Voxel Size"]
+    for sock in [lk.to_socket for lk in group.links if lk.from_node == switch]:
+        group.links.new(vox.outputs[0], sock)
+    for node_name in ("Is Viewport", "Viewport Voxel Size", "Voxel Size Here"):
+        group.nodes.remove(group.nodes[node_name])
+    older = str(tmp_path / "older.blend")
+    group_name = group.name
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=older)
+    finally:
+        bpy.app.handlers.depsgraph_update_pre.extend(pre)
+    assert len(pre) == 1
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(older) as (src, dst):
+        dst.node_groups = [group_name]
+    assert "Is Viewport" not in dst.node_groups[0].nodes  # the file holds the earlier layout
+    bpy.ops.wm.open_mainfile(filepath=older)
+    obj = bpy.data.objects[blend_name]
+    assert _grid_voxels(obj) == {"ms_m": VIEWPORT_VOXEL_MM, "ms_o": VIEWPORT_VOXEL_MM, "ms_q": VIEWPORT_VOXEL_MM}
 
 
 def test_opening_a_current_file_rebuilds_nothing_and_an_older_one_is_upgraded(addon_module, tmp_path, monkeypatch):
