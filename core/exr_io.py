@@ -158,15 +158,22 @@ _HOLD_LOCK = threading.Lock()
 @contextlib.contextmanager
 def _library_lines_held(said: _HeldLines) -> Iterator[None]:
     """The OpenEXR library prints its own lines when a file is damaged: its error on the process's stderr, then
-    the binding's warning through ``sys.stdout``. Hold what it prints while a file is read: on failure the caller
-    names the damage in its one-line error; on success anything held goes to stderr, unchanged."""
-    failed = True
+    the binding's warning through ``sys.stdout``. Hold what is printed while a file is read: on failure the caller
+    names the damage in its one-line error and whatever else was printed meanwhile (another thread's lines) goes to
+    stderr; on success all of it does. Where the streams cannot be redirected, the file is read without."""
     python_lines = io.StringIO()  # the binding's warning goes through Python's sys.stdout
-    with _HOLD_LOCK, tempfile.TemporaryFile() as held:
+    with _HOLD_LOCK:
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()
-        saved = [os.dup(1), os.dup(2)]
+        _flush_c_streams()  # what C code printed before the read stays where it was going
+        try:
+            held = tempfile.TemporaryFile()
+            saved = [os.dup(1), os.dup(2)]
+        except OSError:
+            yield
+            return
+        failed = True
         try:
             os.dup2(held.fileno(), 1)
             os.dup2(held.fileno(), 2)
@@ -181,8 +188,17 @@ def _library_lines_held(said: _HeldLines) -> Iterator[None]:
                 os.close(fd)
             held.seek(0)
             said.text = held.read().decode("utf-8", "replace") + python_lines.getvalue()
-    if said.text and not failed:
-        sys.stderr.write(said.text)
+            held.close()
+            others = said.text if not failed else "".join(
+                ln for ln in said.text.splitlines(keepends=True) if not _library_line(ln))
+            if others:
+                sys.stderr.write(others)
+
+
+def _library_line(line: str) -> bool:
+    """A line the OpenEXR library or its binding prints about a damaged file."""
+    return line.startswith("Warning: Exception raised reading") or bool(
+        re.match(r"^\S.*: \(EXR_ERR_\w+\)", line))
 
 
 def _flush_c_streams() -> None:

@@ -565,11 +565,14 @@ def _excludes(lamp_obj, receivers) -> bool:
 
 
 def lamps_leaving_fabric_unlit(scene) -> list[tuple[bpy.types.Object, list[bpy.types.Object]]]:
-    """Lamps linked from another file whose light links leave fabric objects out where nothing here lights them
-    instead (no exact path: Cycles without OSL, EEVEE, Fast Preview, or a lamp the shader does not evaluate):
-    ``[(lamp, [fabric objects it leaves unlit])]``. Their file made the links for its own exact path; they are
-    read-only here, so the panel says so."""
+    """Lamps linked from another file whose fabric-made light links leave fabric objects out where nothing here
+    lights them instead (no exact path: Cycles without OSL, EEVEE, Fast Preview, or a lamp the shader does not
+    evaluate, e.g. beyond the fourth): ``[(lamp, [fabric objects it leaves unlit])]``. Their file made the links for
+    its own exact path; they are read-only here, so the panel says so. Exclusions the artist made in that file
+    (not marked as the fabric's) are theirs, not reported."""
     exact = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
+    in_shader = {obj.name_full for obj, _ in scene_shader_lamps(
+        scene, keep=lambda obj: not _linking_fixed(obj) or _excludes(obj, exact))} if exact else set()
     fabric = fabric_objects(scene)
     out = []
     for lamp in scene.objects:
@@ -578,9 +581,10 @@ def lamps_leaving_fabric_unlit(scene) -> list[tuple[bpy.types.Object, list[bpy.t
         coll = lamp.light_linking.receiver_collection
         if coll is None:
             continue
+        made = set(coll.get(LINKS_ADDED, []))
         excluded = {obj.name_full for obj, entry in zip(coll.objects, coll.collection_objects, strict=True)
-                    if entry.light_linking.link_state == "EXCLUDE"}
-        evaluated = {obj.name_full for obj in exact} if _excludes(lamp, exact) else set()
+                    if entry.light_linking.link_state == "EXCLUDE" and (coll.get(LINKS_MADE) or obj.name in made)}
+        evaluated = {obj.name_full for obj in exact} if lamp.name_full in in_shader else set()
         unlit = [obj for obj in fabric if obj.name_full in excluded and obj.name_full not in evaluated]
         if unlit:
             out.append((lamp, unlit))

@@ -394,7 +394,7 @@ def set_spread(enamel, spread: float) -> None:
     node = group_node(obj.active_material) if obj is not None else None
     if node is not None:
         node.inputs[SPREAD].default_value = float(spread)
-        sync_spread(obj.modifiers[MODIFIER].node_group)
+        _sync_object_spread(obj)
 
 
 SPREAD_PATH = 'nodes["Spread"].outputs[0].default_value'
@@ -403,8 +403,9 @@ SPREAD_PATH = 'nodes["Spread"].outputs[0].default_value'
 def sync_spread(group) -> bool:
     """The band of a Blend Volume's q grid follows its material's spread: the field group's "Spread" value is set
     where it differs (True then). Not a driver: a driver reading the material re-evaluated the grids (0.4 s a tooth)
-    on every edit of the tooth's materials, whose parameters the blend material follows by drivers. A driver of a
-    file made by an earlier version is removed. A field group from another file is left as it is."""
+    on every edit of the tooth's materials, whose parameters the blend material follows by drivers. Where the
+    spread is keyframed or driven, a driver it is, so every frame of a render gets its own band. A field group
+    from another file is left as it is."""
     if group.library is not None or group.get(MARKER) != "BlendField" or "Spread" not in group.nodes:
         return False
     ensure_viewport_voxel(group)
@@ -413,7 +414,13 @@ def sync_spread(group) -> bool:
     node = group_node(material) if material is not None else None
     if node is None or SPREAD not in node.inputs:
         return False
-    if group.animation_data is not None and group.animation_data.drivers.find(SPREAD_PATH) is not None:
+    driven = group.animation_data is not None and group.animation_data.drivers.find(SPREAD_PATH) is not None
+    if _spread_animated(material, node):
+        if not driven:
+            _add_driver(group, SPREAD_PATH, -1, material,
+                        f'node_tree.nodes["{node.name}"].inputs["{SPREAD}"].default_value')
+        return False
+    if driven:
         group.driver_remove(SPREAD_PATH)
     value = group.nodes["Spread"].outputs[0]
     want = node.inputs[SPREAD].default_value
@@ -421,6 +428,36 @@ def sync_spread(group) -> bool:
         return False
     value.default_value = want
     return True
+
+
+def _spread_animated(material, node) -> bool:
+    """Whether the spread of ``material``'s Blend group node is keyframed or driven."""
+    anim = material.node_tree.animation_data
+    if anim is None:
+        return False
+    index = next(i for i, sock in enumerate(node.inputs) if sock.name == SPREAD)
+    paths = {f'nodes["{node.name}"].inputs[{index}].default_value',
+             f'nodes["{node.name}"].inputs["{SPREAD}"].default_value'}
+    if any(fc.data_path in paths for fc in anim.drivers):
+        return True
+    if anim.action is None:
+        return False
+    try:  # 4.4+: an action's curves live in the channel bag of the slot the node tree uses
+        from bpy_extras.anim_utils import action_get_channelbag_for_slot
+
+        bag = action_get_channelbag_for_slot(anim.action, anim.action_slot)
+        curves = bag.fcurves if bag is not None else ()
+    except ImportError:
+        curves = anim.action.fcurves
+    return any(fc.data_path in paths for fc in curves)
+
+
+def _sync_object_spread(blend_obj) -> None:
+    """:func:`sync_spread` for a Blend Volume's own field group (none where the artist removed its modifier or its
+    group)."""
+    mod = blend_obj.modifiers.get(MODIFIER)
+    if mod is not None and mod.type == "NODES" and mod.node_group is not None:
+        sync_spread(mod.node_group)
 
 
 def sync_spreads() -> None:
@@ -467,7 +504,7 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
     link_materials(mat, em, dm)
     if spread is not None:
         set_spread(enamel, spread)
-    sync_spread(obj.modifiers[MODIFIER].node_group)
+    _sync_object_spread(obj)
     node = group_node(mat)
     on = node is not None and node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
     set_blending(em, on)

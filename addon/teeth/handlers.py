@@ -34,7 +34,8 @@ def on_depsgraph_update(scene, depsgraph) -> None:
 
 @persistent
 def on_depsgraph_update_pre(*_args) -> None:
-    """A spread edited in a Blend Volume's material: its grids' band, evaluated in this update."""
+    """A spread edited (or keyframed) in a Blend Volume's material: its grids' band, evaluated in this update; also
+    before a frame is evaluated (frame_change_pre), for keyframes set by a script without an update since."""
     sync_spreads()
 
 
@@ -70,6 +71,7 @@ TEETH_HANDLERS = [
     (bpy.app.handlers.save_post, on_save_post),
     (bpy.app.handlers.save_post_fail, on_save_post),
     (bpy.app.handlers.depsgraph_update_pre, on_depsgraph_update_pre),
+    (bpy.app.handlers.frame_change_pre, on_depsgraph_update_pre),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.render_pre, on_render_pre),
     (bpy.app.handlers.load_post, on_file_change),

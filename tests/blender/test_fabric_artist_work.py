@@ -304,6 +304,19 @@ def test_a_linked_lamp_that_leaves_its_cloth_unlit_here_is_named_in_the_panel(ad
     assert layout.labels == []
     lit = float(R.render_to_array(scene)[..., :3].mean())
     assert lit > 0.01
+    # four lamps of this file before it by name: the shader evaluates those four, and "Key" lights nothing
+    extra = []
+    for i in range(4):
+        extra.append(bpy.data.objects.new(f"A{i}", bpy.data.lights.new(f"A{i}", "POINT")))
+        extra[-1].location = (5.0, 5.0, -5.0)
+        scene.collection.objects.link(extra[-1])
+    sync_fabric_lamps(scene)
+    assert [(lamp_.name, [o.name for o in objs]) for lamp_, objs in lamps_leaving_fabric_unlit(scene)] == [
+        ("Key", ["Cloth"])]
+    for o in extra:
+        bpy.data.objects.remove(o)
+    sync_fabric_lamps(scene)
+    assert lamps_leaving_fabric_unlit(scene) == []
 
     scene.cycles.shading_system = False
     sync_fabric_lamps(scene)
@@ -322,6 +335,28 @@ def test_a_linked_lamp_that_leaves_its_cloth_unlit_here_is_named_in_the_panel(ad
     sync_fabric_lamps(scene)
     assert lamps_leaving_fabric_unlit(scene) == [] and not _excluded(lamp, bpy.data.objects["Cloth"])
     assert float(R.render_to_array(scene)[..., :3].mean()) > 0.5 * lit  # the closures' light
+
+    # an exclusion the artist made in the other file (not the fabric's) is theirs: no warning for it
+    scene2, cloth2, rim = _lit_scene()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    scene2.cycles.shading_system = False
+    sync_fabric_lamps(scene2)
+    own = bpy.data.collections.new("Rim receivers")
+    own.objects.link(cloth2)
+    rim.light_linking.receiver_collection = own
+    own.collection_objects[0].light_linking.link_state = "EXCLUDE"
+    rim.name = cloth2.name = "Theirs"
+    artist = str(tmp_path / "artist.blend")
+    bpy.data.libraries.write(artist, {rim, cloth2}, fake_user=True)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene, _, light = _lit_scene()
+    bpy.data.objects.remove(light)
+    bpy.data.objects.remove(bpy.data.objects["Cloth"])
+    scene.cycles.shading_system = False
+    theirs = _link_objects(artist, ["Theirs", "Theirs.001"])
+    rim, cloth2 = sorted(theirs, key=lambda o: o.type != "LIGHT")
+    assert rim.library is not None and _excluded(rim, cloth2)  # unlit by it, as its file chose
+    assert lamps_leaving_fabric_unlit(scene) == []
 
 
 def test_a_finished_background_fit_is_an_undo_step_of_its_own(addon_module, tmp_path):

@@ -134,6 +134,40 @@ def test_editing_a_tooth_material_leaves_its_grids_and_the_spread_moves_their_ba
     assert grown.min() > 3.0, grown  # the q grid's band, both sides, in the tooth's mm
 
 
+def test_a_keyframed_spread_gives_each_frame_its_band_and_a_renamed_modifier_is_left_alone(addon_module):
+    """A spread keyframed in the Blend Volume's material (0.3 mm at frame 1, 0.6 mm at frame 10) moves the q grid's
+    band from frame to frame, renders included: the field group reads it by a driver then (and only then). An
+    artist who renamed the Blend Volume's modifier or emptied it keeps a tooth whose materials can still change."""
+    from material_structures.addon.teeth.blend_volume import MODIFIER, SPREAD, SPREAD_PATH, blend_object, ensure_blend
+    from material_structures.addon.teeth.materials import group_node
+
+    assert bpy.ops.material_structures.teeth_add_tooth(source="TEMPLATE", kind="INCISOR", resolution=16) == {"FINISHED"}
+    scene = bpy.context.scene
+    enamel = next(o for o in scene.objects if o.ms_tooth.role == "ENAMEL")
+    obj = blend_object(enamel)
+    group = obj.modifiers[MODIFIER].node_group
+    sock = group_node(obj.active_material).inputs[SPREAD]
+    for frame, spread in ((1, 0.3), (10, 0.6)):
+        sock.default_value = spread
+        sock.keyframe_insert("default_value", frame=frame)
+    scene.frame_set(1)
+    assert group.animation_data.drivers.find(SPREAD_PATH) is not None
+    _, box1 = _evaluated_grids(obj)
+    scene.frame_set(10)
+    _, box10 = _evaluated_grids(obj)
+    assert group.nodes["Spread"].outputs[0].default_value == pytest.approx(0.6, abs=1e-6)
+    grown = (box10.max(axis=0) - box10.min(axis=0)) - (box1.max(axis=0) - box1.min(axis=0))
+    assert grown.min() > 3.0, grown  # 2 x (4.8 - 2.5) mm, in leaves of 2 mm
+    obj.active_material.node_tree.animation_data_clear()
+    bpy.context.view_layer.update()
+    assert group.animation_data is None or group.animation_data.drivers.find(SPREAD_PATH) is None
+
+    obj.modifiers[MODIFIER].name = "Mine"
+    assert ensure_blend(enamel) == obj
+    obj.modifiers["Mine"].node_group = None
+    assert ensure_blend(enamel) == obj
+
+
 def _grid_voxels(obj) -> dict:
     dg = bpy.context.evaluated_depsgraph_get()
     dg.update()

@@ -187,6 +187,38 @@ def test_exr_errors(tmp_path):
         write_exr(tmp_path / "bad.exr", np.zeros(3))
 
 
+def test_a_damaged_exr_keeps_what_else_the_process_prints(tmp_path, capfd):
+    """Reading a damaged EXR holds the OpenEXR library's own lines (the error names the damage instead); lines
+    another thread prints meanwhile still reach the terminal."""
+    import threading
+
+    write_exr(tmp_path / "ok.exr", np.random.default_rng(0).random((64, 64, 3)))
+    data = (tmp_path / "ok.exr").read_bytes()
+    (tmp_path / "cut.exr").write_bytes(data[: len(data) // 2])
+    stop = threading.Event()
+
+    def talk():
+        i = 0
+        while not stop.is_set():
+            print(f"line {i}", flush=True)
+            i += 1
+
+    capfd.readouterr()
+    thread = threading.Thread(target=talk)
+    thread.start()
+    try:
+        for _ in range(50):
+            with pytest.raises(ExrError, match="corrupt leader"):
+                read_exr(tmp_path / "cut.exr")
+    finally:
+        stop.set()
+        thread.join()
+    out, err = capfd.readouterr()
+    said = [int(ln.split()[1]) for ln in (out + err).splitlines() if ln.startswith("line ")]
+    assert sorted(said) == list(range(max(said) + 1)), "a line of the other thread was lost"
+    assert "EXR_ERR" not in out + err and "Warning" not in out + err
+
+
 def test_linear_to_srgb_matches_closed_form():
     from material_structures.core.imaging import linear_to_srgb
 
