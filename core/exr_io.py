@@ -167,10 +167,18 @@ def _library_lines_held(said: _HeldLines) -> Iterator[None]:
             with contextlib.suppress(Exception):
                 stream.flush()
         _flush_c_streams()  # what C code printed before the read stays where it was going
+        held, saved = None, []
         try:
             held = tempfile.TemporaryFile()
-            saved = [os.dup(1), os.dup(2)]
+            saved = [os.dup(1)]
+            saved.append(os.dup(2))
         except OSError:
+            for fd in saved:
+                os.close(fd)
+            if held is not None:
+                held.close()
+            held = None
+        if held is None:
             yield
             return
         failed = True

@@ -576,8 +576,8 @@ def lamps_leaving_fabric_unlit(scene) -> list[tuple[bpy.types.Object, list[bpy.t
     fabric = fabric_objects(scene)
     out = []
     for lamp in scene.objects:
-        if lamp.type != "LIGHT" or not _linking_fixed(lamp):
-            continue
+        if lamp.type != "LIGHT" or lamp.hide_render or not _linking_fixed(lamp):
+            continue  # a lamp hidden from renders lights nothing anywhere
         coll = lamp.light_linking.receiver_collection
         if coll is None:
             continue

@@ -431,7 +431,8 @@ def sync_spread(group) -> bool:
 
 
 def _spread_animated(material, node) -> bool:
-    """Whether the spread of ``material``'s Blend group node is keyframed or driven."""
+    """Whether the spread of ``material``'s Blend group node is keyframed (in the active action or an NLA strip's)
+    or driven."""
     anim = material.node_tree.animation_data
     if anim is None:
         return False
@@ -440,16 +441,21 @@ def _spread_animated(material, node) -> bool:
              f'nodes["{node.name}"].inputs["{SPREAD}"].default_value'}
     if any(fc.data_path in paths for fc in anim.drivers):
         return True
-    if anim.action is None:
-        return False
-    try:  # 4.4+: an action's curves live in the channel bag of the slot the node tree uses
-        from bpy_extras.anim_utils import action_get_channelbag_for_slot
+    actions = [(anim.action, getattr(anim, "action_slot", None))]
+    actions += [(strip.action, getattr(strip, "action_slot", None)) for track in anim.nla_tracks
+                for strip in track.strips]
+    return any(fc.data_path in paths for action, slot in actions if action is not None
+               for fc in _action_curves(action, slot))
 
-        bag = action_get_channelbag_for_slot(anim.action, anim.action_slot)
-        curves = bag.fcurves if bag is not None else ()
+
+def _action_curves(action, slot) -> list:
+    """The F-curves of ``action`` for ``slot`` (4.4+: they live in the slot's channel bag)."""
+    try:
+        from bpy_extras.anim_utils import action_get_channelbag_for_slot
     except ImportError:
-        curves = anim.action.fcurves
-    return any(fc.data_path in paths for fc in curves)
+        return list(action.fcurves)
+    bag = action_get_channelbag_for_slot(action, slot)
+    return list(bag.fcurves) if bag is not None else []
 
 
 def _sync_object_spread(blend_obj) -> None:

@@ -358,6 +358,23 @@ def test_a_linked_lamp_that_leaves_its_cloth_unlit_here_is_named_in_the_panel(ad
     assert rim.library is not None and _excluded(rim, cloth2)  # unlit by it, as its file chose
     assert lamps_leaving_fabric_unlit(scene) == []
 
+    # a lamp its file hides from renders lights nothing anywhere: no warning, OSL on or off
+    scene3, _, light3 = _lit_scene()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    light3.hide_render = True
+    light3.name, bpy.data.objects["Cloth"].name = "Hidden", "Cloth3"
+    hidden = str(tmp_path / "hidden.blend")
+    bpy.data.libraries.write(hidden, {light3, bpy.data.objects["Cloth3"]}, fake_user=True)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene, _, light = _lit_scene()
+    bpy.data.objects.remove(light)
+    bpy.data.objects.remove(bpy.data.objects["Cloth"])
+    lamp3, cloth3 = sorted(_link_objects(hidden, ["Hidden", "Cloth3"]), key=lambda o: o.type != "LIGHT")
+    assert lamp3.hide_render and _excluded(lamp3, cloth3)
+    for osl in (True, False):
+        scene.cycles.shading_system = osl
+        assert lamps_leaving_fabric_unlit(scene) == []
+
 
 def test_a_finished_background_fit_is_an_undo_step_of_its_own(addon_module, tmp_path):
     """Fit BTF runs in the background and makes its material when the fit ends, after the operator returned: that

@@ -158,9 +158,23 @@ def test_a_keyframed_spread_gives_each_frame_its_band_and_a_renamed_modifier_is_
     assert group.nodes["Spread"].outputs[0].default_value == pytest.approx(0.6, abs=1e-6)
     grown = (box10.max(axis=0) - box10.min(axis=0)) - (box1.max(axis=0) - box1.min(axis=0))
     assert grown.min() > 3.0, grown  # 2 x (4.8 - 2.5) mm, in leaves of 2 mm
-    obj.active_material.node_tree.animation_data_clear()
+    # the keyframes pushed down to an NLA strip: still animated, still read by the driver
+    anim = obj.active_material.node_tree.animation_data
+    action = anim.action
+    anim.nla_tracks.new().strips.new("Spread", 1, action)
+    anim.action = None
     bpy.context.view_layer.update()
-    assert group.animation_data is None or group.animation_data.drivers.find(SPREAD_PATH) is None
+    scene.frame_set(1)
+    assert group.animation_data.drivers.find(SPREAD_PATH) is not None
+    assert group.nodes["Spread"].outputs[0].default_value == pytest.approx(0.3, abs=1e-6)
+    scene.frame_set(10)
+    assert group.nodes["Spread"].outputs[0].default_value == pytest.approx(0.6, abs=1e-6)
+    # no keyframes left (the Enamel/Dentin drivers of the material stay): the value is copied, no driver
+    anim.nla_tracks.remove(anim.nla_tracks[0])
+    sock.default_value = 0.45
+    bpy.context.view_layer.update()
+    assert len(anim.drivers) > 0 and group.animation_data.drivers.find(SPREAD_PATH) is None
+    assert group.nodes["Spread"].outputs[0].default_value == pytest.approx(0.45, abs=1e-6)
 
     obj.modifiers[MODIFIER].name = "Mine"
     assert ensure_blend(enamel) == obj
