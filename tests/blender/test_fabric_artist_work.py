@@ -231,6 +231,21 @@ def _link_objects(path, names) -> list:
     return dst.objects
 
 
+def _linked_set(tmp_path):
+    """A new scene with a cloth and the lamp whose light the fabric's exact path left it out of, both linked from
+    the file ``set.blend`` they were made in: (scene, cloth, lamp)."""
+    scene, obj, light = _lit_scene()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    assert _excluded(light, obj)
+    both = str(tmp_path / "set.blend")
+    bpy.data.libraries.write(both, {light, obj}, fake_user=True)
+    scene, _, light = _lit_scene()
+    for o in (light, bpy.data.objects["Cloth"]):
+        bpy.data.objects.remove(o)
+    cloth, lamp = sorted(_link_objects(both, ["Cloth", "Key"]), key=lambda o: o.type != "MESH")
+    return scene, cloth, lamp
+
+
 def test_a_lamp_linked_from_another_file_is_left_as_it_is_and_lights_the_fabric_once(addon_module, tmp_path):
     """A lamp linked from another file: its light linking is read-only here (a change would not be saved, and the
     handlers raised trying). The fabric leaves it as it is: one without light links lights the fabric through Cycles'
@@ -250,15 +265,7 @@ def test_a_lamp_linked_from_another_file_is_left_as_it_is_and_lights_the_fabric_
     bpy.context.view_layer.update()
     assert linked.light_linking.receiver_collection is None and len(bpy.data.collections) == collections
 
-    scene, obj, light = _lit_scene()
-    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
-    assert _excluded(light, obj)
-    both = str(tmp_path / "set.blend")
-    bpy.data.libraries.write(both, {light, obj}, fake_user=True)
-    scene, _, light = _lit_scene()
-    for o in (light, bpy.data.objects["Cloth"]):
-        bpy.data.objects.remove(o)
-    cloth, lamp = sorted(_link_objects(both, ["Cloth", "Key"]), key=lambda o: o.type != "MESH")
+    scene, cloth, lamp = _linked_set(tmp_path)
     assert lamp.library is not None and _excluded(lamp, cloth)
     assert sync_fabric_lamps(scene) == 1
     scene.cycles.shading_system = False
@@ -288,15 +295,7 @@ def test_a_linked_lamp_that_leaves_its_cloth_unlit_here_is_named_in_the_panel(ad
     from material_structures.addon.fabric.material import lamps_leaving_fabric_unlit, sync_fabric_lamps
     from material_structures.addon.fabric.panels import draw_unlit_warnings
 
-    scene, obj, light = _lit_scene()
-    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
-    assert _excluded(light, obj)
-    both = str(tmp_path / "set.blend")
-    bpy.data.libraries.write(both, {light, obj}, fake_user=True)
-    scene, _, light = _lit_scene()
-    for o in (light, bpy.data.objects["Cloth"]):
-        bpy.data.objects.remove(o)
-    cloth, lamp = sorted(_link_objects(both, ["Cloth", "Key"]), key=lambda o: o.type != "MESH")
+    scene, cloth, lamp = _linked_set(tmp_path)
     assert scene.cycles.shading_system and sync_fabric_lamps(scene) == 1
     assert lamps_leaving_fabric_unlit(scene) == []  # the exact path lights it
     layout = _Layout()
