@@ -570,6 +570,8 @@ def lamps_leaving_fabric_unlit(scene) -> list[tuple[bpy.types.Object, list[bpy.t
     evaluate, e.g. beyond the fourth): ``[(lamp, [fabric objects it leaves unlit])]``. Their file made the links for
     its own exact path; they are read-only here, so the panel says so. Exclusions the artist made in that file
     (not marked as the fabric's) are theirs, not reported."""
+    if not bpy.data.libraries:  # nothing linked (the panel draws this often)
+        return []
     exact = fabric_objects(scene, exact_only=True) if exact_path_renders(scene) else []
     in_shader = {obj.name_full for obj, _ in scene_shader_lamps(
         scene, keep=lambda obj: not _linking_fixed(obj) or _excludes(obj, exact))} if exact else set()
