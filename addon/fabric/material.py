@@ -559,9 +559,16 @@ def _excludes(lamp_obj, receivers) -> bool:
     coll = lamp_obj.light_linking.receiver_collection
     if coll is None:
         return not receivers
-    excluded = {obj.name_full for obj, entry in zip(coll.objects, coll.collection_objects, strict=True)
-                if entry.light_linking.link_state == "EXCLUDE"}
+    excluded = _excluded_by(coll)
     return all(obj.name_full in excluded for obj in receivers)
+
+
+def _excluded_by(coll, fabric_made_only: bool = False) -> set[str]:
+    """Full names of the objects a lamp's receiver collection leaves out (``fabric_made_only``: those the fabric left
+    out: every one of a collection it made, else the names it noted in the artist's)."""
+    made = None if not fabric_made_only or coll.get(LINKS_MADE) else set(coll.get(LINKS_ADDED, []))
+    return {obj.name_full for obj, entry in zip(coll.objects, coll.collection_objects, strict=True)
+            if entry.light_linking.link_state == "EXCLUDE" and (made is None or obj.name in made)}
 
 
 def lamps_leaving_fabric_unlit(scene) -> list[tuple[bpy.types.Object, list[bpy.types.Object]]]:
@@ -583,9 +590,7 @@ def lamps_leaving_fabric_unlit(scene) -> list[tuple[bpy.types.Object, list[bpy.t
         coll = lamp.light_linking.receiver_collection
         if coll is None:
             continue
-        made = set(coll.get(LINKS_ADDED, []))
-        excluded = {obj.name_full for obj, entry in zip(coll.objects, coll.collection_objects, strict=True)
-                    if entry.light_linking.link_state == "EXCLUDE" and (coll.get(LINKS_MADE) or obj.name in made)}
+        excluded = _excluded_by(coll, fabric_made_only=True)
         evaluated = {obj.name_full for obj in exact} if lamp.name_full in in_shader else set()
         unlit = [obj for obj in fabric if obj.name_full in excluded and obj.name_full not in evaluated]
         if unlit:
