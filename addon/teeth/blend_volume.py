@@ -332,8 +332,11 @@ def _input_index(node, name: str) -> int:
 
 
 def link_materials(blend_mat, enamel_mat, dentin_mat) -> None:
-    """Drive the blend material's parameters from the tooth's Enamel and Dentin materials."""
+    """Drive the blend material's parameters from the tooth's Enamel and Dentin materials (none where the Blend
+    Volume wears a material of the artist's)."""
     bnode = group_node(blend_mat)
+    if bnode is None:
+        return
     for medium, src in (("Enamel", enamel_mat), ("Dentin", dentin_mat)):
         snode = group_node(src)
         if snode is None:
@@ -587,10 +590,10 @@ def follow_materials(enamels) -> list:
                 ensure_blend(enamel, _twin_spread(em, dm))
                 done.append(enamel)
             continue
-        if obj.active_material is None:
-            continue
-        blend_node = group_node(obj.active_material)
-        on = blend_node is not None and blend_node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
+        blend_node = group_node(obj.active_material) if obj.active_material is not None else None
+        if blend_node is None or SPREAD not in blend_node.inputs:
+            continue  # the artist gave the Blend Volume a material of their own: theirs to keep
+        on = blend_node.inputs[SPREAD].default_value >= SHARP_SPREAD_MM
         stale = [m for m in (em, dm) if m.library is None and BLEND_INPUT in group_node(m).inputs
                  and (group_node(m).inputs[BLEND_INPUT].default_value == 1.0) != on]
         stale += [o for o in (enamel, dentin) if o.library is None and o.get(BLEND_ATTRIBUTE, 0.0) != float(on)]

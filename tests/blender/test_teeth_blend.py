@@ -134,6 +134,34 @@ def test_editing_a_tooth_material_leaves_its_grids_and_the_spread_moves_their_ba
     assert grown.min() > 3.0, grown  # the q grid's band, both sides, in the tooth's mm
 
 
+class _handler_errors:
+    """Collects what the add-on's depsgraph handlers raise (Blender prints it and carries on)."""
+
+    def __init__(self, errors: list):
+        self.errors = errors
+        self.wrapped = []
+
+    def __enter__(self):
+        for handlers in (bpy.app.handlers.depsgraph_update_pre, bpy.app.handlers.depsgraph_update_post):
+            for i, fn in enumerate(list(handlers)):
+                if fn.__module__.endswith("teeth.handlers"):
+                    handlers[i] = self._wrap(fn)
+                    self.wrapped.append((handlers, i, fn))
+        return self
+
+    def _wrap(self, fn):
+        def call(*args):
+            try:
+                fn(*args)
+            except Exception as exc:  # noqa: BLE001  (recorded for the test)
+                self.errors.append(exc)
+        return call
+
+    def __exit__(self, *exc):
+        for handlers, i, fn in self.wrapped:
+            handlers[i] = fn
+
+
 def test_a_keyframed_spread_gives_each_frame_its_band_and_a_renamed_modifier_is_left_alone(addon_module):
     """A spread keyframed in the Blend Volume's material (0.3 mm at frame 1, 0.6 mm at frame 10) moves the q grid's
     band from frame to frame, renders included: the field group reads it by a driver then (and only then). An
@@ -180,6 +208,16 @@ def test_a_keyframed_spread_gives_each_frame_its_band_and_a_renamed_modifier_is_
     assert ensure_blend(enamel) == obj
     obj.modifiers["Mine"].node_group = None
     assert ensure_blend(enamel) == obj
+    # a material of the artist's on the Blend Volume is theirs: the handlers and the operators leave it
+    mine = bpy.data.materials.new("Mine")
+    obj.active_material = mine
+    errors = []
+    with _handler_errors(errors):
+        bpy.context.view_layer.update()
+        enamel.ms_tooth.partner.active_material.node_tree.nodes[0].location.x += 1.0
+        bpy.context.view_layer.update()
+    assert errors == [] and obj.active_material == mine
+    assert ensure_blend(enamel) == obj and obj.active_material == mine
 
 
 def _grid_voxels(obj) -> dict:
