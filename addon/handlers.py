@@ -1,8 +1,8 @@
 """App handlers: each feature's (``<feature>/handlers.py``: lamps kept current in the shaders that
 evaluate them, so moving a lamp just works; a tooth's Blend Volume kept on the materials the tooth
 wears), the embedded shaders brought up to date after a file is loaded, and images that match their
-stored data after an undo or redo. Registered in this order: within one handler list, the fabric's
-run before the scratches', the scratches' before the teeth's."""
+stored data after an undo or redo. Registered in this order: within one handler list, the world images' (an edited
+environment image is read again) first, then the fabric's, the scratches', the teeth's."""
 
 from __future__ import annotations
 
@@ -20,6 +20,21 @@ from .scratch.material import MARKER as SCRATCH_MARKER
 from .scratch.material import ensure_base_metal
 from .teeth.blend_volume import upgrade_after_load as upgrade_teeth_after_load
 from .teeth.handlers import TEETH_HANDLERS
+from .world_environment import forget_edits
+
+
+@persistent
+def on_image_update(_scene, depsgraph) -> None:
+    """An image updated (painted, its pixels set and tagged): a world that shows it is read again."""
+    for update in depsgraph.updates:
+        if isinstance(update.id, bpy.types.Image):
+            forget_edits(update.id.original)
+
+
+@persistent
+def on_render_forget_edits(*_args) -> None:
+    """Every render reads the pixels of an edited world image again (edits from Python need no update tag)."""
+    forget_edits()
 
 
 @persistent
@@ -31,6 +46,7 @@ def on_load_post(*_args) -> None:
             ensure_closures_without_osl(group)
         elif group.library is None and group.get(SCRATCH_MARKER):
             ensure_base_metal(group)
+    forget_edits()  # the pixel digests name images of the file before
     sync_fabric_after_load()  # the world tables live in the temp folder: re-extract them for this file
     upgrade_teeth_after_load()  # the teeth's node layouts of older files
 
@@ -41,10 +57,15 @@ def on_undo_redo_post(*_args) -> None:
     and the brush sessions, which hold images the undo replaced, start again from the images."""
     reload_stale_images()
     drop_sessions()
+    forget_edits()  # the restored images' pixels
 
 
-HANDLERS = [*FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_load_post), *SCRATCH_HANDLERS, *TEETH_HANDLERS,
-            (bpy.app.handlers.undo_post, on_undo_redo_post), (bpy.app.handlers.redo_post, on_undo_redo_post)]
+# The world images' digests are dropped before the fabric's and the scratches' handlers read the world.
+WORLD_HANDLERS = [(bpy.app.handlers.depsgraph_update_post, on_image_update),
+                  (bpy.app.handlers.render_pre, on_render_forget_edits)]
+HANDLERS = [*WORLD_HANDLERS, *FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_load_post), *SCRATCH_HANDLERS,
+            *TEETH_HANDLERS, (bpy.app.handlers.undo_post, on_undo_redo_post),
+            (bpy.app.handlers.redo_post, on_undo_redo_post)]
 
 
 def register_handlers() -> None:

@@ -11,6 +11,7 @@ Users: the fabric's exact world light (``fabric/world_light.py``) and the scratc
 
 from __future__ import annotations
 
+import hashlib
 import os
 
 import numpy as np
@@ -119,8 +120,8 @@ def world_source(scene):
     if isinstance(rotation, str):
         return None, rotation, eye
     image = tex.image
-    key = ("image", image.name, image.filepath, tuple(image.size), image.is_dirty, image.colorspace_settings.name,
-           file_version(image))
+    key = ("image", image.name, image.filepath, tuple(image.size), image.colorspace_settings.name,
+           file_version(image), edit_version(image))
     return key, lambda: image_radiance(image), rotation
 
 
@@ -136,6 +137,36 @@ def file_version(image) -> tuple:
     except (OSError, ValueError):
         return ()
     return (st.st_mtime_ns, st.st_size)
+
+
+def edit_version(image) -> tuple:
+    """What changes when the image's pixels are edited in memory (painted, set from Python, generated): for an
+    image with unsaved edits, a digest of its pixels. The digest is taken once and kept until
+    :func:`forget_edits` (an update of the image, every render, undo, load): a lamp drag does not read the
+    pixels on every step, and a render always sees the pixels as they are."""
+    if not (image.is_dirty or image.source == "GENERATED"):
+        return ()
+    ptr = image.as_pointer()
+    digest = _edit_digests.get(ptr)
+    if digest is None:
+        w, h = image.size
+        buf = np.empty(w * h * image.channels, dtype=np.float32)
+        if buf.size:
+            image.pixels.foreach_get(buf)
+        digest = hashlib.blake2b(buf, digest_size=16).hexdigest()
+        _edit_digests[ptr] = digest
+    return ("edits", digest)
+
+
+_edit_digests: dict[int, str] = {}  # image pointer -> digest of its pixels (images with unsaved edits)
+
+
+def forget_edits(image=None) -> None:
+    """Drop the pixel digest of ``image`` (of every image when None): the next key reads its pixels again."""
+    if image is None:
+        _edit_digests.clear()
+    else:
+        _edit_digests.pop(image.as_pointer(), None)
 
 
 def world_strength(scene) -> float:

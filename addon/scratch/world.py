@@ -51,7 +51,8 @@ def equirect_directions(w: int = MAP_W, h: int = MAP_H):
 
 
 def downsample(rgb: np.ndarray, w: int = MAP_W, h: int = MAP_H) -> np.ndarray:
-    """Box-filter an (H, W, 3) equirect image (row 0 = top) to (h, w, 3)."""
+    """Box-filter an (H, W, 3) equirect image (row 0 = top) to (h, w, 3); a cell no texel falls in (an image
+    smaller than the map) takes the texel it lies in."""
     H, W = rgb.shape[:2]
     ys = (np.arange(H) * h // H)
     xs = (np.arange(W) * w // W)
@@ -59,6 +60,8 @@ def downsample(rgb: np.ndarray, w: int = MAP_W, h: int = MAP_H) -> np.ndarray:
     cnt = np.zeros((h, w, 1))
     np.add.at(out, (ys[:, None], xs[None, :]), rgb[..., :3])
     np.add.at(cnt, (ys[:, None], xs[None, :]), 1.0)
+    yy, xx = np.nonzero(cnt[..., 0] == 0)
+    out[yy, xx] = rgb[yy * H // h, xx * W // w, :3]
     return out / np.maximum(cnt, 1)
 
 

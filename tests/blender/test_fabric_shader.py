@@ -258,6 +258,59 @@ def test_world_tables_follow_the_world(addon_module, tmp_path):
     assert "NaN" in world_light_status(scene) and "fitted closures" in world_light_status(scene)
 
 
+def test_world_tables_follow_pixels_edited_in_memory(addon_module, tmp_path):
+    """An environment image edited in Blender (painted, or its pixels set from Python) and not saved keeps its name,
+    file and size: the tables follow its pixels, at the update that names the image (a paint stroke, a script's
+    ``update_tag``) and at every render (a script that sets pixels without a tag), and are not rebuilt for pixels
+    set to the same values. Before, the first edit gave new tables and every later one was left out: the cloth
+    was lit by the world as it had been."""
+    from importlib import import_module
+
+    import bpy
+
+    from material_structures.addon.fabric.verify import hdri_world
+    from material_structures.core.exr_io import read_exr
+    from material_structures.core.fabric import closure_accuracy as A
+
+    world_tables = import_module(f"{addon_module}.addon.fabric.world_light").world_tables  # the handlers' modules
+    world_environment = import_module(f"{addon_module}.addon.scratch.world").world_environment
+    scene = bpy.context.scene
+    world = hdri_world(scene, A.sky_hdri(16, 32), str(tmp_path / "sky.exr"))
+    image = next(n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT").image
+    scene.render.engine = "CYCLES"
+    scene.render.resolution_x = scene.render.resolution_y = 4
+    scene.render.resolution_percentage = 100
+    scene.cycles.samples = 1
+    scene.camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(scene.camera)
+
+    def paint(value: float, tag: bool):
+        px = np.empty(len(image.pixels), np.float32)
+        image.pixels.foreach_get(px)
+        px[0::4] = value  # red everywhere
+        image.pixels.foreach_set(px)
+        if tag:
+            image.update_tag()
+        bpy.context.view_layer.update()
+
+    def red():
+        return float(read_exr(f"{world_tables(scene)[0]}/radiance.exr")[..., 0].mean())
+
+    first = world_tables(scene)[0]
+    paint(2.0, tag=True)
+    assert world_tables(scene)[0] != first and red() == pytest.approx(2.0)
+    painted = world_tables(scene)[0]
+    paint(2.0, tag=True)  # the same pixels again: the same tables
+    assert world_tables(scene)[0] == painted
+    paint(5.0, tag=True)  # a second edit (before: the same key as the first)
+    assert red() == pytest.approx(5.0)
+    assert world_environment(scene)[0][..., 0].mean() == pytest.approx(5.0)  # the scratches' World Lights too
+    paint(7.0, tag=False)  # no tag: a render reads the pixels again
+    assert red() == pytest.approx(5.0)  # until then the tables stay (a lamp drag reads no pixels)
+    bpy.ops.render.render()
+    assert red() == pytest.approx(7.0)
+
+
 def test_world_table_folders_unused_for_two_weeks_are_removed(addon_module, tmp_path):
     from material_structures.addon.fabric.world_light import PRUNE_AFTER_S, _prune_tables
 

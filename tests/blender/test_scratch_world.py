@@ -38,6 +38,17 @@ def env_world(scene, pack: bool = False) -> None:
     bg.inputs["Strength"].default_value = 1.0
 
 
+def test_the_map_of_an_environment_smaller_than_it_has_no_black_cells():
+    """An image smaller than the 64 x 32 map (before: three cells of four black, the sun a quarter as bright)
+    fills every cell with the texel it lies in; a larger one is box-filtered."""
+    small = np.arange(16 * 32 * 3, dtype=float).reshape(16, 32, 3) + 1.0
+    up = W.downsample(small)
+    assert up.shape == (W.MAP_H, W.MAP_W, 3)
+    np.testing.assert_array_equal(up, np.repeat(np.repeat(small, 2, axis=0), 2, axis=1))
+    large = np.repeat(np.repeat(small, 4, axis=0), 4, axis=1)  # 64 x 128: each map cell averages 2 x 2 texels
+    np.testing.assert_allclose(W.downsample(large), up, rtol=1e-12)
+
+
 def test_bright_region_is_the_sun():
     env = _env()
     d, om = W.equirect_directions()
