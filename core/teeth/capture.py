@@ -180,6 +180,10 @@ class Capture:
         for i, c in enumerate(cams):
             if not (np.isfinite(c.K).all() and np.isfinite(c.R).all() and np.isfinite(c.t).all()):
                 raise UserError(f"{path}: camera {i} has a non-finite K, R or t")
+            if not (c.K[0, 0] > 0 and c.K[1, 1] > 0):  # a zero focal length renders every pixel black
+                raise UserError(f"{path}: camera {i} has a focal length (K[0][0], K[1][1]) that is not > 0")
+            if np.abs(c.R @ c.R.T - np.eye(3)).max() > 1e-4 or np.linalg.det(c.R) < 0:
+                raise UserError(f"{path}: camera {i}'s R is not a rotation (R R^T = I, det R = 1, to 1e-4)")
             if (c.width, c.height) != (cams[0].width, cams[0].height):
                 raise UserError(f"{path}: camera {i} is {c.width} x {c.height}, camera 0 "
                                 f"{cams[0].width} x {cams[0].height}; all cameras need one image size")

@@ -237,6 +237,10 @@ def scene_from_dict(d, source: str = "scene") -> TeethScene:
     # core/schemas/teeth-scene.schema.json: the fields, their kinds, sizes and ranges; below what it cannot say
     check_schema(d, "teeth-scene", source)
     teeth = []
+    names = [t["name"] for t in d["teeth"]]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:  # the fit's parameters, its report and the Blender panel find a tooth by its name
+        raise UserError(f"{source}: two teeth are named {twice[0]!r}; every tooth needs a name of its own")
     for k, t in enumerate(d["teeth"]):
         tooth = _part(source, f"teeth[{k}]", _finite_tooth, t)
         check_volume_mesh(tooth.enamel_mesh, f"{source}: teeth[{k}] ({tooth.name}): the enamel mesh")

@@ -309,8 +309,8 @@ def test_a_capture_the_schema_refuses_is_one_line(synthesised, tmp_path, capsys)
 @pytest.mark.parametrize("edit, said", [
     (lambda d: d["teeth"][0]["enamel"].update(g1=1.5), "teeth[0].enamel.g1: must be < 1, got 1.5"),
     (lambda d: d["teeth"][0]["enamel_mesh"].pop("corner_uv"), "teeth[0].enamel_mesh: lacks the field 'corner_uv'"),
-    (lambda d: d["teeth"][0].update(a_t=[1, 1]), "teeth[0].a_t: expected an RGB triple or an H x W x 3 texture, "
-                                                 "got a list of 2"),
+    (lambda d: d["teeth"][0].update(a_t=[1, 1]), "teeth[0].a_t: expected an RGB triple of fractions, each 0-1 or "
+                                                 "an H x W x 3 texture, got a list of 2"),
     (lambda d: d.update(colour="pink"), "unknown field 'colour' (known: format, blend_spread_mm, teeth, gums, "
                                         "cavity)"),
 ])

@@ -71,6 +71,10 @@ def _edit_json(folder, fn) -> None:
     (lambda m: m["lights"][1].update(intensity=[-1, 1, 1]), "lights[1].intensity[0]: must be >= 0, got -1"),
     (lambda m: m["lights"][1].update(position=[float("nan"), 0, 0]), "light 1 has a non-finite position"),
     (lambda m: m.update(format="other/1"), 'format: expected "material_structures.teeth.capture/1", got "other/1"'),
+    # a zero focal length or an R that is not a rotation rendered every image black without a word
+    (lambda m: m["cameras"][0]["K"][0].__setitem__(0, 0.0), "camera 0 has a focal length (K[0][0], K[1][1])"),
+    (lambda m: m["cameras"][0].update(R=[[0, 0, 0]] * 3), "camera 0's R is not a rotation"),
+    (lambda m: m["cameras"][0].update(R=[[1, 0, 0], [0, 1, 0], [0, 0, -1]]), "camera 0's R is not a rotation"),
 ])
 def test_malformed_capture_is_refused_by_name(capture_dir, tmp_path, capsys, edit, said):
     cap = _copy(capture_dir, tmp_path)
@@ -306,7 +310,8 @@ def _inside_out(d):
      'teeth[0].enamel.sigma_t: expected 3 numbers, got "thick"'),
     (lambda d: d["teeth"][0]["enamel"].update(sigma_t=[float("nan")] * 3), "need sigma_t > 0"),
     (lambda d: d["teeth"][0].update(eta=0.5), "teeth[0].eta: must be >= 1, got 0.5"),
-    (lambda d: d["teeth"][0].update(a_t=[float("inf")] * 3), "NaN or infinite"),
+    (lambda d: d["teeth"][0].update(a_t=[float("nan")] * 3), "NaN or infinite"),
+    (lambda d: d["teeth"][0].update(a_t=[float("inf")] * 3), "teeth[0].a_t: expected an RGB triple of fractions"),
     (_drop_face, "the enamel mesh is not closed (3 edges belong to one triangle only)"),
     (_third_face_on_an_edge, "the enamel mesh is not manifold (3 edges are shared by three or more triangles)"),
     (_inside_out, "the enamel mesh has its faces pointing inwards"),
@@ -317,6 +322,14 @@ def _inside_out(d):
     (lambda d: d.update(blend_spread_mm=-1), "blend_spread_mm: must be > 0, got -1"),
     (lambda d: d.update(blend_spread_mm=float("nan")), "blend_spread_mm must be a number > 0"),
     (lambda d: d.update(format="other/2"), 'format: expected "material_structures.teeth.scene/1", got "other/2"'),
+    # out of range: a negative transmittance or cavity albedo was a traceback ("internal error"), a transmittance
+    # above 1 or a dentin coefficient beyond the fit's range rendered without a word, a second tooth of the same
+    # name was rendered and fitted as one tooth
+    (lambda d: d["teeth"][0].update(a_t=[-1, -1, -1]), "teeth[0].a_t: expected an RGB triple of fractions, each 0-1"),
+    (lambda d: d["teeth"][0].update(a_t=[5, 5, 5]), "teeth[0].a_t: expected an RGB triple of fractions, each 0-1"),
+    (lambda d: d["teeth"][0].update(c=[5, -5, 5]), "teeth[0].c[0]: must be <= 0.8, got 5"),
+    (lambda d: d["cavity"].update(albedo=[-3, 7, 2]), "cavity.albedo[0]: must be >= 0, got -3"),
+    (lambda d: d["teeth"].append(d["teeth"][0]), "two teeth are named"),
 ])
 def test_a_scene_that_cannot_be_rendered_is_one_line(capture_dir, tmp_path, capsys, edit, said):
     """A scene.json without "teeth" was KeyError: 'teeth' (render and fit); a mesh with a hole, an edge of three
