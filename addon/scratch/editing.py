@@ -83,8 +83,13 @@ def material_set(mat):
 
 
 def object_scratch_material(obj):
+    """The scratched-metal material the operators work on: the object's active material when it is one (the
+    material panel's), else its first slot that holds one."""
     if obj is None or obj.type != "MESH":
         return None
+    active = obj.active_material
+    if active is not None and active.get(MARKER):
+        return active
     for slot in obj.material_slots:
         if slot.material is not None and slot.material.get(MARKER):
             return slot.material

@@ -215,15 +215,16 @@ def _group_op(kind: str):
 GROUP_OPERATORS = [_group_op(k) for k in GROUP_NAMES]
 
 
-def apply_fit_file(context, path: str) -> tuple[list[str], list[str]]:
+def apply_fit_file(context, path: str, copies: list | None = None) -> tuple[list[str], list[str]]:
     """Apply a fitted scene file to the teeth mapped under Fit to capture (by name where a capture tooth is not
-    in the mapping). Returns (``"capture tooth -> object"`` for each tooth applied, the file's tooth names)."""
+    in the mapping). Returns (``"capture tooth -> object"`` for each tooth applied, the file's tooth names); the
+    materials made a tooth's own on the way are appended to ``copies``."""
     from ...core.teeth.scene import load_scene
 
     ts = load_scene(path)
     names = [t.name for t in ts.teeth]
     targets = fit_targets(names, context.scene)
-    done = apply_fit(ts, context.scene, source=path, targets=targets)
+    done = apply_fit(ts, context.scene, source=path, targets=targets, copies=copies)
     return [f"{n} -> {targets[n].name}" for n in done], names
 
 
@@ -294,24 +295,35 @@ class MS_OT_teeth_apply_fit_file(FilePicker, bpy.types.Operator):
         if not os.path.isfile(path):
             self.report({"ERROR"}, f"file not found: {self.filepath}")
             return {"CANCELLED"}
+        copies: list[str] = []
         try:
-            done, names = apply_fit_file(context, path)
+            done, names = apply_fit_file(context, path, copies)
         except (ValueError, KeyError, OSError) as exc:
             self.report({"ERROR"}, _read_error(self.filepath, exc, "cannot apply"))
             return {"CANCELLED"}
         if not done:  # nothing was changed
             self.report({"ERROR"}, no_mapping_message(names))
             return {"CANCELLED"}
-        self.report({"INFO"}, applied_message(done))
+        self.report({"INFO"}, applied_message(done, copies))
         return {"FINISHED"}
 
 
-def applied_message(done: list[str]) -> str:
+def applied_message(done: list[str], copies: list[str] | None = None) -> str:
     """The status line of Apply Fit Result: each "fit tooth -> Blender tooth" up to three, else a count (a smile's 16
-    pairs would not fit the status bar)."""
+    pairs would not fit the status bar); then the materials made a tooth's own, if any."""
     if len(done) <= 3:
-        return f"Applied the fit: {', '.join(done)}"
-    return f"Applied the fit to {len(done)} teeth: {', '.join(done[:2])} and {len(done) - 2} more"
+        text = f"Applied the fit: {', '.join(done)}"
+    else:
+        text = f"Applied the fit to {len(done)} teeth: {', '.join(done[:2])} and {len(done) - 2} more"
+    return text + copies_note(copies)
+
+
+def copies_note(copies: list[str] | None) -> str:
+    """What Apply Fit Result adds for the materials it made a tooth's own: "" when none."""
+    if not copies:
+        return ""
+    shown = ", ".join(copies[:2]) + (f" and {len(copies) - 2} more" if len(copies) > 2 else "")
+    return f" (shared materials copied so each tooth keeps its fit: {shown})"
 
 
 class MS_OT_teeth_fit(bpy.types.Operator):
@@ -379,8 +391,9 @@ class MS_OT_teeth_fit(bpy.types.Operator):
     def _finish(self, context, job, state):
         fs = context.scene.ms_teeth_fit
         if state == "FINISHED":
+            copies: list[str] = []
             try:
-                done, names = apply_fit_file(context, job.result_path)
+                done, names = apply_fit_file(context, job.result_path, copies)
             except (ValueError, KeyError, OSError) as exc:
                 done, names, error = [], [], f"cannot apply {job.result_path}: {exc}"
             else:
@@ -391,7 +404,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
                 self.report({"ERROR"}, f"Teeth fit finished but applied to nothing: {error}; "
                                        f"then Apply Fit Result on {job.result_path}")
                 return {"CANCELLED"}
-            job.outcome = fs.last_result = f"done: applied {', '.join(done)}; log {job.log_path}"
+            job.outcome = fs.last_result = f"done: applied {', '.join(done)}{copies_note(copies)}; log {job.log_path}"
             show_fit_check(fs, job.out_dir)
             self.report({"INFO"}, f"Teeth fit finished; loss plot {job.loss_plot}")
             return {"FINISHED"}

@@ -226,11 +226,32 @@ def no_mapping_message(names: list[str]) -> str:
             "choose them under Fit to capture in the Teeth panel")
 
 
-def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, targets: dict | None = None) -> list[str]:
+def own_material(obj, copies: list | None = None):
+    """``obj``'s active material, made its own first where a fit written into it would reach other objects: one
+    that another object wears too (a tooth copied with Shift+D keeps its original's materials) or one linked from a
+    library file becomes a copy in ``obj``'s slot (its name appended to ``copies``). None without a material."""
+    mat = obj.active_material
+    if mat is None or obj.library is not None:
+        return mat
+    shared = any(o is not obj and any(slot.material == mat for slot in o.material_slots) for o in bpy.data.objects)
+    if mat.library is None and not shared:
+        return mat
+    own = mat.copy()
+    own.name = f"{mat.name.split('.')[0]} ({obj.name})"
+    obj.material_slots[obj.active_material_index].material = own
+    if copies is not None:
+        copies.append(own.name)
+    return own
+
+
+def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, targets: dict | None = None,
+              copies: list | None = None) -> list[str]:
     """Write a fitted core ``TeethScene`` into the teeth it maps to (``targets``, default ``fit_targets``: the
     panel's capture-tooth mapping, else by tooth name): materials, a_t, the fitted dentin coefficients (and,
-    with ``set_current``, the shape-key values), gums and cavity. Returns the capture tooth names applied;
-    when none maps to a tooth, nothing is changed and the list is empty."""
+    with ``set_current``, the shape-key values), gums and cavity. A tooth whose material another object wears too
+    gets its own copy first (``own_material``; its names appended to ``copies``): each fitted tooth keeps its
+    own values. Returns the capture tooth names applied; when none maps to a tooth, nothing is changed and the list
+    is empty."""
     scene = scene or bpy.context.scene
     objs = fit_targets([t.name for t in ts.teeth], scene) if targets is None else targets
     if not objs:
@@ -241,13 +262,14 @@ def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, target
         if enamel is None:
             continue
         st = enamel.ms_tooth
-        em = enamel.active_material
+        em = own_material(enamel, copies)
         if em is not None:
             set_volume(em, t.enamel)
             set_a_t(em, t.a_t)
         dentin = st.partner
-        if dentin is not None and dentin.active_material is not None:
-            set_volume(dentin.active_material, t.dentin)
+        dm = own_material(dentin, copies) if dentin is not None else None
+        if dm is not None:
+            set_volume(dm, t.dentin)
         for o in (enamel, dentin):
             if o is not None:
                 o.ms_tooth.fitted = tuple(float(x) for x in t.c)

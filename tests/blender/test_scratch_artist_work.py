@@ -326,6 +326,28 @@ def test_world_lights_read_the_environment_once_not_on_every_lamp_move(scene, mo
     assert len(reads) == 2
 
 
+def test_generate_acts_on_the_active_material_of_an_object_with_two(scene):
+    """An object wearing two scratched metals: Generate, Import and Export act on the active one, the one whose
+    material panel the artist is in (before: on the first slot's, replacing a set the artist did not touch)."""
+    from material_structures.addon.scratch.editing import material_set
+
+    a = _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(count=50, seed=1, set_name="Brass")
+    b = _plane(scene, "B", x=3.0)
+    bpy.ops.material_structures.scratch_generate(count=50, seed=2, set_name="Steel")
+    brass, steel = a.active_material, b.active_material
+    _activate(a)
+    bpy.ops.object.material_slot_add()
+    a.material_slots[1].material = steel
+    a.active_material_index = 1
+    before = _digest(material_set(brass)[1])
+    assert bpy.ops.material_structures.scratch_generate(count=300, seed=3) == {"FINISHED"}
+    assert material_set(steel)[1].n_scratches == 300
+    assert _digest(material_set(brass)[1]) == before
+    a.active_material_index = 0
+    assert _set_of(a).n_scratches == 50  # the first slot's, now active
+
+
 WORLD_LIGHTS = """
 from material_structures.addon.scratch.material import scratch_script_nodes, sync_scratch_lamps
 scene = bpy.context.scene

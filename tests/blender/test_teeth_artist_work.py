@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from types import SimpleNamespace
@@ -268,6 +269,50 @@ def test_apply_fit_result_uses_the_mapping_and_refuses_nothing(addon_module, cap
     assert enamel.ms_tooth.has_fit
     np.testing.assert_allclose(tuple(enamel.ms_tooth.fitted), t.c, atol=1e-6)
     np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
+
+
+def test_a_fit_applied_to_a_tooth_and_its_shift_d_copy_gives_each_its_own_values(addon_module, capture_dir,
+                                                                                    tmp_path):
+    """A tooth copied with Shift+D keeps its original's Enamel and Dentin materials (Blender's default): a two-tooth
+    fit mapped onto the pair wrote both teeth into the same materials, the second tooth's values over the first's
+    (both renders showed tooth1's enamel). Each fitted tooth now gets materials of its own, and its Blend Volume
+    follows them."""
+    from importlib import import_module
+
+    from material_structures.addon.teeth.materials import group_node
+
+    linked_materials = import_module(f"{addon_module}.addon.teeth.blend_volume").linked_materials
+    blend_object = import_module(f"{addon_module}.addon.teeth.blend_volume").blend_object
+    d = json.loads(open(os.path.join(capture_dir, "scene.json")).read())
+    second = json.loads(json.dumps(d["teeth"][0]))
+    second["name"] = "tooth1"
+    second["enamel"]["sigma_t"] = [3.0, 3.0, 3.0]
+    second["c"] = [-0.3, 0.3, -0.3]
+    d["teeth"][0]["enamel"]["sigma_t"] = [0.5, 0.5, 0.5]
+    d["teeth"].append(second)
+    path = tmp_path / "two_fit.json"
+    path.write_text(json.dumps(d))
+    a = _add_incisor()
+    bpy.ops.object.duplicate_move(TRANSFORM_OT_translate={"value": (0.01, 0.0, 0.0)})
+    bpy.context.view_layer.update()
+    b = bpy.context.active_object
+    assert b is not a and b.active_material == a.active_material  # Shift+D: the same materials
+    shared = a.active_material
+    tooth_map = bpy.context.scene.ms_teeth_fit.tooth_map
+    for name, obj in (("tooth0", a), ("tooth1", b)):
+        m = tooth_map.add()
+        m.capture_tooth, m.enamel = name, obj
+    assert bpy.ops.material_structures.teeth_apply_fit_file(filepath=str(path)) == {"FINISHED"}
+    bpy.context.view_layer.update()
+    for obj, sigma_t, c in ((a, 0.5, d["teeth"][0]["c"]), (b, 3.0, second["c"])):
+        node = group_node(obj.active_material)
+        np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), (sigma_t,) * 3, rtol=1e-6)
+        np.testing.assert_allclose(tuple(obj.ms_tooth.fitted), c, atol=1e-6)
+        dentin = obj.ms_tooth.partner
+        assert linked_materials(blend_object(obj).active_material) == (obj.active_material, dentin.active_material)
+    assert a.active_material != b.active_material and a.ms_tooth.partner.active_material != \
+        b.ms_tooth.partner.active_material
+    assert shared.name in {a.active_material.name, b.active_material.name}  # one tooth keeps it, one has a copy
 
 
 def test_mapping_is_prefilled_where_names_match(addon_module, capture_dir):
