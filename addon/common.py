@@ -264,6 +264,18 @@ def group_node(mat, marker: str):
                  and n.node_tree.get(marker)), None)
 
 
+def linked_slot_reason(obj) -> str:
+    """Why a material cannot be put into ``obj``'s active slot ("" when it can): the object, or the mesh that holds
+    the slot, is linked from a library file and read-only here."""
+    if obj.library is not None:
+        return f"'{obj.name}' is linked from {obj.library.filepath}: make it local (Object > Relations > Make Local)"
+    on_data = not obj.material_slots or obj.material_slots[obj.active_material_index].link == "DATA"
+    if on_data and obj.data is not None and obj.data.library is not None:
+        return (f"the mesh of '{obj.name}' is linked from {obj.data.library.filepath}: make it local "
+                "(Object > Relations > Make Local > Selected Objects and Data)")
+    return ""
+
+
 def assign_material(obj, mat) -> None:
     """Put ``mat`` into the object's active material slot (a new slot when it has none)."""
     if obj.material_slots:
@@ -433,13 +445,17 @@ def image_to_array(image, channels: int) -> np.ndarray:
 
 # -- meshes, UVs and strokes ------------------------------------------------------------------------------
 def require_uv_mesh(op, obj) -> bool:
-    """Whether ``obj`` is a mesh with a UV map (the materials' maps and frames need one); else the
-    operator ``op`` reports why not."""
+    """Whether ``obj`` is a mesh with a UV map (the materials' maps and frames need one) whose active material slot
+    can be set; else the operator ``op`` reports why not."""
     if obj is None or obj.type != "MESH":
         op.report({"ERROR"}, "Select a mesh object")
         return False
     if not obj.data.uv_layers:
         op.report({"ERROR"}, f"'{obj.name}' has no UV map: the material's maps and frame need one (UV > Unwrap)")
+        return False
+    reason = linked_slot_reason(obj)
+    if reason:  # checked before anything is made: a material and its images would be left behind
+        op.report({"ERROR"}, f"Cannot give it a material: {reason}")
         return False
     return True
 

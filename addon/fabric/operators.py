@@ -26,6 +26,7 @@ from ..common import (
     MeshUVLookup,
     SyncLamps,
     assign_material,
+    linked_slot_reason,
     push_undo,
     require_uv_mesh,
     stroke_property,
@@ -155,7 +156,7 @@ def finish_fabric_fit(job, scene, obj, state: str) -> tuple[str, str]:
     except (OSError, ValueError) as exc:
         job.outcome = f"finished, not imported: {exc}"
         return "ERROR", f"Fabric fit finished but its maps cannot be imported: {exc}"
-    if obj is not None and obj.type == "MESH" and obj.data.uv_layers:
+    if obj is not None and obj.type == "MESH" and obj.data.uv_layers and not linked_slot_reason(obj):
         assign_material(obj, mat)
         sync_fabric_lamps(scene)
         where = f" on {obj.name}"

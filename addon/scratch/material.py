@@ -23,6 +23,7 @@ import os
 
 import bpy
 
+from ...core.errors import UserError
 from ...render import load_osl_script, osl_flip_t
 from ..common import (
     add_eevee_fallback,
@@ -251,7 +252,8 @@ def material_scratch_group(mat) -> bpy.types.ShaderNodeTree | None:
 
 
 def script_node(group):
-    return next(n for n in group.nodes if n.type == "SCRIPT" and "TableDir" in n.inputs)
+    """The group's scratch script node; None when the artist deleted it (that group alone renders no scratches)."""
+    return next((n for n in group.nodes if n.type == "SCRIPT" and "TableDir" in n.inputs), None)
 
 
 def sync_group_tables(group, scratch_set=None) -> str:
@@ -260,6 +262,9 @@ def sync_group_tables(group, scratch_set=None) -> str:
     s = scratch_set if scratch_set is not None else load_group_set(group)
     folder = extract_tables(s)
     node = script_node(group)
+    if node is None:
+        raise UserError(f"the node group '{group.name}' has lost its scratch script node; add a new scratched "
+                        "material (Generate on an object without one) or undo the node's deletion")
     vals = {
         "TableDir": folder,
         "HasTables": 1,
@@ -289,6 +294,8 @@ def ensure_tables_extracted() -> int:
     n = 0
     for g in scratch_groups():
         node = script_node(g)
+        if node is None:
+            continue
         if not os.path.isfile(os.path.join(node.inputs["TableDir"].default_value, "cell_params.exr")):
             try:
                 sync_group_tables(g)
@@ -353,7 +360,9 @@ def group_node(mat):
 
 def scratch_script_nodes():
     for g in scratch_groups():
-        yield script_node(g)
+        node = script_node(g)
+        if node is not None:
+            yield node
 
 
 def scene_scratch_lamps(scene):

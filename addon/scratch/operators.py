@@ -14,6 +14,7 @@ from collections.abc import Callable
 
 import bpy
 
+from ...core.errors import UserError
 from ...core.scratch.scratch_io import EXR_FILES, load_scratch_set, save_kind, save_scratch_set
 from ..common import (
     BLEND_RELATIVE,
@@ -203,7 +204,11 @@ class MS_OT_scratch_generate(bpy.types.Operator):
         except ValueError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        mat = apply_set(context, obj, s, self.set_name)
+        try:
+            mat = apply_set(context, obj, s, self.set_name)
+        except UserError as exc:  # e.g. a group whose script node the artist deleted
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
         lost = self.count - new.n_scratches
         why = ""
         if lost > 0:  # arcs or lines that lie wholly outside the square patch are clipped away
@@ -434,7 +439,11 @@ class MS_OT_scratch_import(FilePicker, bpy.types.Operator):
             self.report({"ERROR"}, f"Cannot import scratch set: {exc}")
             return {"CANCELLED"}
         name = self.set_name or os.path.splitext(os.path.basename(path.rstrip(os.sep)))[0] or "Imported"
-        apply_set(context, obj, s, name)
+        try:
+            apply_set(context, obj, s, name)
+        except UserError as exc:
+            self.report({"ERROR"}, f"Cannot import scratch set: {exc}")
+            return {"CANCELLED"}
         self.report({"INFO"}, f"Imported {s.n_scratches} scratches from {path}")
         return {"FINISHED"}
 

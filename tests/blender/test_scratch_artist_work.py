@@ -348,6 +348,54 @@ def test_generate_acts_on_the_active_material_of_an_object_with_two(scene):
     assert _set_of(a).n_scratches == 50  # the first slot's, now active
 
 
+def test_new_materials_on_a_linked_object_are_one_line_and_leave_nothing_behind(scene, tmp_path):
+    """Generate Scratches and New Fabric Material on an object linked from another file raised a traceback
+    ("MaterialSlot.material is read-only") and left the new material's group and images in the file."""
+    _plane(scene, "Plate")
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.objects = ["Plate"]
+    plate = dst.objects[0]
+    bpy.context.scene.collection.objects.link(plate)
+    bpy.context.view_layer.objects.active = plate
+    before = (len(bpy.data.materials), len(bpy.data.images), len(bpy.data.node_groups))
+    for op, kwargs in ((bpy.ops.material_structures.scratch_generate, {"count": 20}),
+                       (bpy.ops.material_structures.fabric_new_material, {"preset": "PLUSH"})):
+        with pytest.raises(RuntimeError) as info:
+            op(**kwargs)
+        msg = str(info.value)
+        assert "Traceback" not in msg and "'Plate' is linked from" in msg and "Make Local" in msg, msg
+    assert (len(bpy.data.materials), len(bpy.data.images), len(bpy.data.node_groups)) == before
+
+
+def test_a_scratch_group_whose_script_node_was_deleted_breaks_only_itself(scene):
+    """Deleting the script node inside one scratched metal's group made every scratch sync raise StopIteration:
+    the other scratched materials stopped following their lamps, Generate on them failed, and the load handlers
+    stopped half way. Now the other materials go on, and Generate on the broken one says why in one line."""
+    from material_structures.addon.scratch.material import scratch_script_nodes
+
+    a = _plane(scene, "A")
+    bpy.ops.material_structures.scratch_generate(count=30, set_name="Broken")
+    b = _plane(scene, "B", x=3.0)
+    bpy.ops.material_structures.scratch_generate(count=30, set_name="Fine")
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    scene.collection.objects.link(lamp)
+    group = a.active_material.node_tree.nodes["Scratched Metal"].node_tree
+    group.nodes.remove(next(n for n in group.nodes if n.type == "SCRIPT"))
+    lamp.location = (1.0, 2.0, 3.0)
+    bpy.context.view_layer.update()  # the depsgraph handlers sync the lamps
+    fine = next(scratch_script_nodes())
+    assert tuple(fine.inputs["Lamp1Position"].default_value) == pytest.approx((1.0, 2.0, 3.0))
+    _activate(b)
+    assert bpy.ops.material_structures.scratch_generate(count=40) == {"FINISHED"}
+    _activate(a)
+    with pytest.raises(RuntimeError, match="has lost its scratch script node") as info:
+        bpy.ops.material_structures.scratch_generate(count=40)
+    assert "Traceback" not in str(info.value)
+
+
 WORLD_LIGHTS = """
 from material_structures.addon.scratch.material import scratch_script_nodes, sync_scratch_lamps
 scene = bpy.context.scene
