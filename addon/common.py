@@ -264,6 +264,15 @@ def group_node(mat, marker: str):
                  and n.node_tree.get(marker)), None)
 
 
+def target_collection(context):
+    """Where new objects go, as Blender's Add menu puts them: the active collection, or the scene's own when the
+    active one is linked from a library file (read-only here)."""
+    coll = context.collection
+    if coll is None or coll.library is not None:
+        return context.scene.collection
+    return coll
+
+
 def linked_slot_reason(obj) -> str:
     """Why a material cannot be put into ``obj``'s active slot ("" when it can): the object, or the mesh that holds
     the slot, is linked from a library file and read-only here."""

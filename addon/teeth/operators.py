@@ -9,7 +9,14 @@ import bpy
 from ...core.teeth.anatomy import SPECS as ANATOMY_SPECS
 from ...core.teeth.anatomy import make_anatomical_tooth
 from ...core.teeth.fit_checkpoint import stopped_fit
-from ..common import BLEND_RELATIVE, AddGroupNode, CancelBackgroundJob, FilePicker, end_modal_progress
+from ..common import (
+    BLEND_RELATIVE,
+    AddGroupNode,
+    CancelBackgroundJob,
+    FilePicker,
+    end_modal_progress,
+    target_collection,
+)
 from . import fit_job
 from .fit_job import FitJob, current_job, job_running, set_current_job, usable_cores
 from .geometry import build_tooth_pair, placement_from_mesh_object, tooth_from_mesh_object
@@ -136,7 +143,7 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
             em = new_teeth_material("Enamel", f"Enamel {name}", scene=scene, mm_per_unit=mm)
             dm = new_teeth_material("Dentin", f"Dentin {name}", scene=scene, mm_per_unit=mm)
             e_obj, d_obj = build_tooth_pair(name, enamel, dentin, (0.0, 0.0, 0.0), em, dm,
-                                            context.collection or scene.collection, mm, kind=kind,
+                                            target_collection(context), mm, kind=kind,
                                             smooth=self.smooth)
         except (ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, str(exc))
@@ -484,7 +491,7 @@ class MS_OT_teeth_import_scene(FilePicker, bpy.types.Operator):
         except (OSError, ValueError, KeyError) as exc:
             self.report({"ERROR"}, _read_error(self.filepath, exc))
             return {"CANCELLED"}
-        build_teeth_scene(ts, context.collection or context.scene.collection, _mm_per_unit(context.scene),
+        build_teeth_scene(ts, target_collection(context), _mm_per_unit(context.scene),
                           smooth=True)
         _report_light_paths(self, context.scene)
         return {"FINISHED"}

@@ -315,6 +315,28 @@ def test_a_fit_applied_to_a_tooth_and_its_shift_d_copy_gives_each_its_own_values
     assert shared.name in {a.active_material.name, b.active_material.name}  # one tooth keeps it, one has a copy
 
 
+def test_teeth_added_while_a_linked_collection_is_active_go_into_the_scene(addon_module, capture_dir, tmp_path):
+    """With a collection linked from another file active (read-only here), Import Teeth Scene raised "Collection
+    'Lib' is linked" with a traceback and Add Tooth refused: both left their meshes and materials in the file. As
+    Blender's Add menu does, the teeth now go into the scene's own collection."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.context.scene.collection.children.link(bpy.data.collections.new("Lib"))
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.collections = ["Lib"]
+    scene, layer = bpy.context.scene, bpy.context.view_layer
+    scene.collection.children.link(dst.collections[0])
+    layer.active_layer_collection = layer.layer_collection.children["Lib"]
+    assert bpy.context.collection.library is not None
+    assert bpy.ops.material_structures.teeth_add_tooth(kind="INCISOR", resolution=12) == {"FINISHED"}
+    assert bpy.ops.material_structures.teeth_import_scene(
+        filepath=os.path.join(capture_dir, "scene.json")) == {"FINISHED"}
+    assert len(bpy.data.objects) > 3 and all(o.name in scene.objects for o in bpy.data.objects)
+    assert {c.name for o in bpy.data.objects for c in o.users_collection} == {scene.collection.name}
+
+
 def test_mapping_is_prefilled_where_names_match(addon_module, capture_dir):
     enamel = import_capture_scene(capture_dir)  # tooth name "tooth0", as in the capture
     assert bpy.ops.material_structures.teeth_add_tooth(kind="MOLAR", resolution=8) == {"FINISHED"}
