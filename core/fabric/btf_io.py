@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
 from ..json_schema import check as check_schema
+from ..staged_write import staged_files
 
 UNIT_TOL = 1e-3
 
@@ -313,18 +314,24 @@ def save_btf(path: str | os.PathLike, values: np.ndarray, wi: np.ndarray, wo: np
         raise ValueError(f"values must be (N, H, W, 3) with N = {wi.shape[0]}, got {values.shape}")
     if path.endswith(".npz"):
         os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-        np.savez(path, values=values, wi=wi, wo=wo)
+        tmp = f"{path}.tmp-{os.getpid()}.npz"
+        try:
+            np.savez(tmp, values=values, wi=wi, wo=wo)
+            os.replace(tmp, path)  # never a half-written file under the real name
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
         return path
-    os.makedirs(path, exist_ok=True)
     width = len(str(max(values.shape[0] - 1, 0)))
     samples = []
-    for k in range(values.shape[0]):
-        name = f"{k:0{max(width, 4)}d}.exr"
-        write_exr(os.path.join(path, name), values[k])
-        samples.append({"wi": wi[k].tolist(), "wo": wo[k].tolist(), "image": name})
-    desc = {"width": int(values.shape[2]), "height": int(values.shape[1]), "samples": samples}
-    with open(os.path.join(path, "btf.json"), "w") as f:
-        json.dump(desc, f)
+    with staged_files(path, "btf.json") as stage:  # the images and their btf.json, or no btf.json: never a mix
+        for k in range(values.shape[0]):
+            name = f"{k:0{max(width, 4)}d}.exr"
+            write_exr(os.path.join(stage, name), values[k])
+            samples.append({"wi": wi[k].tolist(), "wo": wo[k].tolist(), "image": name})
+        desc = {"width": int(values.shape[2]), "height": int(values.shape[1]), "samples": samples}
+        with open(os.path.join(stage, "btf.json"), "w") as f:
+            json.dump(desc, f)
     return path
 
 

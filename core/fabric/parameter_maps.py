@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
 from ..json_schema import check as check_schema
+from ..staged_write import staged_files
 from .quaternion import quat_normalize
 
 MAP_FILES = {"kd": ("kd.exr", 3), "ks": ("ks.exr", 3), "sigma": ("sigma.exr", 2), "basis": ("basis.exr", 4)}
@@ -68,8 +69,11 @@ def make_maps(kd, ks, sigma, basis) -> FabricMaps:
 
 def save_params(out_dir: str | os.PathLike, maps: FabricMaps, extra: dict | None = None) -> None:
     """Write the four EXR maps and ``params.json`` describing them."""
-    out_dir = os.fspath(out_dir)
-    os.makedirs(out_dir, exist_ok=True)
+    with staged_files(out_dir, "params.json") as stage:  # the maps and their params.json, or no params.json
+        _write_params(stage, maps, extra)
+
+
+def _write_params(out_dir: str, maps: FabricMaps, extra: dict | None) -> None:
     write_exr(os.path.join(out_dir, "kd.exr"), maps.kd)
     write_exr(os.path.join(out_dir, "ks.exr"), maps.ks)
     write_exr(os.path.join(out_dir, "sigma.exr"), maps.sigma)

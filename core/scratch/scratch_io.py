@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import MissingFileError, UserError
 from ..exr_io import ExrError, read_exr, write_exr
+from ..staged_write import staged_files
 from .scratch_set import ScratchSet, validate_scratch_set
 
 FORMAT = "material_structures.scratch_set"
@@ -171,14 +172,15 @@ def save_scratch_set_exr(folder: str | os.PathLike, s: ScratchSet) -> list[str]:
         VERSION, s.patch_size_um[0], s.patch_size_um[1], nx, ny, s.cell_size_um, s.query_radius_um,
         s.sigma_um, m, k, TABLE_WIDTH,
     ]
-    paths = [os.path.join(folder, f) for f in EXR_FILES]
     tables = scratch_set_tables(s)
-    write_exr(paths[0], tables["segments"], ("R", "G", "B", "A"))
-    write_exr(paths[1], tables["params"], ("R", "G", "B", "A"))
-    write_exr(paths[2], tables["grid"], ("R", "G"))
-    write_exr(paths[3], tables["cells"], ("Y",))
-    write_exr(paths[4], meta, ("Y",))
-    return paths
+    with staged_files(folder, "meta.exr") as stage:  # all five or a folder without meta.exr: never a mix
+        staged = [os.path.join(stage, f) for f in EXR_FILES]
+        write_exr(staged[0], tables["segments"], ("R", "G", "B", "A"))
+        write_exr(staged[1], tables["params"], ("R", "G", "B", "A"))
+        write_exr(staged[2], tables["grid"], ("R", "G"))
+        write_exr(staged[3], tables["cells"], ("Y",))
+        write_exr(staged[4], meta, ("Y",))
+    return [os.path.join(folder, f) for f in EXR_FILES]
 
 
 def _load_exr_folder(folder: str) -> ScratchSet:
