@@ -17,14 +17,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import specular_moments
+from .parameter_maps import SIGMA_RANGE
 from .quaternion import quat_from_rotvec, quat_multiply, quat_to_matrix
 from .specular_moments import specular_term
 
 # the compiled sums; without numba the numpy ones below
 _compiled = specular_moments if specular_moments.HAVE_NUMBA else None
 
-LOG_SIGMA_MIN = np.log(0.01)
-LOG_SIGMA_MAX = np.log(10.0)
+LOG_SIGMA_MIN = np.log(SIGMA_RANGE[0])
+LOG_SIGMA_MAX = np.log(SIGMA_RANGE[1])
 
 
 @dataclass

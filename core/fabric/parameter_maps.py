@@ -23,6 +23,9 @@ MAP_FILES = {"kd": ("kd.exr", 3), "ks": ("ks.exr", 3), "sigma": ("sigma.exr", 2)
 PARAMS_VERSION = 1
 
 
+SIGMA_RANGE = (0.01, 10.0)  # sigma_x, sigma_y: what the fitter fits (levenberg_marquardt) and the brushes keep to
+
+
 @dataclasses.dataclass(frozen=True)
 class FabricMaps:
     """SVBRDF parameter maps, all ``(H, W, C)`` float32: kd/ks (C=3), sigma (C=2), basis (C=4, wxyz)."""

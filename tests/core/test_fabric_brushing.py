@@ -110,6 +110,24 @@ def test_recolor_smoothness_anisotropy_closed_forms():
     assert np.array_equal(be.kd[0], maps.kd[0]) and be.basis is maps.basis
 
 
+def test_repeated_smoothness_and_anisotropy_keep_sigma_in_the_fitters_range():
+    """Each stroke segment multiplies sigma again: one back-and-forth stroke (60 segments) at factor 0.1 took it to 0
+    (maps the add-on's own import then refused), at 2.0 to 5.7e17. It stays within 0.01-10, the fitter's range."""
+    from material_structures.core.fabric.levenberg_marquardt import LOG_SIGMA_MAX, LOG_SIGMA_MIN
+    from material_structures.core.fabric.parameter_maps import SIGMA_RANGE
+
+    assert SIGMA_RANGE == pytest.approx((0.01, 10.0)) == (np.exp(LOG_SIGMA_MIN), np.exp(LOG_SIGMA_MAX))
+    for factor, bound in ((0.1, 0.01), (2.0, 10.0)):
+        maps = flat_maps(8, 9)
+        for _ in range(60):
+            maps = smoothness(maps, factor)
+        np.testing.assert_allclose(maps.sigma, bound, rtol=1e-6)
+    maps = flat_maps(8, 9)
+    for _ in range(60):
+        maps = anisotropy(maps, 0.1)
+    assert maps.sigma[..., 0].min() == pytest.approx(0.01, rel=1e-6) and np.allclose(maps.sigma[..., 1], 0.6)
+
+
 def test_data_driven_states_blend_by_direction():
     states = []
     for k in range(8):
