@@ -264,6 +264,13 @@ def group_node(mat, marker: str):
                  and n.node_tree.get(marker)), None)
 
 
+def local_node_group(name: str, marker: str):
+    """This file's own node group ``name`` carrying the ID property ``marker`` (None if it has none). A group of the
+    same name linked from a library file is not it: a new material built on that one would break when the other
+    file moves, and changes to it are never saved."""
+    return next((g for g in bpy.data.node_groups if g.name == name and g.library is None and g.get(marker)), None)
+
+
 def target_collection(context):
     """Where new objects go, as Blender's Add menu puts them: the active collection, or the scene's own when the
     active one is linked from a library file (read-only here)."""

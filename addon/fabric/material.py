@@ -32,6 +32,7 @@ from ..common import (
     describe_group_sockets,
     group_material,
     group_node,
+    local_node_group,
     osl_switch,
     relink_osl_switch,
     wire_lamp_shader_group,
@@ -133,8 +134,8 @@ def _load_script(tree, scene):
 def ensure_fabric_group(scene=None) -> bpy.types.ShaderNodeTree:
     """The shared "SGGX Fabric" node group (created once per file)."""
     scene = scene or bpy.context.scene
-    group = bpy.data.node_groups.get(GROUP_NAME)
-    if group is not None and group.get(MARKER):
+    group = local_node_group(GROUP_NAME, MARKER)
+    if group is not None:
         ensure_viewport_look(group)
         ensure_fit_inputs(group, scene)
         ensure_closures_without_osl(group)

@@ -44,7 +44,7 @@ import bpy
 
 from ...core.teeth.blend_spread import DEFAULT_SPREAD_MM
 from ...render import material_output, new_material
-from ..common import add_group_input
+from ..common import add_group_input, local_node_group
 from .materials import BLEND_ATTRIBUTE, INNER_ATTRIBUTE, MARKER, describe_teeth_sockets, group_node
 
 BLEND_INPUT = "Blend Volume"  # Enamel/Dentin group input: 1 = the Blend Volume carries the medium
@@ -214,9 +214,9 @@ def ensure_blend_group() -> bpy.types.ShaderNodeTree:
     from a file made before :data:`BLEND_VERSION` gets its nodes rebuilt (its inputs and their values stay)."""
     from .materials import DEFAULTS
 
-    group = bpy.data.node_groups.get(BLEND_GROUP)
-    if group is not None and group.get(MARKER):
-        if group.get(VERSION_KEY, 1) < BLEND_VERSION and group.library is None:
+    group = local_node_group(BLEND_GROUP, MARKER)
+    if group is not None:
+        if group.get(VERSION_KEY, 1) < BLEND_VERSION:
             for node in list(group.nodes):
                 group.nodes.remove(node)
             for item in [i for i in group.interface.items_tree if i.item_type == "SOCKET" and i.name == UNIT]:

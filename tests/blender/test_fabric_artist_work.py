@@ -397,3 +397,22 @@ def test_a_finished_background_fit_is_an_undo_step_of_its_own(addon_module, tmp_
     bpy.ops.ed.undo()  # Ctrl+Z: the fitted material goes, the move stays
     assert bpy.data.objects["Cloth"].active_material is None
     assert bpy.data.objects["Cloth"].location.x == 1.0
+
+
+def test_a_new_fabric_material_never_builds_on_a_group_linked_from_another_file(addon_module, tmp_path):
+    """A file that links a cloth from another file holds that file's "SGGX Fabric" group: New Fabric Material built
+    its new local material on it (found by name), so the material lost its shader once the other file moved, and
+    the add-on's upgrades to the group were never saved. It now gets this file's own group."""
+    scene = bpy.context.scene
+    _plane(scene, "Cloth")
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    _link_objects(path, ["Cloth"])
+    linked = [g for g in bpy.data.node_groups if g.name == "SGGX Fabric"]
+    assert len(linked) == 1 and linked[0].library is not None
+    plane = _plane(bpy.context.scene, "Mine", x=3.0)
+    assert bpy.ops.material_structures.fabric_new_material(preset="CORDUROY") == {"FINISHED"}
+    group = next(n for n in plane.active_material.node_tree.nodes if n.type == "GROUP").node_tree
+    assert group.name == "SGGX Fabric" and group.library is None
