@@ -74,12 +74,19 @@ def curves_set(curves_uv, patch_um, width_um, depth_um, sigma_um, seed=0, max_fo
 
 def material_set(mat):
     """(set name, ScratchSet) of a scratched-metal material, or None."""
-    if mat is None or not mat.get(MARKER):
+    if not has_scratch_set(mat):
         return None
     node = group_node(mat)
-    if node is None or node.node_tree.get(PROP) is None:
-        return None
     return str(node.node_tree[PROP]["name"]), load_group_set(node.node_tree)
+
+
+def has_scratch_set(mat) -> bool:
+    """Whether ``mat`` is a scratched metal holding a set (what :func:`material_set` reads), without reading it: an
+    operator's poll runs on every redraw, and reading a 10 000-scratch set took 30 ms there (50 000: 200 ms)."""
+    if mat is None or not mat.get(MARKER):
+        return False
+    node = group_node(mat)
+    return node is not None and node.node_tree is not None and node.node_tree.get(PROP) is not None
 
 
 def object_scratch_material(obj):

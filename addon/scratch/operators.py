@@ -34,6 +34,7 @@ from .editing import (
     PATTERNS,
     curves_set,
     generate_set,
+    has_scratch_set,
     material_set,
     merge_sets,
     object_scratch_material,
@@ -315,7 +316,7 @@ class MS_OT_scratch_draw(bpy.types.Operator):
             cls.poll_message_set(f"'{mat.name}' is linked from another file: make it local (Object > Relations > "
                                  "Make Local) to draw on it")
             return False
-        return material_set(mat) is not None
+        return has_scratch_set(mat)
 
     def execute(self, context):
         obj = context.active_object
