@@ -542,10 +542,32 @@ def sync_fabric_lamps(scene, update_matrices: bool = True) -> int:
         for node in nodes:
             write_world_inputs(node, folder, width, height, rotation, strength)
     in_shader = {obj.name_full for obj, _ in pairs}
-    for obj in scene.objects:
-        if obj.type == "LIGHT" and not _linking_fixed(obj):
-            _link_off(obj, receivers if obj.name_full in in_shader else [])
+    wants = {obj: (receivers if obj.name_full in in_shader else []) for obj in scene.objects
+             if obj.type == "LIGHT" and not _linking_fixed(obj)}
+    _unshare_receivers(wants)
+    for obj, want in wants.items():
+        _link_off(obj, want)
     return len(lamps)
+
+
+def _unshare_receivers(wants: dict) -> None:
+    """Lamps that share one receiver collection (a lamp copied with Shift+D keeps its original's) but need other
+    fabric exclusions (one evaluated by the shader, the other not: hidden from renders, past the shader's fourth)
+    each get a copy of it, the artist's own links included: else each sync took back what the other lamp needs, and
+    a lamp lit the cloth twice, through the shader and through Cycles."""
+    sharing: dict = {}
+    for obj in wants:
+        coll = obj.light_linking.receiver_collection
+        if coll is not None and coll.library is None:
+            sharing.setdefault(coll.name_full, []).append(obj)
+    for objs in sharing.values():
+        first = {o.name_full for o in wants[objs[0]]}
+        for obj in objs[1:]:
+            if {o.name_full for o in wants[obj]} != first:
+                coll = obj.light_linking.receiver_collection
+                own = coll.copy()
+                own.name = f"{coll.name} ({obj.name})"
+                obj.light_linking.receiver_collection = own
 
 
 def _linking_fixed(lamp_obj) -> bool:

@@ -416,3 +416,31 @@ def test_a_new_fabric_material_never_builds_on_a_group_linked_from_another_file(
     assert bpy.ops.material_structures.fabric_new_material(preset="CORDUROY") == {"FINISHED"}
     group = next(n for n in plane.active_material.node_tree.nodes if n.type == "GROUP").node_tree
     assert group.name == "SGGX Fabric" and group.library is None
+
+
+def test_a_lamp_copy_sharing_its_receiver_collection_does_not_undo_the_lamps_exclusion(addon_module):
+    """A lamp with the artist's own light links (the backdrop left out), copied with Shift+D (the copy shares the
+    receiver collection) and the copy hidden from renders: each sync, the copy's pass took back the cloth's exclusion
+    the first lamp needs, so that lamp lit the cloth twice (through the shader and through Cycles). The copy now
+    gets a collection of its own, with the artist's links."""
+    from material_structures.addon.fabric.material import sync_fabric_lamps
+
+    scene, cloth, key = _lit_scene()
+    assert bpy.ops.material_structures.fabric_new_material(preset="VELVET") == {"FINISHED"}
+    backdrop = bpy.data.objects.new("Backdrop", bpy.data.meshes.new("Backdrop"))
+    scene.collection.objects.link(backdrop)
+    mine = bpy.data.collections.new("Key Receivers")
+    mine.objects.link(backdrop)
+    mine.collection_objects[0].light_linking.link_state = "EXCLUDE"
+    key.light_linking.receiver_collection = mine
+    sync_fabric_lamps(scene)
+    assert _excluded(key, cloth) and _excluded(key, backdrop)
+    copy = key.copy()  # what Shift+D makes of the lamp object
+    scene.collection.objects.link(copy)
+    copy.hide_render = True
+    assert copy.light_linking.receiver_collection == mine
+    for _ in range(2):
+        sync_fabric_lamps(scene)
+        assert _excluded(key, cloth) and _excluded(key, backdrop)
+        assert not _excluded(copy, cloth) and _excluded(copy, backdrop)
+    assert copy.light_linking.receiver_collection != key.light_linking.receiver_collection
