@@ -156,13 +156,15 @@ def finish_fabric_fit(job, scene, obj, state: str) -> tuple[str, str]:
     except (OSError, ValueError) as exc:
         job.outcome = f"finished, not imported: {exc}"
         return "ERROR", f"Fabric fit finished but its maps cannot be imported: {exc}"
-    if obj is not None and obj.type == "MESH" and obj.data.uv_layers and not linked_slot_reason(obj):
+    linked = linked_slot_reason(obj) if obj is not None and obj.type == "MESH" else ""
+    if obj is not None and obj.type == "MESH" and obj.data.uv_layers and not linked:
         assign_material(obj, mat)
         sync_fabric_lamps(scene)
         where = f" on {obj.name}"
     else:
         mat.use_fake_user = True  # kept for the next mesh, although nothing uses it yet
-        where = " (select a mesh with a UV map and pick it in its material slot)"
+        why = f"{linked}; then pick it" if linked else "select a mesh with a UV map and pick it"
+        where = f" ({why} in its material slot)"
     job.outcome = f"done: {mat.name}{where}"
     return "INFO", f"Fabric fit finished: {mat.name}{where}"
 

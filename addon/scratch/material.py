@@ -211,6 +211,7 @@ def update_scratch_group(group, scratch_set, scene=None) -> bpy.types.ShaderNode
     shares its set name with another group (an appended material, a copied group) first gets a name of
     its own (its images renamed with it); one that shares images gets new images: no other group changes."""
     scene = scene or bpy.context.scene
+    _require_script_node(group)  # before anything changes: a refused edit leaves the set as it was
     name = str(group[PROP]["name"])
     images = group_images(group)
     same_name, same_images = _sharing(group)
@@ -251,6 +252,15 @@ def material_scratch_group(mat) -> bpy.types.ShaderNodeTree | None:
     return group
 
 
+def _require_script_node(group):
+    """The group's script node, or a UserError that says the artist deleted it and what to do."""
+    node = script_node(group)
+    if node is None:
+        raise UserError(f"the node group '{group.name}' has lost its scratch script node; add a new scratched "
+                        "material (Generate on an object without one) or undo the node's deletion")
+    return node
+
+
 def script_node(group):
     """The group's scratch script node; None when the artist deleted it (that group alone renders no scratches)."""
     return next((n for n in group.nodes if n.type == "SCRIPT" and "TableDir" in n.inputs), None)
@@ -261,10 +271,7 @@ def sync_group_tables(group, scratch_set=None) -> str:
     meta = group[PROP]
     s = scratch_set if scratch_set is not None else load_group_set(group)
     folder = extract_tables(s)
-    node = script_node(group)
-    if node is None:
-        raise UserError(f"the node group '{group.name}' has lost its scratch script node; add a new scratched "
-                        "material (Generate on an object without one) or undo the node's deletion")
+    node = _require_script_node(group)
     vals = {
         "TableDir": folder,
         "HasTables": 1,

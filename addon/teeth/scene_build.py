@@ -10,11 +10,13 @@ fx 36 / W, principal point as lens shift; the box pixel filter of the core -> Cy
 from __future__ import annotations
 
 import math
+import re
 
 import bpy
 import numpy as np
 from mathutils import Matrix
 
+from ...core.errors import UserError
 from ...render import add_lamp, configure_cycles
 from .blend_volume import ensure_blend
 from .geometry import build_tooth_pair, make_mesh
@@ -229,19 +231,35 @@ def no_mapping_message(names: list[str]) -> str:
 def own_material(obj, copies: list | None = None):
     """``obj``'s active material, made its own first where a fit written into it would reach other objects: one
     that another object wears too (a tooth copied with Shift+D keeps its original's materials) or one linked from a
-    library file becomes a copy in ``obj``'s slot (its name appended to ``copies``). None without a material."""
+    library file becomes a copy in ``obj``'s slot (its name appended to ``copies``). Where the slot is the mesh's and
+    the mesh is shared (Alt+D) or linked, the copy goes into the object's own slot (link Object), so the other
+    object keeps its material. None without a material."""
     mat = obj.active_material
-    if mat is None or obj.library is not None:
-        return mat
+    if mat is None:
+        return None
     shared = any(o is not obj and any(slot.material == mat for slot in o.material_slots) for o in bpy.data.objects)
     if mat.library is None and not shared:
         return mat
     own = mat.copy()
-    own.name = f"{mat.name.split('.')[0]} ({obj.name})"
-    obj.material_slots[obj.active_material_index].material = own
+    base = re.sub(r" \([^()]*\)$", "", re.sub(r"\.\d{3}$", "", mat.name))  # "Enamel X (Y).001" -> "Enamel X"
+    own.name = f"{base} ({obj.name})"
+    slot = obj.material_slots[obj.active_material_index]
+    if slot.link == "DATA" and (obj.data.users > 1 or obj.data.library is not None):
+        slot.link = "OBJECT"
+    slot.material = own
     if copies is not None:
         copies.append(own.name)
     return own
+
+
+def _check_fit_targets(ts, objs: dict) -> None:
+    """Refuse, before anything changes, a fit mapped onto a tooth linked from a library file (read-only here)."""
+    for t in ts.teeth:
+        enamel = objs.get(t.name)
+        for obj in (enamel, enamel.ms_tooth.partner if enamel is not None else None):
+            if obj is not None and obj.library is not None:
+                raise UserError(f"cannot apply the fit of {t.name} to '{obj.name}': it is linked from "
+                                f"{obj.library.filepath}; make it local (Object > Relations > Make Local)")
 
 
 def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, targets: dict | None = None,
@@ -256,6 +274,7 @@ def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, target
     objs = fit_targets([t.name for t in ts.teeth], scene) if targets is None else targets
     if not objs:
         return []
+    _check_fit_targets(ts, objs)
     done = []
     for t in ts.teeth:
         enamel = objs.get(t.name)

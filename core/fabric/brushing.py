@@ -164,7 +164,8 @@ def smoothness(maps: FabricMaps, factor: float, weight=1.0) -> FabricMaps:
     """Scale ``sigma_x, sigma_y`` by ``factor ** weight`` (factor < 1: smoother, as lower deviation
     means a sharper lobe), kept within ``SIGMA_RANGE``."""
     w = _weights(maps, weight)
-    return maps.replace(sigma=np.clip(maps.sigma * np.power(float(factor), w), *SIGMA_RANGE).astype(np.float32))
+    scaled = np.clip(maps.sigma * np.power(float(factor), w), *SIGMA_RANGE)
+    return maps.replace(sigma=np.where(w > 0, scaled, maps.sigma).astype(np.float32))  # untouched texels as they were
 
 
 def anisotropy(maps: FabricMaps, factor: float, weight=1.0) -> FabricMaps:
@@ -173,7 +174,8 @@ def anisotropy(maps: FabricMaps, factor: float, weight=1.0) -> FabricMaps:
     w = _weights(maps, weight)[..., 0]
     s = np.array(maps.sigma, dtype=np.float64)
     k = np.argmin(s, axis=-1)
-    rows = np.clip(np.take_along_axis(s, k[..., None], -1)[..., 0] * np.power(float(factor), w), *SIGMA_RANGE)
+    row = np.take_along_axis(s, k[..., None], -1)[..., 0]
+    rows = np.where(w > 0, np.clip(row * np.power(float(factor), w), *SIGMA_RANGE), row)
     np.put_along_axis(s, k[..., None], rows[..., None], -1)
     return maps.replace(sigma=s.astype(np.float32))
 

@@ -391,9 +391,12 @@ def test_a_scratch_group_whose_script_node_was_deleted_breaks_only_itself(scene)
     _activate(b)
     assert bpy.ops.material_structures.scratch_generate(count=40) == {"FINISHED"}
     _activate(a)
-    with pytest.raises(RuntimeError, match="has lost its scratch script node") as info:
-        bpy.ops.material_structures.scratch_generate(count=40)
-    assert "Traceback" not in str(info.value)
+    before = _digest(_set_of(a))
+    for replace in (False, True):
+        with pytest.raises(RuntimeError, match="has lost its scratch script node") as info:
+            bpy.ops.material_structures.scratch_generate(count=40, replace=replace)
+        assert "Traceback" not in str(info.value)
+        assert _digest(_set_of(a)) == before  # refused before anything changed
 
 
 def test_draw_scratches_poll_reads_no_set(scene, monkeypatch, addon_module):

@@ -271,11 +271,13 @@ def test_apply_fit_result_uses_the_mapping_and_refuses_nothing(addon_module, cap
     np.testing.assert_allclose(tuple(node.inputs["Sigma_t"].default_value), t.enamel.sigma_t, rtol=1e-6)
 
 
-def test_a_fit_applied_to_a_tooth_and_its_shift_d_copy_gives_each_its_own_values(addon_module, capture_dir,
-                                                                                    tmp_path):
-    """A tooth copied with Shift+D keeps its original's Enamel and Dentin materials (Blender's default): a two-tooth
-    fit mapped onto the pair wrote both teeth into the same materials, the second tooth's values over the first's
-    (both renders showed tooth1's enamel). Each fitted tooth now gets materials of its own, and its Blend Volume
+@pytest.mark.parametrize("duplicate", ["duplicate_move", "duplicate_move_linked"])
+def test_a_fit_applied_to_a_tooth_and_its_copy_gives_each_its_own_values(addon_module, capture_dir, tmp_path,
+                                                                         duplicate):
+    """A tooth copied with Shift+D keeps its original's Enamel and Dentin materials (Blender's default), one copied
+    with Alt+D its mesh and with it the material slot: a two-tooth fit mapped onto the pair wrote both teeth into the
+    same materials, the second tooth's values over the first's (both renders showed tooth1's enamel). Each fitted
+    tooth now gets materials of its own (in the object's own slot where the mesh is shared), and its Blend Volume
     follows them."""
     from importlib import import_module
 
@@ -293,10 +295,11 @@ def test_a_fit_applied_to_a_tooth_and_its_shift_d_copy_gives_each_its_own_values
     path = tmp_path / "two_fit.json"
     path.write_text(json.dumps(d))
     a = _add_incisor()
-    bpy.ops.object.duplicate_move(TRANSFORM_OT_translate={"value": (0.01, 0.0, 0.0)})
+    getattr(bpy.ops.object, duplicate)(TRANSFORM_OT_translate={"value": (0.01, 0.0, 0.0)})
     bpy.context.view_layer.update()
     b = bpy.context.active_object
-    assert b is not a and b.active_material == a.active_material  # Shift+D: the same materials
+    assert b is not a and b.active_material == a.active_material  # the same materials
+    assert (b.data == a.data) == (duplicate == "duplicate_move_linked")
     shared = a.active_material
     tooth_map = bpy.context.scene.ms_teeth_fit.tooth_map
     for name, obj in (("tooth0", a), ("tooth1", b)):
@@ -313,6 +316,27 @@ def test_a_fit_applied_to_a_tooth_and_its_shift_d_copy_gives_each_its_own_values
     assert a.active_material != b.active_material and a.ms_tooth.partner.active_material != \
         b.ms_tooth.partner.active_material
     assert shared.name in {a.active_material.name, b.active_material.name}  # one tooth keeps it, one has a copy
+
+
+def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_module, capture_dir, tmp_path):
+    """A tooth linked from another file is read-only here: Apply Fit Result says so, naming the file, before it
+    changes anything."""
+    _add_incisor()
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.objects = ["Incisor Enamel", "Incisor Dentin"]
+    for obj in dst.objects:
+        bpy.context.scene.collection.objects.link(obj)
+    enamel = bpy.data.objects["Incisor Enamel"]
+    m = bpy.context.scene.ms_teeth_fit.tooth_map.add()
+    m.capture_tooth, m.enamel = "tooth0", enamel
+    before = (len(bpy.data.materials), len(bpy.data.objects))
+    with pytest.raises(RuntimeError, match="make it local") as info:
+        bpy.ops.material_structures.teeth_apply_fit_file(filepath=os.path.join(capture_dir, "scene.json"))
+    assert "is linked from" in str(info.value) and "Traceback" not in str(info.value)
+    assert (len(bpy.data.materials), len(bpy.data.objects)) == before
 
 
 def test_teeth_added_while_a_linked_collection_is_active_go_into_the_scene(addon_module, capture_dir, tmp_path):

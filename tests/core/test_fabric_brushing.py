@@ -126,6 +126,13 @@ def test_repeated_smoothness_and_anisotropy_keep_sigma_in_the_fitters_range():
     for _ in range(60):
         maps = anisotropy(maps, 0.1)
     assert maps.sigma[..., 0].min() == pytest.approx(0.01, rel=1e-6) and np.allclose(maps.sigma[..., 1], 0.6)
+    # texels the brush does not touch (weight 0) keep their values, even outside the range (maps from elsewhere)
+    wide = flat_maps(8, 9).replace(sigma=np.full((8, 9, 2), 20.0, np.float32))
+    w = np.zeros((8, 9))
+    w[2:4, 2:4] = 1.0
+    for edit in (lambda m: smoothness(m, 0.9, weight=w), lambda m: anisotropy(m, 0.9, weight=w)):
+        out = edit(wide)
+        assert np.all(out.sigma[w == 0] == 20.0) and np.all(out.sigma[w > 0].min(axis=-1) == 10.0)
 
 
 def test_data_driven_states_blend_by_direction():
