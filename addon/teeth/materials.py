@@ -15,6 +15,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import bpy
 import numpy as np
 
@@ -405,6 +407,8 @@ def new_teeth_material(kind: str, name: str | None = None, scene=None, volume=No
     node.inputs["mm per Unit"].default_value = mm_per_unit
     if surface:
         _add_eevee_output(mat, out, kind)
+        d = DEFAULTS[kind]  # the stand-in of the material's own values (before: Principled's orange skin defaults)
+        _sync_eevee(mat, SimpleNamespace(sigma_t=d["sigma_t"], albedo=d["albedo"]), mm_per_unit)
     mat.diffuse_color = (*[min(1.0, x) for x in DEFAULTS[kind]["albedo"]], 1.0)  # solid-view colour
     if volume is not None:
         set_volume(mat, volume)

@@ -318,6 +318,22 @@ def test_a_fit_applied_to_a_tooth_and_its_copy_gives_each_its_own_values(addon_m
     assert shared.name in {a.active_material.name, b.active_material.name}  # one tooth keeps it, one has a copy
 
 
+def test_add_tooth_gives_eevee_the_teeth_own_colour_and_reach(addon_module):
+    """EEVEE (Blender's default engine) renders a tooth through its materials' Principled stand-in, which kept
+    Principled's defaults (base 0.8, the orange skin radius 1 / 0.2 / 0.1) until a fit was applied: an orange tooth
+    (frame mean RGB 0.19 / 0.06 / 0.03 against 0.08 / 0.06 / 0.05). It now starts at the material's values."""
+    from material_structures.addon.teeth.materials import DEFAULTS
+
+    _add_incisor()
+    for obj, kind in ((bpy.data.objects["Incisor Enamel"], "Enamel"), (bpy.data.objects["Incisor Dentin"], "Dentin")):
+        p = obj.active_material.node_tree.nodes.get("EEVEE Stand-in")
+        if p is None:
+            continue  # a medium without a surface of its own
+        np.testing.assert_allclose(tuple(p.inputs["Base Color"].default_value)[:3], DEFAULTS[kind]["albedo"], rtol=1e-6)
+        np.testing.assert_allclose(tuple(p.inputs["Subsurface Radius"].default_value),
+                                   1.0 / np.asarray(DEFAULTS[kind]["sigma_t"]), rtol=1e-6)
+
+
 def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_module, capture_dir, tmp_path):
     """A tooth linked from another file is read-only here: Apply Fit Result says so, naming the file, before it
     changes anything."""
