@@ -562,6 +562,50 @@ def own_dentin(enamel):
     return copy
 
 
+def follow_places() -> int:
+    """Blend Volumes follow their tooth's place: one whose enamel shell was deleted goes with it (it is hidden and
+    cannot be selected, and it went on rendering the deleted tooth's inside, saved with the file); one whose enamel
+    moved to other collections, or was linked into another scene, moves with it (left behind, the tooth rendered
+    hollow where the old collection was excluded, and in the other scene). Returns how many changed."""
+    changed = 0
+    for obj in [o for o in bpy.data.objects if o.library is None and getattr(o, "ms_tooth", None) is not None
+                and o.ms_tooth.role == "BLEND"]:
+        enamel = obj.parent if obj.parent is not None else obj.ms_tooth.partner
+        if enamel is None or not enamel.users_collection:
+            bpy.data.objects.remove(obj, do_unlink=True)
+            changed += 1
+            continue
+        want = {c.as_pointer(): c for c in enamel.users_collection if c.library is None}
+        have = {c.as_pointer(): c for c in obj.users_collection}
+        if not want or want.keys() == have.keys():
+            continue
+        for key, coll in want.items():
+            if key not in have:
+                coll.objects.link(obj)
+        for key, coll in have.items():
+            if key not in want and coll.library is None:
+                coll.objects.unlink(obj)
+        changed += 1
+    return changed
+
+
+def _linked_tooth_blend(enamel, done: list) -> None:
+    """A tooth whose enamel and dentin were linked from another file without their Blend Volume (File > Link of the
+    objects one sees; the Blend Volume is hidden): their materials give their medium to a Blend Volume (the objects
+    say so), so it rendered hollow. It gets a Blend Volume of this file's, built from the linked objects."""
+    dentin = enamel.ms_tooth.partner
+    if dentin is None or blend_object(enamel) is not None or not enamel.users_collection:
+        return
+    if not any(o.get(BLEND_ATTRIBUTE) == 1.0 for o in (enamel, dentin)):
+        return
+    if group_node(enamel.active_material) is None or group_node(dentin.active_material) is None:
+        return
+    local = [c for c in enamel.users_collection if c.library is None]
+    if local and ensure_blend(enamel, _twin_spread(enamel.active_material, dentin.active_material),
+                              collection=local[0]) is not None:
+        done.append(enamel)
+
+
 def follow_materials(enamels) -> list:
     """Teeth (enamel shells) whose Blend Volume is driven by other materials than the ones their enamel and dentin
     wear now (an artist gave the dentin another material, e.g. a library Dentin Shade) get the new ones linked: the
@@ -574,6 +618,7 @@ def follow_materials(enamels) -> list:
     done = []
     for enamel in enamels:
         if enamel.library is not None:
+            _linked_tooth_blend(enamel, done)
             continue
         dentin = own_dentin(enamel)
         if dentin is None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from .blend_volume import follow_materials, sync_spreads
+from .blend_volume import follow_materials, follow_places, sync_spreads
 from .materials import gate_for_linking, ungate_local
 
 
@@ -23,11 +23,16 @@ def _enamel_of(obj):
 @persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
     enamels = {}
+    places = False
     for update in depsgraph.updates:
         if isinstance(update.id, bpy.types.Object):
             enamel = _enamel_of(update.id.original)
             if enamel is not None:
                 enamels[enamel.name_full] = enamel
+        elif isinstance(update.id, (bpy.types.Collection, bpy.types.Scene)):
+            places = True  # objects deleted, moved between collections, linked into a scene
+    if places:
+        follow_places()
     if enamels:
         follow_materials(enamels.values())
 
@@ -41,6 +46,7 @@ def on_depsgraph_update_pre(*_args) -> None:
 
 @persistent
 def on_render_pre(scene, *_args) -> None:
+    follow_places()
     follow_materials([o for o in scene.objects if _enamel_of(o) is o])
     sync_spreads()
 
@@ -49,6 +55,7 @@ def on_render_pre(scene, *_args) -> None:
 def on_file_change(*_args) -> None:
     """A file opened (one saved before the handlers, or by a Blender without the extension) or restored by undo."""
     ungate_local()  # written gated (on_save_pre)
+    follow_places()
     follow_materials([o for o in bpy.data.objects if _enamel_of(o) is o])
     sync_spreads()
 

@@ -334,6 +334,57 @@ def test_add_tooth_gives_eevee_the_teeth_own_colour_and_reach(addon_module):
                                    1.0 / np.asarray(DEFAULTS[kind]["sigma_t"]), rtol=1e-6)
 
 
+def _blend_volumes():
+    return [o for o in bpy.data.objects if o.ms_tooth.role == "BLEND"]
+
+
+def test_a_blend_volume_goes_where_its_tooth_goes_and_with_it(addon_module):
+    """The Blend Volume (hidden, not selectable) stayed in its first collection when its tooth was moved to another
+    (the tooth rendered hollow, frame mean 0.037 for 0.115, once the old collection was excluded) or linked into
+    another scene, and stayed when the tooth was deleted, rendering the deleted tooth's inside (0.124) and saved
+    with the file. It now moves with its tooth and goes with it."""
+    enamel = _add_incisor()
+    dentin = enamel.ms_tooth.partner
+    scene, layer = bpy.context.scene, bpy.context.view_layer
+    (blend,) = _blend_volumes()
+    teeth = bpy.data.collections.new("Teeth")
+    scene.collection.children.link(teeth)
+    for obj in (enamel, dentin):  # Object > Collection > Move to Collection
+        teeth.objects.link(obj)
+        scene.collection.objects.unlink(obj)
+    layer.update()
+    assert [c.name for c in blend.users_collection] == ["Teeth"]
+    other = bpy.data.scenes.new("Other")  # Object > Link/Transfer Data > Link Objects to Scene
+    for obj in (enamel, dentin):
+        other.collection.objects.link(obj)
+    layer.update()
+    assert blend.name in other.objects
+    for obj in scene.objects:
+        obj.select_set(obj in (enamel, dentin))
+    assert bpy.ops.object.delete() == {"FINISHED"}
+    for obj in (enamel, dentin):  # and from the other scene: the tooth is gone from every collection
+        other.collection.objects.unlink(obj)
+    layer.update()
+    assert _blend_volumes() == []
+
+
+def test_a_tooth_linked_from_another_file_without_its_blend_volume_gets_one(addon_module, tmp_path):
+    """File > Link of a tooth's Enamel and Dentin (what one sees; the Blend Volume is hidden) rendered it hollow:
+    its materials give their medium to a Blend Volume, and none came with it. It now gets one of this file's."""
+    _add_incisor()
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.objects = ["Incisor Enamel", "Incisor Dentin"]
+    for obj in dst.objects:
+        bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.update()
+    (blend,) = _blend_volumes()
+    assert blend.library is None and blend.parent == bpy.data.objects["Incisor Enamel"]
+    assert blend.name in bpy.context.scene.objects and not blend.hide_render
+
+
 def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_module, capture_dir, tmp_path):
     """A tooth linked from another file is read-only here: Apply Fit Result says so, naming the file, before it
     changes anything."""
@@ -345,6 +396,7 @@ def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_m
         dst.objects = ["Incisor Enamel", "Incisor Dentin"]
     for obj in dst.objects:
         bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.update()  # the linked tooth gets a Blend Volume of this file's
     enamel = bpy.data.objects["Incisor Enamel"]
     m = bpy.context.scene.ms_teeth_fit.tooth_map.add()
     m.capture_tooth, m.enamel = "tooth0", enamel
