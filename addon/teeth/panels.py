@@ -12,6 +12,18 @@ from .properties import CHECK_IMAGE_NAME, fit_out_dir, owner
 from .scene_build import short_light_paths
 
 
+def scene_has_teeth(scene) -> bool:
+    """Whether ``scene`` renders a tooth: one of its objects, or one in a collection it instances (File > Link of a
+    collection makes an instance; its objects are not the scene's objects)."""
+    for obj in scene.objects:
+        if obj.ms_tooth.role == "ENAMEL":
+            return True
+        coll = obj.instance_collection if obj.instance_type == "COLLECTION" else None
+        if coll is not None and any(o.ms_tooth.role == "ENAMEL" for o in coll.all_objects):
+            return True
+    return False
+
+
 class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
     bl_label = "Teeth"
     bl_idname = "VIEW3D_PT_material_structures_teeth"
@@ -23,7 +35,7 @@ class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):
         row.operator("material_structures.teeth_add_tooth", text="From Mesh", icon="MESH_DATA").source = "MESH"
         layout.operator("material_structures.teeth_import_scene", icon="IMPORT")
         if (context.scene.render.engine == "CYCLES" and short_light_paths(context.scene)
-                and any(o.ms_tooth.role == "ENAMEL" for o in context.scene.objects)):
+                and scene_has_teeth(context.scene)):
             row = layout.row()
             row.label(text="Light Paths too short: teeth render too dark", icon="ERROR")
             row.operator("material_structures.teeth_light_paths", text="Set Light Paths")

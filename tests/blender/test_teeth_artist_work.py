@@ -385,6 +385,34 @@ def test_a_tooth_linked_from_another_file_without_its_blend_volume_gets_one(addo
     assert blend.name in bpy.context.scene.objects and not blend.hide_render
 
 
+def test_the_light_paths_warning_sees_a_tooth_linked_as_a_collection_instance(addon_module, tmp_path):
+    """File > Link of a collection makes an instance whose objects are not the scene's: the Teeth panel did not warn
+    that Blender's default light paths render such a tooth half as bright (0.054 against 0.115)."""
+    from importlib import import_module
+
+    from material_structures.addon.teeth.scene_build import short_light_paths
+
+    scene_has_teeth = import_module(f"{addon_module}.addon.teeth.panels").scene_has_teeth
+    _add_incisor()
+    tooth = bpy.data.collections.new("Tooth")
+    bpy.context.scene.collection.children.link(tooth)
+    for obj in list(bpy.context.scene.collection.objects):
+        tooth.objects.link(obj)
+        bpy.context.scene.collection.objects.unlink(obj)
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    assert short_light_paths(scene) and not scene_has_teeth(scene)
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.collections = ["Tooth"]
+    instance = bpy.data.objects.new("Tooth", None)
+    instance.instance_type, instance.instance_collection = "COLLECTION", dst.collections[0]
+    scene.collection.objects.link(instance)
+    assert not any(o.ms_tooth.role == "ENAMEL" for o in scene.objects) and scene_has_teeth(scene)
+
+
 def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_module, capture_dir, tmp_path):
     """A tooth linked from another file is read-only here: Apply Fit Result says so, naming the file, before it
     changes anything."""
