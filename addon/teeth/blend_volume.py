@@ -563,30 +563,50 @@ def own_dentin(enamel):
 
 
 def follow_places() -> int:
-    """Blend Volumes follow their tooth's place: one whose enamel shell was deleted goes with it (it is hidden and
-    cannot be selected, and it went on rendering the deleted tooth's inside, saved with the file); one whose enamel
-    moved to other collections, or was linked into another scene, moves with it (left behind, the tooth rendered
-    hollow where the old collection was excluded, and in the other scene). Returns how many changed."""
+    """Blend Volumes follow their tooth's place: one whose enamel shell is in no collection (the tooth was deleted,
+    or a script took it out for a while) leaves every collection too (it is hidden and cannot be selected, and it
+    went on rendering the deleted tooth's inside, saved with the file); it stays the enamel's child, so a tooth put
+    back finds it, spread and all. One whose enamel moved to other collections, or was linked into another scene,
+    moves with it (left behind, the tooth rendered hollow where the old collection was excluded, and in the other
+    scene). One this file made for a linked tooth leaves when the tooth's own file brings its Blend Volume (else the
+    medium would count twice). Collections that cannot change here (linked, overridden) are left as they are.
+    Returns how many changed."""
     changed = 0
-    for obj in [o for o in bpy.data.objects if o.library is None and getattr(o, "ms_tooth", None) is not None
-                and o.ms_tooth.role == "BLEND"]:
+    for obj in _local_blend_volumes():
         enamel = obj.parent if obj.parent is not None else obj.ms_tooth.partner
-        if enamel is None or not enamel.users_collection:
-            bpy.data.objects.remove(obj, do_unlink=True)
-            changed += 1
-            continue
-        want = {c.as_pointer(): c for c in enamel.users_collection if c.library is None}
         have = {c.as_pointer(): c for c in obj.users_collection}
-        if not want or want.keys() == have.keys():
+        redundant = enamel is not None and any(c.library is not None and c.ms_tooth.role == "BLEND"
+                                               for c in enamel.children)
+        if enamel is None or not enamel.users_collection or redundant:
+            want = {}
+        else:
+            want = {c.as_pointer(): c for c in enamel.users_collection if c.library is None}
+            if not want:
+                continue  # the tooth lives in collections of another file only: nothing here to follow
+        if want.keys() == have.keys():
             continue
         for key, coll in want.items():
             if key not in have:
-                coll.objects.link(obj)
+                _try(coll.objects.link, obj)
         for key, coll in have.items():
-            if key not in want and coll.library is None:
-                coll.objects.unlink(obj)
+            if key not in want:
+                _try(coll.objects.unlink, obj)
         changed += 1
     return changed
+
+
+def _try(change, obj) -> None:
+    """A collection change that a library override may refuse ("Collection ... is overridden"): then it stays."""
+    try:
+        change(obj)
+    except RuntimeError:
+        pass
+
+
+def _local_blend_volumes() -> list:
+    """This file's Blend Volume objects (a scan of every object, 1.4 us each: run on collection changes only)."""
+    return [o for o in bpy.data.objects if o.library is None and getattr(o, "ms_tooth", None) is not None
+            and o.ms_tooth.role == "BLEND"]
 
 
 def _linked_tooth_blend(enamel, done: list) -> None:
@@ -617,6 +637,8 @@ def follow_materials(enamels) -> list:
     Volume."""
     done = []
     for enamel in enamels:
+        if not enamel.users_collection:  # deleted (or out of every collection for a while): follow_places' part
+            continue
         if enamel.library is not None:
             _linked_tooth_blend(enamel, done)
             continue

@@ -20,6 +20,19 @@ def _enamel_of(obj):
     return ms.partner if ms.role == "DENTIN" else None
 
 
+_scene_counts: dict = {}  # scene -> objects in its own (master) collection, at the last look
+
+
+def _scene_objects_changed() -> bool:
+    """Whether an object joined or left a scene's own collection since the last look (a few microseconds: a
+    selection click, which updates the scene too, does not scan every object)."""
+    counts = {sc.name_full: len(sc.collection.objects) for sc in bpy.data.scenes}
+    changed = counts != _scene_counts
+    _scene_counts.clear()
+    _scene_counts.update(counts)
+    return changed
+
+
 @persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
     enamels = {}
@@ -29,8 +42,10 @@ def on_depsgraph_update(scene, depsgraph) -> None:
             enamel = _enamel_of(update.id.original)
             if enamel is not None:
                 enamels[enamel.name_full] = enamel
-        elif isinstance(update.id, (bpy.types.Collection, bpy.types.Scene)):
-            places = True  # objects deleted, moved between collections, linked into a scene
+        elif isinstance(update.id, bpy.types.Collection):
+            places = True  # objects deleted, moved between collections, linked into one
+        elif isinstance(update.id, bpy.types.Scene):
+            places |= _scene_objects_changed()  # linked into a scene's own collection; not a selection click
     if places:
         follow_places()
     if enamels:

@@ -13,15 +13,23 @@ from .scene_build import short_light_paths
 
 
 def scene_has_teeth(scene) -> bool:
-    """Whether ``scene`` renders a tooth: one of its objects, or one in a collection it instances (File > Link of a
-    collection makes an instance; its objects are not the scene's objects)."""
-    for obj in scene.objects:
-        if obj.ms_tooth.role == "ENAMEL":
-            return True
-        coll = obj.instance_collection if obj.instance_type == "COLLECTION" else None
-        if coll is not None and any(o.ms_tooth.role == "ENAMEL" for o in coll.all_objects):
-            return True
-    return False
+    """Whether ``scene`` renders a tooth: one of its objects, or one in a collection it instances, at any depth
+    (File > Link of a collection makes an instance; its objects are not the scene's objects). Each collection is
+    looked into once: the panel redraws often, and a scene may instance one collection a thousand times."""
+    seen: set = set()
+
+    def has_teeth(objects) -> bool:
+        for obj in objects:
+            if obj.ms_tooth.role == "ENAMEL":
+                return True
+            coll = obj.instance_collection if obj.instance_type == "COLLECTION" else None
+            if coll is not None and coll.as_pointer() not in seen:
+                seen.add(coll.as_pointer())
+                if has_teeth(coll.all_objects):
+                    return True
+        return False
+
+    return has_teeth(scene.objects)
 
 
 class VIEW3D_PT_material_structures_teeth(SidebarPanel, bpy.types.Panel):

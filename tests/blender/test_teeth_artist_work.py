@@ -342,7 +342,8 @@ def test_a_blend_volume_goes_where_its_tooth_goes_and_with_it(addon_module):
     """The Blend Volume (hidden, not selectable) stayed in its first collection when its tooth was moved to another
     (the tooth rendered hollow, frame mean 0.037 for 0.115, once the old collection was excluded) or linked into
     another scene, and stayed when the tooth was deleted, rendering the deleted tooth's inside (0.124) and saved
-    with the file. It now moves with its tooth and goes with it."""
+    with the file. It now moves with its tooth and leaves the scene with it (kept as the enamel's child: a tooth
+    put back finds it, spread and all), and no update makes it again for the deleted tooth."""
     enamel = _add_incisor()
     dentin = enamel.ms_tooth.partner
     scene, layer = bpy.context.scene, bpy.context.view_layer
@@ -359,13 +360,25 @@ def test_a_blend_volume_goes_where_its_tooth_goes_and_with_it(addon_module):
         other.collection.objects.link(obj)
     layer.update()
     assert blend.name in other.objects
-    for obj in scene.objects:
-        obj.select_set(obj in (enamel, dentin))
-    assert bpy.ops.object.delete() == {"FINISHED"}
-    for obj in (enamel, dentin):  # and from the other scene: the tooth is gone from every collection
-        other.collection.objects.unlink(obj)
+    for obj in (enamel, dentin):  # a script takes the tooth out of every collection for a while, then puts it back
+        for coll in list(obj.users_collection):
+            coll.objects.unlink(obj)
     layer.update()
-    assert _blend_volumes() == []
+    assert blend.users_collection == ()
+    for obj in (enamel, dentin):
+        teeth.objects.link(obj)
+    layer.update()
+    assert _blend_volumes() == [blend] and [c.name for c in blend.users_collection] == ["Teeth"]
+    for obj in teeth.objects:
+        obj.select_set(obj == enamel)  # what a click on a tooth selects
+    assert bpy.ops.object.delete() == {"FINISHED"}
+    layer.update()
+    for _ in range(3):  # later updates (objects added, moved) make no Blend Volume for the deleted tooth
+        scene.collection.objects.link(bpy.data.objects.new("Empty", None))
+        layer.update()
+    assert not any(o.ms_tooth.role == "BLEND" for sc in bpy.data.scenes for o in sc.objects)
+    assert _blend_volumes() == [blend] and blend.users_collection == ()  # dropped with the tooth when saved
+    assert len([m for m in bpy.data.materials if m.name.startswith("Blend ")]) == 1
 
 
 def test_a_tooth_linked_from_another_file_without_its_blend_volume_gets_one(addon_module, tmp_path):
@@ -411,6 +424,13 @@ def test_the_light_paths_warning_sees_a_tooth_linked_as_a_collection_instance(ad
     instance.instance_type, instance.instance_collection = "COLLECTION", dst.collections[0]
     scene.collection.objects.link(instance)
     assert not any(o.ms_tooth.role == "ENAMEL" for o in scene.objects) and scene_has_teeth(scene)
+    outer = bpy.data.collections.new("Set")  # an instance inside an instanced collection (a set dressing)
+    scene.collection.objects.unlink(instance)
+    outer.objects.link(instance)
+    dressing = bpy.data.objects.new("Set", None)
+    dressing.instance_type, dressing.instance_collection = "COLLECTION", outer
+    scene.collection.objects.link(dressing)
+    assert scene_has_teeth(scene)
 
 
 def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_module, capture_dir, tmp_path):
