@@ -381,9 +381,8 @@ def test_a_blend_volume_goes_where_its_tooth_goes_and_with_it(addon_module):
     assert len([m for m in bpy.data.materials if m.name.startswith("Blend ")]) == 1
 
 
-def test_a_tooth_linked_from_another_file_without_its_blend_volume_gets_one(addon_module, tmp_path):
-    """File > Link of a tooth's Enamel and Dentin (what one sees; the Blend Volume is hidden) rendered it hollow:
-    its materials give their medium to a Blend Volume, and none came with it. It now gets one of this file's."""
+def _link_an_incisor(tmp_path) -> None:
+    """A new file that links the Enamel and Dentin of an incisor saved in another (not its hidden Blend Volume)."""
     _add_incisor()
     path = str(tmp_path / "lib.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
@@ -392,6 +391,12 @@ def test_a_tooth_linked_from_another_file_without_its_blend_volume_gets_one(addo
         dst.objects = ["Incisor Enamel", "Incisor Dentin"]
     for obj in dst.objects:
         bpy.context.scene.collection.objects.link(obj)
+
+
+def test_a_tooth_linked_from_another_file_without_its_blend_volume_gets_one(addon_module, tmp_path):
+    """File > Link of a tooth's Enamel and Dentin (what one sees; the Blend Volume is hidden) rendered it hollow:
+    its materials give their medium to a Blend Volume, and none came with it. It now gets one of this file's."""
+    _link_an_incisor(tmp_path)
     bpy.context.view_layer.update()
     (blend,) = _blend_volumes()
     assert blend.library is None and blend.parent == bpy.data.objects["Incisor Enamel"]
@@ -436,14 +441,7 @@ def test_the_light_paths_warning_sees_a_tooth_linked_as_a_collection_instance(ad
 def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_module, capture_dir, tmp_path):
     """A tooth linked from another file is read-only here: Apply Fit Result says so, naming the file, before it
     changes anything."""
-    _add_incisor()
-    path = str(tmp_path / "lib.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    bpy.ops.wm.read_homefile(use_empty=True)
-    with bpy.data.libraries.load(path, link=True) as (_src, dst):
-        dst.objects = ["Incisor Enamel", "Incisor Dentin"]
-    for obj in dst.objects:
-        bpy.context.scene.collection.objects.link(obj)
+    _link_an_incisor(tmp_path)
     bpy.context.view_layer.update()  # the linked tooth gets a Blend Volume of this file's
     enamel = bpy.data.objects["Incisor Enamel"]
     m = bpy.context.scene.ms_teeth_fit.tooth_map.add()
