@@ -478,8 +478,9 @@ def sync_spreads() -> None:
 
 
 def ensure_blend(enamel, spread: float | None = None, collection=None):
-    """Give the tooth of ``enamel`` its Blend Volume (made once; its materials linked again each call) and,
-    unless ``spread`` is None, set the spread. Returns the Blend Volume object (None without a dentin)."""
+    """Give the tooth of ``enamel`` its Blend Volume (made once, in ``collection`` or the enamel's collections of this
+    file; its materials linked again each call) and, unless ``spread`` is None, set the spread. Returns the Blend
+    Volume object (None without a dentin, or where it has none and no collection of this file could hold one)."""
     dentin = enamel.ms_tooth.partner
     em = enamel.active_material
     dm = dentin.active_material if dentin is not None else None
@@ -487,17 +488,20 @@ def ensure_blend(enamel, spread: float | None = None, collection=None):
         return None
     from .materials import ensure_blend_input, set_gate
 
+    obj = blend_object(enamel)
+    # a new Blend Volume goes where its enamel is, in collections of this file (one of another file is read-only)
+    colls = [collection] if collection is not None else [c for c in enamel.users_collection if c.library is None]
+    if obj is None and not colls:
+        return None
     for m in (em, dm):
         ensure_blend_input(group_node(m).node_tree)
         set_gate(group_node(m).node_tree, False)  # a shade appended from a file: its input is set here
-    obj = blend_object(enamel)
     name = enamel.ms_tooth.tooth_name or enamel.name
     if obj is None:
         mat = new_blend_material(f"Blend {name}", DEFAULT_SPREAD_MM if spread is None else spread)
         me = bpy.data.meshes.new(f"{name} Blend Volume")
         me.materials.append(mat)
         obj = bpy.data.objects.new(f"{name} Blend Volume", me)
-        colls = [collection] if collection is not None else list(enamel.users_collection)
         for c in colls:
             c.objects.link(obj)
         obj.parent = enamel  # identity: the grids are in the enamel's millimetre frame
@@ -609,38 +613,18 @@ def _local_blend_volumes() -> list:
             and o.ms_tooth.role == "BLEND"]
 
 
-def _linked_tooth_blend(enamel, done: list) -> None:
-    """A tooth whose enamel and dentin were linked from another file without their Blend Volume (File > Link of the
-    objects one sees; the Blend Volume is hidden): their materials give their medium to a Blend Volume (the objects
-    say so), so it rendered hollow. It gets a Blend Volume of this file's, built from the linked objects."""
-    dentin = enamel.ms_tooth.partner
-    if dentin is None or blend_object(enamel) is not None or not enamel.users_collection:
-        return
-    if not any(o.get(BLEND_ATTRIBUTE) == 1.0 for o in (enamel, dentin)):
-        return
-    if group_node(enamel.active_material) is None or group_node(dentin.active_material) is None:
-        return
-    local = [c for c in enamel.users_collection if c.library is None]
-    if local and ensure_blend(enamel, _twin_spread(enamel.active_material, dentin.active_material),
-                              collection=local[0]) is not None:
-        done.append(enamel)
-
-
 def follow_materials(enamels) -> list:
     """Teeth (enamel shells) whose Blend Volume is driven by other materials than the ones their enamel and dentin
     wear now (an artist gave the dentin another material, e.g. a library Dentin Shade) get the new ones linked: the
     Blend Volume takes their parameters and they stop carrying a medium of their own, which the dentin would
     otherwise hold twice (a material linked from a library included: the tooth object's own property empties it). A
-    tooth without a Blend Volume whose materials or objects expect one (a Shift+D copy) gets its own (a copy of the
-    enamel alone first its own dentin: :func:`own_dentin`). A tooth whose new material is not an Enamel/Dentin
-    material, or that comes from another file, is left alone. Returns the enamel shells relinked or given a Blend
-    Volume."""
+    tooth without a Blend Volume whose materials or objects expect one (a Shift+D copy, or a tooth linked from another
+    file without it) gets its own (a copy of the enamel alone first its own dentin: :func:`own_dentin`). A tooth
+    whose new material is not an Enamel/Dentin material, or that comes from another file with its Blend Volume, is
+    left alone. Returns the enamel shells relinked or given a Blend Volume."""
     done = []
     for enamel in enamels:
         if not enamel.users_collection:  # deleted (or out of every collection for a while): follow_places' part
-            continue
-        if enamel.library is not None:
-            _linked_tooth_blend(enamel, done)
             continue
         dentin = own_dentin(enamel)
         if dentin is None:
@@ -650,13 +634,16 @@ def follow_materials(enamels) -> list:
             continue
         obj = blend_object(enamel)
         if obj is None:
-            # a copy (Shift+D) of a tooth, its Blend Volume not selected (it cannot be): its materials give their
-            # medium to a Blend Volume, so it gets its own, at the spread of the tooth it was copied from
-            if any(BLEND_INPUT in group_node(m).inputs and group_node(m).inputs[BLEND_INPUT].default_value == 1.0
-                   for m in (em, dm)) or any(o.get(BLEND_ATTRIBUTE) == 1.0 for o in (enamel, dentin)):
-                ensure_blend(enamel, _twin_spread(em, dm))
+            # a copy (Shift+D) of a tooth, its Blend Volume not selected (it cannot be), or a tooth linked from another
+            # file without it (File > Link of what one sees): its materials give their medium to a Blend Volume, so
+            # it gets its own (this file's), at the spread of the tooth it was copied from
+            if (any(BLEND_INPUT in group_node(m).inputs and group_node(m).inputs[BLEND_INPUT].default_value == 1.0
+                    for m in (em, dm)) or any(o.get(BLEND_ATTRIBUTE) == 1.0 for o in (enamel, dentin))) \
+                    and ensure_blend(enamel, _twin_spread(em, dm)) is not None:
                 done.append(enamel)
             continue
+        if enamel.library is not None:
+            continue  # a linked tooth's Blend Volume (its file's, or one made here): left as it is
         blend_node = group_node(obj.active_material) if obj.active_material is not None else None
         if blend_node is None or SPREAD not in blend_node.inputs:
             continue  # the artist gave the Blend Volume a material of their own: theirs to keep
