@@ -43,8 +43,9 @@ def load_osl_script(
     node = node_tree.nodes.new("ShaderNodeScript")
     if name:
         node.name = node.label = name
-    node.mode = "INTERNAL"
-    node.script = shader_text(shader)
+    with _private_temporary_folder():  # with Cycles + OSL as the engine, setting the script compiles it
+        node.mode = "INTERNAL"
+        node.script = shader_text(shader)
     errors = compile_script_node(node, scene)
     have_in = {s.name for s in node.inputs}
     have_out = {s.name for s in node.outputs}
