@@ -36,7 +36,7 @@ def _inputs(n, seed, radius=(120.0, 240.0)):
     return pts, fp, wo
 
 
-@pytest.mark.heavy  # 5-16 s per light: outside `make test-fast`
+@pytest.mark.heavy  # 1-3 s per light: outside `make test-fast`
 @pytest.mark.parametrize(
     "light",
     [
