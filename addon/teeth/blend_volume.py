@@ -669,10 +669,14 @@ def _twin_spread(enamel_mat, dentin_mat) -> float | None:
 
 def upgrade_after_load() -> None:
     """Teeth of a file made by an older version: the Enamel/Dentin groups and the Blend group get the current
-    node layouts, and every tooth with a Blend Volume its materials linked again (their drivers made anew).
+    node layouts (the Enamel/Gingiva groups their EEVEE stand-in), and every tooth with a Blend Volume its materials
+    linked again (their drivers made anew).
     A file of the current layouts is left as it was opened (nothing rebuilt, no driver made again)."""
-    from .materials import ensure_blend_input
+    from .materials import SURFACE_GROUPS, ensure_blend_input, ensure_stand_in
 
+    for group in bpy.data.node_groups:
+        if group.library is None and group.get(MARKER) in SURFACE_GROUPS:
+            ensure_stand_in(group)
     changed = False
     for group in bpy.data.node_groups:
         if group.library is None and group.get(MARKER) in MEDIA:

@@ -15,8 +15,6 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import bpy
 import numpy as np
 
@@ -79,6 +77,8 @@ SOCKET_WORDS = {
     "Spread (mm)": "Width of the enamel/dentin transition in millimetres (the sigmoid's spread)",
     "Surface": "The boundary's surface shader (connect to the material output's Surface)",
     "Volume": "The medium (connect to the material output's Volume)",
+    "EEVEE Surface": "A subsurface stand-in of the tissue for EEVEE and Material Preview (connect to an EEVEE "
+                     "material output); Cycles renders Surface and Volume",
     "Geometry": "The tooth's volume grids for the blended boundary",
 }
 
@@ -363,6 +363,7 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
     group = next((g for g in mine if g.name == kind), mine[0] if mine else None)
     if group is not None:
         describe_teeth_sockets(group)  # a group from a file made before the sockets had words
+        ensure_stand_in(group)  # ... or before the stand-in followed the sliders
         return group
     group = bpy.data.node_groups.new(kind, "ShaderNodeTree")
     group[MARKER] = kind
@@ -371,6 +372,8 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
     if kind in SURFACE_GROUPS:
         group.interface.new_socket("Surface", in_out="OUTPUT", socket_type="NodeSocketShader")
     group.interface.new_socket("Volume", in_out="OUTPUT", socket_type="NodeSocketShader")
+    if kind in SURFACE_GROUPS:
+        group.interface.new_socket(EEVEE_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
     nodes, links = group.nodes, group.links
     gin = nodes.new("NodeGroupInput")
     gout = nodes.new("NodeGroupOutput")
@@ -394,6 +397,8 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
         links.new(switch.outputs[0], gout.inputs["Surface"])
         script.location, attr.location, switch.location = (200, 200), (-300, 250), (900, 200)
     links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
+    if kind in SURFACE_GROUPS:
+        links.new(_stand_in_subgraph(group, gin, kind), gout.inputs[EEVEE_OUTPUT])
     describe_teeth_sockets(group)
     return group
 
@@ -406,9 +411,7 @@ def new_teeth_material(kind: str, name: str | None = None, scene=None, volume=No
     mat, node, out = group_material(name or kind, group, MARKER, kind, label=kind, surface=surface, volume="Volume")
     node.inputs["mm per Unit"].default_value = mm_per_unit
     if surface:
-        _add_eevee_output(mat, out, kind)
-        d = DEFAULTS[kind]  # the stand-in of the material's own values (before: Principled's orange skin defaults)
-        _sync_eevee(mat, SimpleNamespace(sigma_t=d["sigma_t"], albedo=d["albedo"]), mm_per_unit)
+        add_eevee_fallback(mat, out, node.outputs[EEVEE_OUTPUT], location=(400, -350), name="EEVEE Output")
     mat.diffuse_color = (*[min(1.0, x) for x in DEFAULTS[kind]["albedo"]], 1.0)  # solid-view colour
     if volume is not None:
         set_volume(mat, volume)
@@ -417,31 +420,68 @@ def new_teeth_material(kind: str, name: str | None = None, scene=None, volume=No
     return mat
 
 
-def _add_eevee_output(mat, cycles_output, kind: str) -> None:
-    """EEVEE/viewport stand-in (the OSL boundary and the volumes are Cycles-only): a Principled BSDF with
-    random-walk subsurface scattering, radius = 1 / sigma_t, colour = albedo; kept in sync by set_volume."""
-    p = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
-    p.name = p.label = "EEVEE Stand-in"
+EEVEE_OUTPUT = "EEVEE Surface"  # the surface group's output for EEVEE and Material Preview
+STAND_IN_NODE = "EEVEE Stand-in"
+
+
+def _stand_in_subgraph(group, gin, kind: str):
+    """EEVEE / Material Preview stand-in (the OSL boundary and the volumes are Cycles-only): a Principled BSDF with
+    random-walk subsurface scattering, colour = Albedo, radius = 1 / Sigma_t in mm (scaled by 1 / mm per Unit),
+    IOR = Eta. Inside the group, so it follows every edit of the material's sliders (returns the shader socket)."""
+    nodes, links = group.nodes, group.links
+    p = nodes.new("ShaderNodeBsdfPrincipled")
+    p.name = p.label = STAND_IN_NODE
     p.inputs["Roughness"].default_value = 0.08
-    p.inputs["IOR"].default_value = DEFAULTS[kind]["eta"]
     weight = p.inputs.get("Subsurface Weight") or p.inputs.get("Subsurface")
     if weight is not None:
         weight.default_value = 1.0
-    p.location = (100, -350)
-    add_eevee_fallback(mat, cycles_output, p.outputs[0], location=(400, -350), name="EEVEE Output")
-
-
-def _sync_eevee(mat, volume, mm_per_unit: float) -> None:
-    p = mat.node_tree.nodes.get("EEVEE Stand-in") if mat.node_tree else None
-    if p is None:
-        return
-    p.inputs["Base Color"].default_value = (*(float(x) for x in volume.albedo), 1.0)
+    links.new(gin.outputs["Albedo"], p.inputs["Base Color"])
+    links.new(gin.outputs["Eta"], p.inputs["IOR"])
+    reach = nodes.new("ShaderNodeVectorMath")
+    reach.operation = "DIVIDE"
+    reach.inputs[0].default_value = (1.0, 1.0, 1.0)
+    links.new(gin.outputs["Sigma_t"], reach.inputs[1])
+    unit = nodes.new("ShaderNodeMath")
+    unit.operation = "DIVIDE"
+    unit.inputs[0].default_value = 1.0
+    links.new(gin.outputs["mm per Unit"], unit.inputs[1])
     radius = p.inputs.get("Subsurface Radius")
     if radius is not None:
-        radius.default_value = tuple(float(1.0 / x) for x in volume.sigma_t)
+        links.new(reach.outputs[0], radius)
     scale = p.inputs.get("Subsurface Scale")
     if scale is not None:
-        scale.default_value = 1.0 / mm_per_unit
+        links.new(unit.outputs[0], scale)
+    reach.location, unit.location, p.location = (300, -900), (300, -1100), (600, -900)
+    return p.outputs[0]
+
+
+def ensure_stand_in(group) -> bool:
+    """Give a local Enamel/Gingiva ``group`` of an older file its :data:`EEVEE_OUTPUT` and move every local material
+    wearing it from the material's own stand-in (fixed values, set at creation and by fits only) onto it. Returns
+    whether it changed anything."""
+    kind = group.get(MARKER)
+    if kind not in SURFACE_GROUPS or group.library is not None:
+        return False
+    gout = next((n for n in group.nodes if n.type == "GROUP_OUTPUT"), None)
+    gin = next((n for n in group.nodes if n.type == "GROUP_INPUT"), None)
+    if gout is None or gin is None:
+        return False
+    changed = False
+    if EEVEE_OUTPUT not in gout.inputs:
+        group.interface.new_socket(EEVEE_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
+        group.links.new(_stand_in_subgraph(group, gin, kind), gout.inputs[EEVEE_OUTPUT])
+        changed = True
+    for mat in bpy.data.materials:
+        tree = mat.node_tree
+        own = tree.nodes.get(STAND_IN_NODE) if tree is not None and mat.library is None else None
+        node = group_node(mat) if own is not None else None
+        if node is None or node.node_tree != group or EEVEE_OUTPUT not in node.outputs:
+            continue
+        for link in list(own.outputs[0].links):
+            tree.links.new(node.outputs[EEVEE_OUTPUT], link.to_socket)
+        tree.nodes.remove(own)
+        changed = True
+    return changed
 
 
 def group_node(mat):
@@ -460,7 +500,6 @@ def set_volume(mat, volume) -> None:
     node.inputs["G2"].default_value = float(volume.g2)
     node.inputs["Beta"].default_value = float(volume.beta)
     mat.diffuse_color = (*(float(x) for x in volume.albedo), 1.0)
-    _sync_eevee(mat, volume, node.inputs["mm per Unit"].default_value)
 
 
 def set_a_t(mat, a_t) -> None:

@@ -17,6 +17,7 @@ from types import SimpleNamespace
 import bpy
 import numpy as np
 import pytest
+from mathutils import Vector
 
 from ._teeth_capture import assert_fit_applied, import_capture_scene, write_tiny_capture
 from .fresh import run_fresh
@@ -318,20 +319,73 @@ def test_a_fit_applied_to_a_tooth_and_its_copy_gives_each_its_own_values(addon_m
     assert shared.name in {a.active_material.name, b.active_material.name}  # one tooth keeps it, one has a copy
 
 
-def test_add_tooth_gives_eevee_the_teeth_own_colour_and_reach(addon_module):
-    """EEVEE (Blender's default engine) renders a tooth through its materials' Principled stand-in, which kept
-    Principled's defaults (base 0.8, the orange skin radius 1 / 0.2 / 0.1) until a fit was applied: an orange tooth
-    (frame mean RGB 0.19 / 0.06 / 0.03 against 0.08 / 0.06 / 0.05). It now starts at the material's values."""
-    from material_structures.addon.teeth.materials import DEFAULTS
+def _eevee_tooth_colour(enamel) -> np.ndarray:
+    """Mean RGB of the tooth's pixels in an EEVEE render (32 x 32, a sun, a black world, looking at the crown)."""
+    from material_structures import render as R
 
-    _add_incisor()
-    for obj, kind in ((bpy.data.objects["Incisor Enamel"], "Enamel"), (bpy.data.objects["Incisor Dentin"], "Dentin")):
-        p = obj.active_material.node_tree.nodes.get("EEVEE Stand-in")
-        if p is None:
-            continue  # a medium without a surface of its own
-        np.testing.assert_allclose(tuple(p.inputs["Base Color"].default_value)[:3], DEFAULTS[kind]["albedo"], rtol=1e-6)
-        np.testing.assert_allclose(tuple(p.inputs["Subsurface Radius"].default_value),
-                                   1.0 / np.asarray(DEFAULTS[kind]["sigma_t"]), rtol=1e-6)
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_EEVEE_NEXT" if bpy.app.version < (5, 0, 0) else "BLENDER_EEVEE"
+    scene.render.resolution_x = scene.render.resolution_y = 32
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = True
+    scene.eevee.taa_render_samples = 4
+    if scene.camera is None:
+        R.dark_world(scene)
+        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+        sun.data.energy = 3.0
+        scene.collection.objects.link(sun)
+        lo, hi = np.min([enamel.matrix_world @ Vector(c) for c in enamel.bound_box], 0), \
+            np.max([enamel.matrix_world @ Vector(c) for c in enamel.bound_box], 0)
+        centre, size = (lo + hi) / 2, float(np.max(hi - lo))
+        R.add_orthographic_camera(scene, 1.2 * size, location=(centre[0], centre[1] - 4 * size, centre[2]),
+                                  rotation=(np.pi / 2, 0.0, 0.0))
+    px = R.render_to_array(scene)
+    alpha = px[..., 3] > 0.5
+    assert alpha.sum() > 50, "the tooth is not in the picture"
+    return px[alpha, :3].mean(axis=0)
+
+
+def test_eevee_shows_the_teeth_own_colour_and_follows_the_sliders(addon_module):
+    """EEVEE (Blender's default engine, and Material Preview) renders a tooth through a Principled stand-in. It kept
+    Principled's defaults (base 0.8, the orange skin radius 1 / 0.2 / 0.1) until a fit was applied, and then the
+    fit's values: the Albedo and Sigma_t sliders an artist turns on the material changed nothing in EEVEE. The
+    stand-in now reads the material's own values, whatever sets them."""
+    from material_structures.addon.teeth.materials import DEFAULTS, STAND_IN_NODE, group_node
+
+    enamel = _add_incisor()
+    mat = enamel.active_material
+    assert STAND_IN_NODE not in mat.node_tree.nodes  # in the group, fed by the material's inputs
+    node = group_node(mat)
+    np.testing.assert_allclose(tuple(node.inputs["Albedo"].default_value)[:3], DEFAULTS["Enamel"]["albedo"])
+    before = _eevee_tooth_colour(enamel)
+    assert before[0] / before[2] < 1.6, before  # not the orange of Principled's skin defaults (measured 7.0)
+    node.inputs["Albedo"].default_value = (0.95, 0.45, 0.45, 1.0)  # as an artist turns the slider
+    after = _eevee_tooth_colour(enamel)
+    assert after[0] / after[1] > 1.3 * before[0] / before[1], (before, after)
+
+
+def test_a_file_with_the_materials_own_stand_in_moves_onto_the_groups(addon_module, tmp_path):
+    """A file saved before the stand-in was part of the group: loading it links its EEVEE output to the group's
+    stand-in and removes the material's own Principled node (which no slider reached)."""
+    from material_structures.addon.teeth.materials import EEVEE_OUTPUT, STAND_IN_NODE, group_node
+
+    enamel = _add_incisor()
+    mat = enamel.active_material
+    group = group_node(mat).node_tree
+    # the layout as older versions made it: the material's own Principled feeding its EEVEE output
+    own = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
+    own.name = STAND_IN_NODE
+    eevee_out = mat.node_tree.nodes["EEVEE Output"]
+    mat.node_tree.links.new(own.outputs[0], eevee_out.inputs["Surface"])
+    group.interface.remove(next(s for s in group.interface.items_tree
+                                if s.item_type == "SOCKET" and s.name == EEVEE_OUTPUT))
+    path = tmp_path / "old.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    mat = bpy.data.objects["Incisor Enamel"].active_material
+    assert STAND_IN_NODE not in mat.node_tree.nodes
+    fed = mat.node_tree.nodes["EEVEE Output"].inputs["Surface"].links[0].from_socket
+    assert fed.node == group_node(mat) and fed.name == EEVEE_OUTPUT
 
 
 def _blend_volumes():

@@ -66,7 +66,8 @@ def test_node_groups_and_add_menu(addon_module):
     from material_structures.addon.nodes import MENU_ENTRIES
     from material_structures.addon.teeth.materials import ensure_group
 
-    groups = (("Enamel", ["Surface", "Volume"]), ("Dentin", ["Volume"]), ("Gingiva", ["Surface", "Volume"]))
+    groups = (("Enamel", ["Surface", "Volume", "EEVEE Surface"]), ("Dentin", ["Volume"]),
+              ("Gingiva", ["Surface", "Volume", "EEVEE Surface"]))
     for kind, outputs in groups:
         g = ensure_group(kind, bpy.context.scene)
         outs = [s.name for s in g.interface.items_tree if s.item_type == "SOCKET" and s.in_out == "OUTPUT"]
