@@ -160,22 +160,28 @@ def recolor(maps: FabricMaps, kd=None, ks=None, weight=1.0) -> FabricMaps:
     return maps.replace(**changes)
 
 
+def _within_range(scaled: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """``scaled`` kept within ``SIGMA_RANGE``; a value already outside it (maps from elsewhere) may move toward the
+    range, never away from it, and is not pulled into it in one step."""
+    return np.clip(scaled, np.minimum(before, SIGMA_RANGE[0]), np.maximum(before, SIGMA_RANGE[1]))
+
+
 def smoothness(maps: FabricMaps, factor: float, weight=1.0) -> FabricMaps:
     """Scale ``sigma_x, sigma_y`` by ``factor ** weight`` (factor < 1: smoother, as lower deviation
-    means a sharper lobe), kept within ``SIGMA_RANGE``."""
+    means a sharper lobe), kept within ``SIGMA_RANGE`` (:func:`_within_range`)."""
     w = _weights(maps, weight)
-    scaled = np.clip(maps.sigma * np.power(float(factor), w), *SIGMA_RANGE)
+    scaled = _within_range(maps.sigma * np.power(float(factor), w), maps.sigma)
     return maps.replace(sigma=np.where(w > 0, scaled, maps.sigma).astype(np.float32))  # untouched texels as they were
 
 
 def anisotropy(maps: FabricMaps, factor: float, weight=1.0) -> FabricMaps:
     """Boost anisotropy by scaling the smallest ellipsoid axis by ``factor ** weight`` (factor < 1), kept within
-    ``SIGMA_RANGE``."""
+    ``SIGMA_RANGE`` (:func:`_within_range`)."""
     w = _weights(maps, weight)[..., 0]
     s = np.array(maps.sigma, dtype=np.float64)
     k = np.argmin(s, axis=-1)
     row = np.take_along_axis(s, k[..., None], -1)[..., 0]
-    rows = np.where(w > 0, np.clip(row * np.power(float(factor), w), *SIGMA_RANGE), row)
+    rows = np.where(w > 0, _within_range(row * np.power(float(factor), w), row), row)
     np.put_along_axis(s, k[..., None], rows[..., None], -1)
     return maps.replace(sigma=s.astype(np.float32))
 

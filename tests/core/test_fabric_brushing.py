@@ -126,13 +126,21 @@ def test_repeated_smoothness_and_anisotropy_keep_sigma_in_the_fitters_range():
     for _ in range(60):
         maps = anisotropy(maps, 0.1)
     assert maps.sigma[..., 0].min() == pytest.approx(0.01, rel=1e-6) and np.allclose(maps.sigma[..., 1], 0.6)
-    # texels the brush does not touch (weight 0) keep their values, even outside the range (maps from elsewhere)
+    # maps from elsewhere, sigma 20 (outside the range): texels the brush does not touch (weight 0) keep their
+    # values; touched ones move with the stroke toward the range, not away from it, and do not jump into it (a
+    # smoothing stroke at 0.9 clamped 20 to 10)
     wide = flat_maps(8, 9).replace(sigma=np.full((8, 9, 2), 20.0, np.float32))
     w = np.zeros((8, 9))
     w[2:4, 2:4] = 1.0
     for edit in (lambda m: smoothness(m, 0.9, weight=w), lambda m: anisotropy(m, 0.9, weight=w)):
         out = edit(wide)
-        assert np.all(out.sigma[w == 0] == 20.0) and np.all(out.sigma[w > 0].min(axis=-1) == 10.0)
+        assert np.all(out.sigma[w == 0] == 20.0)
+        np.testing.assert_allclose(out.sigma[w > 0].min(axis=-1), 18.0, rtol=1e-6)
+    for edit in (lambda m: smoothness(m, 1.5, weight=w), lambda m: anisotropy(m, 1.5, weight=w)):
+        assert np.all(edit(wide).sigma == 20.0)  # away from the range: held where it was
+    low = wide.replace(sigma=np.full((8, 9, 2), 0.005, np.float32))
+    np.testing.assert_allclose(smoothness(low, 1.5, weight=w).sigma[w > 0], 0.0075, rtol=1e-6)
+    assert np.all(smoothness(low, 0.5, weight=w).sigma == np.float32(0.005))
 
 
 def test_data_driven_states_blend_by_direction():
