@@ -17,6 +17,7 @@ import contextlib
 import json
 import math
 import os
+import sys
 
 from ..core.errors import MissingFileError, UserError
 from ..core.teeth.fit_checkpoint import TRIALS_DIR
@@ -100,7 +101,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         f"{FIT_DEFAULTS.textured_iterations})")
     f.add_argument("--held-out-lights", type=at_least(0), default=None,
                    help="lights left out of the fit to check it by: those farthest off the capture's axis, so the "
-                        f"check predicts lights outside the cone the fit saw (default {FIT_DEFAULTS.held_out_lights})")
+                        "check predicts lights outside the cone the fit saw; at most a quarter of the capture's "
+                        f"lights (default {FIT_DEFAULTS.held_out_lights})")
     f.add_argument("--held-out-camera", type=at_least(0), default=None, metavar="INDEX",
                    help="a camera (its index in capture.json) left out of the fit and rendered afterwards under "
                         "every light, to check new views by (default: none)")
@@ -546,6 +548,9 @@ def run_fit(args: argparse.Namespace) -> int:
     full_cap, cam_cap = cap, None
     if fs.held_out_camera >= 0:  # the fit, its search, trials, check and intervals see the other cameras only
         cap, cam_cap = split_camera(full_cap, fs.held_out_camera)
+    if args.held_out_lights is not None and args.held_out_lights > len(cap.lights) // 4:
+        print(f"note: --held-out-lights {args.held_out_lights}: a fit holds out at most a quarter of the capture's "
+              f"{len(cap.lights)} lights; it holds out {len(cap.lights) // 4}", file=sys.stderr)
     as_json = os.environ.get(PROGRESS_ENV) == "json"  # the Blender add-on reads progress as JSON lines
     os.makedirs(args.out, exist_ok=True)  # before the cluster, the search and the trials: a bad --out fails at once
     with _fit_backends(args, cap, on_dask) as (gradient, task_map):

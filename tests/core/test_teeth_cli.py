@@ -196,10 +196,13 @@ def test_fit_workers_in_one_process_and_clear_errors(tmp_path, capsys):
         assert main(common + ["--out", str(tmp_path / name), *extra]) == 0
         logs[name] = json.loads((tmp_path / name / "loss.json").read_text())["log"]
     assert [e["loss"] for e in logs["two"]] == pytest.approx([e["loss"] for e in logs["one"]], rel=1e-9)
-    # on a local Dask cluster (a task per band of a camera's rows; the intervals' renders too)
-    assert main(common + ["--out", str(tmp_path / "dask"), "--dask-workers", "1"]) == 0
-    assert len(json.loads((tmp_path / "dask" / "loss.json").read_text())["log"]) == 2
+    # on a local Dask cluster (a task per band of a camera's rows; the intervals' renders too); more held-out
+    # lights than a quarter of the capture's are held out as that quarter, and the fit says so (it did not)
     capsys.readouterr()
+    assert main(common + ["--out", str(tmp_path / "dask"), "--dask-workers", "1", "--held-out-lights", "2"]) == 0
+    assert len(json.loads((tmp_path / "dask" / "loss.json").read_text())["log"]) == 2
+    assert ("note: --held-out-lights 2: a fit holds out at most a quarter of the capture's 3 lights; it holds out 0"
+            in capsys.readouterr().err)
     assert main(["teeth", "fit", str(cap_dir), "--out", str(tmp_path / "x"), "--workers", "2", "--dask-workers",
                  "1"]) == 2
     assert "--workers is for fits in this process" in capsys.readouterr().err
