@@ -68,13 +68,27 @@ HANDLERS = [*WORLD_HANDLERS, *FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_l
             (bpy.app.handlers.redo_post, on_undo_redo_post)]
 
 
+def after_enable() -> None:
+    """The extension enabled with a file open (installed, enabled or updated during a session): the file gets the
+    work opening it would have done (its shaders brought up to date, the scratch tables and world tables
+    extracted, the teeth's layouts upgraded). Run once by a timer: while an extension registers, Blender keeps
+    ``bpy.data`` from it."""
+    for handler_list, fn in HANDLERS:
+        if handler_list is bpy.app.handlers.load_post:
+            fn()
+
+
 def register_handlers() -> None:
     for handler_list, fn in HANDLERS:
         if fn not in handler_list:
             handler_list.append(fn)
+    if not bpy.app.timers.is_registered(after_enable):
+        bpy.app.timers.register(after_enable, first_interval=0.0)
 
 
 def unregister_handlers() -> None:
     for handler_list, fn in HANDLERS:
         while fn in handler_list:
             handler_list.remove(fn)
+    if bpy.app.timers.is_registered(after_enable):
+        bpy.app.timers.unregister(after_enable)

@@ -126,17 +126,24 @@ def world_source(scene):
 
 
 def file_version(image) -> tuple:
-    """What changes when the image's file is replaced on disk (so Image > Reload of an edited HDRI gives new
-    tables): its modification time and size; the packed size for a packed image."""
+    """What tells the image's stored pixels from another's and changes when its file is replaced on disk (so
+    Image > Reload of an edited HDRI gives new tables): the file's absolute path, modification time and size; a
+    digest of a packed image's data (two files' packed images of one name and size are different images). The
+    digest is kept like an edit's (:func:`forget_edits`)."""
     if image.packed_file is not None:
-        return ("packed", image.packed_file.size)
+        ptr = ("packed", image.as_pointer())
+        digest = _edit_digests.get(ptr)
+        if digest is None:
+            digest = _edit_digests[ptr] = hashlib.blake2b(image.packed_file.data, digest_size=16).hexdigest()
+        return ("packed", image.packed_file.size, digest)
     import bpy
 
+    path = bpy.path.abspath(image.filepath, library=image.library)
     try:
-        st = os.stat(bpy.path.abspath(image.filepath, library=image.library))
+        st = os.stat(path)
     except (OSError, ValueError):
-        return ()
-    return (st.st_mtime_ns, st.st_size)
+        return (path,)
+    return (path, st.st_mtime_ns, st.st_size)
 
 
 def edit_version(image) -> tuple:
@@ -158,15 +165,17 @@ def edit_version(image) -> tuple:
     return ("edits", digest)
 
 
-_edit_digests: dict[int, str] = {}  # image pointer -> digest of its pixels (images with unsaved edits)
+# image pointer -> digest of its pixels (images with unsaved edits); ("packed", pointer) -> of its packed data
+_edit_digests: dict = {}
 
 
 def forget_edits(image=None) -> None:
-    """Drop the pixel digest of ``image`` (of every image when None): the next key reads its pixels again."""
+    """Drop the digests of ``image`` (of every image when None): the next key reads its pixels again."""
     if image is None:
         _edit_digests.clear()
     else:
         _edit_digests.pop(image.as_pointer(), None)
+        _edit_digests.pop(("packed", image.as_pointer()), None)
 
 
 def world_strength(scene) -> float:

@@ -65,6 +65,45 @@ def test_register_unregister_twice(addon_module):
         assert hasattr(bpy.types.Scene, "material_structures")
 
 
+def test_enabling_with_a_file_open_does_what_opening_it_does(addon_module, tmp_path, monkeypatch):
+    """An artist opens a file, then installs, enables or updates the extension: the file got none of the work that
+    opening it does (here, on another machine: the scratch tables were not extracted, and a Rendered viewport
+    showed the metal without its scratches until the first F12 render). Enabling now queues that work once."""
+    import importlib
+    import shutil
+    import tempfile
+
+    from material_structures.addon.scratch.material import create_scratched_metal, group_node, script_node
+    from material_structures.addon.scratch.verify import test_scratch_set
+
+    root = sys.modules[addon_module]
+    handlers = importlib.import_module(f"{addon_module}.addon.handlers")
+    tables = importlib.import_module(f"{addon_module}.addon.scratch.tables")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mat = create_scratched_metal("Plate", test_scratch_set(), "plate", scene=bpy.context.scene)
+    bpy.ops.mesh.primitive_plane_add()
+    bpy.context.active_object.data.materials.append(mat)
+    shutil.rmtree(script_node(group_node(mat).node_tree).inputs["TableDir"].default_value)  # another machine's
+    path = str(tmp_path / "scratched.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    other = tmp_path / "other-machine-tmp"
+    other.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(other))
+    root.unregister()
+    try:
+        bpy.ops.wm.open_mainfile(filepath=path)
+    finally:
+        root.register()
+    assert not os.path.isdir(tables.cache_root())
+    assert bpy.app.timers.is_registered(handlers.after_enable)
+    handlers.after_enable()  # what the timer runs, once Blender's event loop turns (it does not without a window)
+    folder = script_node(group_node(bpy.data.materials["Plate"]).node_tree).inputs["TableDir"].default_value
+    assert os.path.isfile(os.path.join(folder, "cell_params.exr")) and folder.startswith(tables.cache_root())
+    root.unregister()
+    assert not bpy.app.timers.is_registered(handlers.after_enable)
+    root.register()
+
+
 def test_operator_ids_are_namespaced(addon_module):
     ops = [c for c in _classes(addon_module) if issubclass(c, bpy.types.Operator)]
     assert ops

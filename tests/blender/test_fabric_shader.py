@@ -315,6 +315,45 @@ def test_world_tables_follow_pixels_edited_in_memory(addon_module, tmp_path):
     assert red() == pytest.approx(float(now[0::4].mean()), rel=1e-6)
 
 
+def test_world_tables_of_two_files_packed_images_of_one_name_and_size(addon_module, tmp_path):
+    """Two files, each with a packed environment "sky" of the same size (blue in one, green in the other), opened
+    one after the other: each file's cloth is lit by its own sky. Before, the tables' key held a packed image's
+    name, size and packed byte count only, and the second file's cloth was lit by the first file's sky until
+    Blender restarted."""
+    from importlib import import_module
+
+    import bpy
+
+    from material_structures.core.exr_io import read_exr
+
+    world_tables = import_module(f"{addon_module}.addon.fabric.world_light").world_tables
+
+    def make(path, rgb):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        scene = bpy.context.scene
+        world = bpy.data.worlds.new("World")
+        scene.world = world
+        if world.node_tree is None:  # 4.5
+            world.use_nodes = True
+        image = bpy.data.images.new("sky", 64, 32, float_buffer=True)
+        image.pixels.foreach_set(np.tile(np.array([*rgb, 1.0], np.float32), 64 * 32))
+        image.pack()
+        tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+        tex.image = image
+        world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+        bpy.ops.wm.save_as_mainfile(filepath=str(path))
+
+    make(tmp_path / "blue.blend", (0.0, 0.0, 1.0))
+    make(tmp_path / "green.blend", (0.0, 1.0, 0.0))
+    sizes = set()
+    for name, rgb in (("blue", (0, 0, 1)), ("green", (0, 1, 0)), ("blue", (0, 0, 1))):
+        bpy.ops.wm.open_mainfile(filepath=str(tmp_path / f"{name}.blend"))
+        sizes.add(bpy.data.images["sky"].packed_file.size)
+        folder = world_tables(bpy.context.scene)[0]
+        np.testing.assert_allclose(read_exr(f"{folder}/radiance.exr")[..., :3].mean(axis=(0, 1)), rgb, atol=1e-3)
+    assert len(sizes) == 1  # the case: one packed size
+
+
 def test_world_table_folders_unused_for_two_weeks_are_removed(addon_module, tmp_path):
     from material_structures.addon.fabric.world_light import PRUNE_AFTER_S, _prune_tables
 
