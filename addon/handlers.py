@@ -20,7 +20,7 @@ from .scratch.material import MARKER as SCRATCH_MARKER
 from .scratch.material import ensure_base_metal
 from .teeth.blend_volume import upgrade_after_load as upgrade_teeth_after_load
 from .teeth.handlers import TEETH_HANDLERS
-from .world_environment import forget_edits
+from .world_environment import forget_edits, forget_packed
 
 
 @persistent
@@ -47,6 +47,7 @@ def on_load_post(*_args) -> None:
         elif group.library is None and group.get(SCRATCH_MARKER):
             ensure_base_metal(group)
     forget_edits()  # the pixel digests name images of the file before
+    forget_packed()
     sync_fabric_after_load()  # the world tables live in the temp folder: re-extract them for this file
     upgrade_teeth_after_load()  # the teeth's node layouts of older files
 
@@ -58,6 +59,7 @@ def on_undo_redo_post(*_args) -> None:
     reload_stale_images()
     drop_sessions()
     forget_edits()  # the restored images' pixels
+    forget_packed()
 
 
 # The world images' digests are dropped before the fabric's and the scratches' handlers read the world.
@@ -76,6 +78,10 @@ def after_enable() -> None:
     for handler_list, fn in HANDLERS:
         if handler_list is bpy.app.handlers.load_post:
             fn()
+    # an undo step of the file as brought up to date, for Ctrl+Z to return to (an opened file's first step is
+    # recorded after its load handlers ran)
+    if bpy.ops.ed.undo_push.poll():
+        bpy.ops.ed.undo_push(message="Material Structures: file brought up to date")
 
 
 def register_handlers() -> None:

@@ -128,13 +128,13 @@ def world_source(scene):
 def file_version(image) -> tuple:
     """What tells the image's stored pixels from another's and changes when its file is replaced on disk (so
     Image > Reload of an edited HDRI gives new tables): the file's absolute path, modification time and size; a
-    digest of a packed image's data (two files' packed images of one name and size are different images). The
-    digest is kept like an edit's (:func:`forget_edits`)."""
+    digest of a packed image's data (two files' packed images of one name and size are different images), taken
+    once per packed data (packing again makes new data) until :func:`forget_packed` (a load, an undo)."""
     if image.packed_file is not None:
-        ptr = ("packed", image.as_pointer())
-        digest = _edit_digests.get(ptr)
+        ptr = image.packed_file.as_pointer()
+        digest = _packed_digests.get(ptr)
         if digest is None:
-            digest = _edit_digests[ptr] = hashlib.blake2b(image.packed_file.data, digest_size=16).hexdigest()
+            digest = _packed_digests[ptr] = hashlib.blake2b(image.packed_file.data, digest_size=16).hexdigest()
         return ("packed", image.packed_file.size, digest)
     import bpy
 
@@ -165,17 +165,21 @@ def edit_version(image) -> tuple:
     return ("edits", digest)
 
 
-# image pointer -> digest of its pixels (images with unsaved edits); ("packed", pointer) -> of its packed data
-_edit_digests: dict = {}
+_edit_digests: dict[int, str] = {}  # image pointer -> digest of its pixels (images with unsaved edits)
+_packed_digests: dict[int, str] = {}  # packed file pointer -> digest of its data
 
 
 def forget_edits(image=None) -> None:
-    """Drop the digests of ``image`` (of every image when None): the next key reads its pixels again."""
+    """Drop the pixel digest of ``image`` (of every image when None): the next key reads its pixels again."""
     if image is None:
         _edit_digests.clear()
     else:
         _edit_digests.pop(image.as_pointer(), None)
-        _edit_digests.pop(("packed", image.as_pointer()), None)
+
+
+def forget_packed() -> None:
+    """Drop the packed data's digests (a file opened, an undo: the pointers may name other data now)."""
+    _packed_digests.clear()
 
 
 def world_strength(scene) -> float:

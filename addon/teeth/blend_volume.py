@@ -360,7 +360,7 @@ def new_blend_material(name: str, spread: float) -> bpy.types.Material:
     node.node_tree = group
     node.name = node.label = BLEND_GROUP
     out = material_output(mat)
-    out.target = "CYCLES"  # EEVEE: the Enamel/Dentin materials' own stand-ins
+    out.target = "CYCLES"  # EEVEE: the Enamel group's stand-in and the Dentin's volume
     tree.links.new(node.outputs["Volume"], out.inputs["Volume"])
     node.inputs[SPREAD].default_value = float(spread)
     mat.diffuse_color = (1.0, 1.0, 1.0, 0.0)

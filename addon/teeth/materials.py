@@ -474,6 +474,9 @@ def ensure_stand_in(group) -> bool:
     for mat in bpy.data.materials:
         tree = mat.node_tree
         own = tree.nodes.get(STAND_IN_NODE) if tree is not None and mat.library is None else None
+        if own is not None and (own.type != "BSDF_PRINCIPLED"
+                                or any(lk.to_node.type != "OUTPUT_MATERIAL" for lk in own.outputs[0].links)):
+            continue  # not the stand-in older versions made (an artist's node of that name)
         node = group_node(mat) if own is not None else None
         if node is None or node.node_tree != group or EEVEE_OUTPUT not in node.outputs:
             continue
@@ -500,6 +503,8 @@ def set_volume(mat, volume) -> None:
     node.inputs["G2"].default_value = float(volume.g2)
     node.inputs["Beta"].default_value = float(volume.beta)
     mat.diffuse_color = (*(float(x) for x in volume.albedo), 1.0)
+    if node.node_tree is not None:
+        ensure_stand_in(node.node_tree)  # a material appended from an older file: EEVEE reads what was just set
 
 
 def set_a_t(mat, a_t) -> None:

@@ -28,6 +28,7 @@ from .scene_build import (
     capture_tooth_names,
     fill_tooth_map,
     fit_targets,
+    linked_tooth_reason,
     map_teeth_by_position,
     no_mapping_message,
     raise_light_paths,
@@ -125,6 +126,8 @@ class MS_OT_teeth_add_tooth(bpy.types.Operator):
                 if src is None or src.type != "MESH":
                     self.report({"ERROR"}, "Select a closed mesh object (the enamel surface)")
                     return {"CANCELLED"}
+                if src.mode == "EDIT":  # its mesh as edited (in Edit Mode the mesh holds it as Edit Mode began)
+                    bpy.ops.object.mode_set(mode="OBJECT")
                 context.view_layer.update()  # src.matrix_world as seen (after moves from scripts)
                 # the source's world scale is baked into the millimetre vertices once; the tooth object
                 # gets the source's world location and rotation and scale 1 / mm
@@ -178,6 +181,10 @@ class MS_OT_teeth_set_dentin(bpy.types.Operator):
         if obj is None:
             self.report({"ERROR"}, "The active object is not a tooth (enamel shell or dentin core)")
             return {"CANCELLED"}
+        reason = linked_tooth_reason(obj)
+        if reason is not None:
+            self.report({"ERROR"}, f"Cannot change the dentin shape: {reason}")
+            return {"CANCELLED"}
         obj.ms_tooth.set_coefficients(self.coefficients)
         return {"FINISHED"}
 
@@ -198,6 +205,10 @@ class MS_OT_teeth_apply_fitted(bpy.types.Operator):
         objs = [o for o in objs if o is not None and o.ms_tooth.has_fit]
         if not objs:
             self.report({"ERROR"}, "No fitted coefficients on the selected tooth (run a fit first)")
+            return {"CANCELLED"}
+        reason = next(filter(None, map(linked_tooth_reason, objs)), None)
+        if reason is not None:
+            self.report({"ERROR"}, f"Cannot apply the fitted coefficients: {reason}")
             return {"CANCELLED"}
         for o in objs:
             o.ms_tooth.set_coefficients(tuple(o.ms_tooth.fitted))
@@ -326,11 +337,11 @@ def applied_message(done: list[str], copies: list[str] | None = None) -> str:
 
 
 def copies_note(copies: list[str] | None) -> str:
-    """What Apply Fit Result adds for the materials it made a tooth's own: "" when none."""
+    """What Apply Fit Result adds for the materials and dentin meshes it made a tooth's own: "" when none."""
     if not copies:
         return ""
     shown = ", ".join(copies[:2]) + (f" and {len(copies) - 2} more" if len(copies) > 2 else "")
-    return f" (shared materials copied so each tooth keeps its fit: {shown})"
+    return f" (shared data copied so each tooth keeps its fit: {shown})"
 
 
 class MS_OT_teeth_fit(bpy.types.Operator):

@@ -252,14 +252,38 @@ def own_material(obj, copies: list | None = None):
     return own
 
 
+def linked_tooth_reason(enamel) -> str | None:
+    """Why the tooth of ``enamel`` cannot take new values here (its enamel or dentin object, or the dentin's mesh
+    that holds the shape keys, is linked from a library file, read-only in this one), or None."""
+    for obj in (enamel, enamel.ms_tooth.partner if enamel is not None else None):
+        if obj is None:
+            continue
+        lib = obj.library or (obj.data.library if obj is not enamel and obj.data is not None else None)
+        if lib is not None:
+            return (f"'{obj.name}' is linked from {lib.filepath}; make it local (Object > Relations > Make Local)")
+    return None
+
+
 def _check_fit_targets(ts, objs: dict) -> None:
     """Refuse, before anything changes, a fit mapped onto a tooth linked from a library file (read-only here)."""
     for t in ts.teeth:
         enamel = objs.get(t.name)
-        for obj in (enamel, enamel.ms_tooth.partner if enamel is not None else None):
-            if obj is not None and obj.library is not None:
-                raise UserError(f"cannot apply the fit of {t.name} to '{obj.name}': it is linked from "
-                                f"{obj.library.filepath}; make it local (Object > Relations > Make Local)")
+        reason = linked_tooth_reason(enamel) if enamel is not None else None
+        if reason is not None:
+            raise UserError(f"cannot apply the fit of {t.name}: {reason}")
+
+
+def own_dentin_mesh(dentin, copies: list | None = None) -> None:
+    """Give ``dentin`` a mesh (with its shape keys) of its own where another object shares it (an Alt+D copy of a
+    tooth): a tooth's fitted dentin shape is its own, not also its copy's. The copy's name is appended to
+    ``copies``."""
+    if dentin is None or dentin.data is None or dentin.data.users <= 1:
+        return
+    base = re.sub(r" \([^()]*\)$", "", re.sub(r"\.\d{3}$", "", dentin.data.name))
+    dentin.data = dentin.data.copy()
+    dentin.data.name = f"{base} ({dentin.name})"
+    if copies is not None:
+        copies.append(dentin.data.name)
 
 
 def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, targets: dict | None = None,
@@ -295,6 +319,7 @@ def apply_fit(ts, scene=None, source: str = "", set_current: bool = True, target
                 o.ms_tooth.has_fit = True
                 o.ms_tooth.fit_source = source
         if set_current:
+            own_dentin_mesh(dentin, copies)
             st.set_coefficients(t.c)
         ensure_blend(enamel, ts.blend_spread)  # the fit's enamel/dentin blend (made for a tooth without one)
         done.append(t.name)

@@ -68,7 +68,8 @@ def test_register_unregister_twice(addon_module):
 def test_enabling_with_a_file_open_does_what_opening_it_does(addon_module, tmp_path, monkeypatch):
     """An artist opens a file, then installs, enables or updates the extension: the file got none of the work that
     opening it does (here, on another machine: the scratch tables were not extracted, and a Rendered viewport
-    showed the metal without its scratches until the first F12 render). Enabling now queues that work once."""
+    showed the metal without its scratches until the first F12 render). Enabling now queues that work once, and
+    records it as an undo step: Ctrl+Z of the next action keeps it."""
     import importlib
     import shutil
     import tempfile
@@ -94,11 +95,20 @@ def test_enabling_with_a_file_open_does_what_opening_it_does(addon_module, tmp_p
         bpy.ops.wm.open_mainfile(filepath=path)
     finally:
         root.register()
+    bpy.ops.ed.undo_push(message="Opened")  # the step a desktop Blender records when it opens a file
     assert not os.path.isdir(tables.cache_root())
     assert bpy.app.timers.is_registered(handlers.after_enable)
     handlers.after_enable()  # what the timer runs, once Blender's event loop turns (it does not without a window)
-    folder = script_node(group_node(bpy.data.materials["Plate"]).node_tree).inputs["TableDir"].default_value
+
+    def table_folder():
+        return script_node(group_node(bpy.data.materials["Plate"]).node_tree).inputs["TableDir"].default_value
+
+    folder = table_folder()
     assert os.path.isfile(os.path.join(folder, "cell_params.exr")) and folder.startswith(tables.cache_root())
+    bpy.data.objects["Plane"].location.x += 1.0
+    bpy.ops.ed.undo_push(message="Move")
+    bpy.ops.ed.undo()
+    assert table_folder() == folder
     root.unregister()
     assert not bpy.app.timers.is_registered(handlers.after_enable)
     root.register()

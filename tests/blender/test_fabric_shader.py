@@ -319,7 +319,7 @@ def test_world_tables_of_two_files_packed_images_of_one_name_and_size(addon_modu
     """Two files, each with a packed environment "sky" of the same size (blue in one, green in the other), opened
     one after the other: each file's cloth is lit by its own sky. Before, the tables' key held a packed image's
     name, size and packed byte count only, and the second file's cloth was lit by the first file's sky until
-    Blender restarted."""
+    Blender restarted. The packed data's digest is taken once, not at every render (0.27 s for a 4K sky)."""
     from importlib import import_module
 
     import bpy
@@ -352,6 +352,11 @@ def test_world_tables_of_two_files_packed_images_of_one_name_and_size(addon_modu
         folder = world_tables(bpy.context.scene)[0]
         np.testing.assert_allclose(read_exr(f"{folder}/radiance.exr")[..., :3].mean(axis=(0, 1)), rgb, atol=1e-3)
     assert len(sizes) == 1  # the case: one packed size
+    world_environment = import_module(f"{addon_module}.addon.world_environment")
+    handlers = import_module(f"{addon_module}.addon.handlers")
+    assert len(world_environment._packed_digests) == 1
+    handlers.on_render_forget_edits()
+    assert len(world_environment._packed_digests) == 1
 
 
 def test_world_table_folders_unused_for_two_weeks_are_removed(addon_module, tmp_path):

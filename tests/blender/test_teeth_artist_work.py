@@ -279,10 +279,12 @@ def test_a_fit_applied_to_a_tooth_and_its_copy_gives_each_its_own_values(addon_m
     with Alt+D its mesh and with it the material slot: a two-tooth fit mapped onto the pair wrote both teeth into the
     same materials, the second tooth's values over the first's (both renders showed tooth1's enamel). Each fitted
     tooth now gets materials of its own (in the object's own slot where the mesh is shared), and its Blend Volume
-    follows them."""
+    follows them. An Alt+D copy's dentin shared its original's mesh and shape keys: the first tooth rendered the
+    second's dentin shape (its panel showing its own); each fitted dentin now gets a mesh of its own."""
     from importlib import import_module
 
     from material_structures.addon.teeth.materials import group_node
+    from material_structures.core.teeth.dentin_blend_shapes import MODE_NAMES
 
     linked_materials = import_module(f"{addon_module}.addon.teeth.blend_volume").linked_materials
     blend_object = import_module(f"{addon_module}.addon.teeth.blend_volume").blend_object
@@ -314,6 +316,8 @@ def test_a_fit_applied_to_a_tooth_and_its_copy_gives_each_its_own_values(addon_m
         np.testing.assert_allclose(tuple(obj.ms_tooth.fitted), c, atol=1e-6)
         dentin = obj.ms_tooth.partner
         assert linked_materials(blend_object(obj).active_material) == (obj.active_material, dentin.active_material)
+        keys = dentin.data.shape_keys.key_blocks
+        np.testing.assert_allclose([keys[n].value for n in MODE_NAMES], c, atol=1e-6)
     assert a.active_material != b.active_material and a.ms_tooth.partner.active_material != \
         b.ms_tooth.partner.active_material
     assert shared.name in {a.active_material.name, b.active_material.name}  # one tooth keeps it, one has a copy
@@ -364,28 +368,47 @@ def test_eevee_shows_the_teeth_own_colour_and_follows_the_sliders(addon_module):
     assert after[0] / after[1] > 1.3 * before[0] / before[1], (before, after)
 
 
-def test_a_file_with_the_materials_own_stand_in_moves_onto_the_groups(addon_module, tmp_path):
-    """A file saved before the stand-in was part of the group: loading it links its EEVEE output to the group's
-    stand-in and removes the material's own Principled node (which no slider reached)."""
+def _file_with_the_materials_own_stand_in(path) -> None:
+    """An incisor saved in the layout older versions made: the enamel material's own Principled feeding its EEVEE
+    output, the group without its stand-in."""
     from material_structures.addon.teeth.materials import EEVEE_OUTPUT, STAND_IN_NODE, group_node
 
-    enamel = _add_incisor()
-    mat = enamel.active_material
+    mat = _add_incisor().active_material
     group = group_node(mat).node_tree
-    # the layout as older versions made it: the material's own Principled feeding its EEVEE output
     own = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
     own.name = STAND_IN_NODE
-    eevee_out = mat.node_tree.nodes["EEVEE Output"]
-    mat.node_tree.links.new(own.outputs[0], eevee_out.inputs["Surface"])
+    mat.node_tree.links.new(own.outputs[0], mat.node_tree.nodes["EEVEE Output"].inputs["Surface"])
     group.interface.remove(next(s for s in group.interface.items_tree
                                 if s.item_type == "SOCKET" and s.name == EEVEE_OUTPUT))
-    path = tmp_path / "old.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    bpy.ops.wm.open_mainfile(filepath=str(path))
-    mat = bpy.data.objects["Incisor Enamel"].active_material
-    assert STAND_IN_NODE not in mat.node_tree.nodes
+
+
+def _eevee_fed_by_the_group(mat) -> bool:
+    from material_structures.addon.teeth.materials import EEVEE_OUTPUT, STAND_IN_NODE, group_node
+
     fed = mat.node_tree.nodes["EEVEE Output"].inputs["Surface"].links[0].from_socket
-    assert fed.node == group_node(mat) and fed.name == EEVEE_OUTPUT
+    return STAND_IN_NODE not in mat.node_tree.nodes and fed.node == group_node(mat) and fed.name == EEVEE_OUTPUT
+
+
+def test_a_file_with_the_materials_own_stand_in_moves_onto_the_groups(addon_module, tmp_path):
+    """A file saved before the stand-in was part of the group: loading it links its EEVEE output to the group's
+    stand-in and removes the material's own Principled node (which no slider reached). A material appended from
+    such a file moves onto it when a fit is written into it (before, the fit changed nothing in EEVEE)."""
+    from material_structures.addon.teeth.materials import set_volume
+    from material_structures.core.teeth.scene import VolumeMaterial
+
+    path = tmp_path / "old.blend"
+    _file_with_the_materials_own_stand_in(path)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    assert _eevee_fed_by_the_group(bpy.data.objects["Incisor Enamel"].active_material)
+    _file_with_the_materials_own_stand_in(path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(str(path), link=False) as (_src, dst):
+        dst.materials = ["Enamel Incisor"]
+    (mat,) = dst.materials
+    assert not _eevee_fed_by_the_group(mat)  # appended as it was
+    set_volume(mat, VolumeMaterial(sigma_t=(1.0, 1.0, 1.0), albedo=(0.2, 0.9, 0.2), g1=0.5, g2=0.5, beta=1.0))
+    assert _eevee_fed_by_the_group(mat)
 
 
 def _blend_volumes():
@@ -505,6 +528,53 @@ def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_m
         bpy.ops.material_structures.teeth_apply_fit_file(filepath=os.path.join(capture_dir, "scene.json"))
     assert "is linked from" in str(info.value) and "Traceback" not in str(info.value)
     assert (len(bpy.data.materials), len(bpy.data.objects)) == before
+
+
+def test_the_dentin_shape_of_a_linked_tooth_is_refused_in_one_line(addon_module, tmp_path):
+    """Set Dentin Shape and Apply Fitted Coefficients on a tooth linked from another file said FINISHED and showed
+    the new shape, which was gone when the file was opened again (the shape keys are the library's). Both now say
+    why, as Apply Fit Result does, and change nothing."""
+    from material_structures.core.teeth.dentin_blend_shapes import MODE_NAMES
+
+    enamel = _add_incisor()
+    enamel.ms_tooth.fitted = (0.2, -0.15, 0.1)
+    enamel.ms_tooth.has_fit = True
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.objects = ["Incisor Enamel", "Incisor Dentin"]
+    for obj in dst.objects:
+        bpy.context.scene.collection.objects.link(obj)
+    enamel = bpy.data.objects["Incisor Enamel"]
+    bpy.context.view_layer.objects.active = enamel
+    for op, kwargs in ((bpy.ops.material_structures.teeth_set_dentin, {"coefficients": (0.5, 0.4, 0.3)}),
+                       (bpy.ops.material_structures.teeth_apply_fitted, {})):
+        with pytest.raises(RuntimeError, match="make it local") as info:
+            op(**kwargs)
+        assert "is linked from" in str(info.value) and "Traceback" not in str(info.value)
+    keys = enamel.ms_tooth.partner.data.shape_keys.key_blocks
+    assert [keys[n].value for n in MODE_NAMES] == [0.0, 0.0, 0.0]
+
+
+def test_a_tooth_from_a_mesh_in_edit_mode_is_the_mesh_as_edited(addon_module):
+    """From Mesh with the source in Edit Mode read the mesh as it was when Edit Mode began: with a UV map a
+    traceback (TypeError from the UV layer), without one a tooth of the old shape."""
+    import bmesh
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.004, segments=16, ring_count=8)
+    src = bpy.context.active_object
+    bpy.ops.object.mode_set(mode="EDIT")
+    bm = bmesh.from_edit_mesh(src.data)
+    for v in bm.verts:
+        v.co.z *= 3.0  # the crown stretched in Edit Mode
+    bmesh.update_edit_mesh(src.data)
+    assert bpy.ops.material_structures.teeth_add_tooth(source="MESH") == {"FINISHED"}
+    bpy.context.view_layer.update()
+    enamel = next(o for o in bpy.data.objects if o.ms_tooth.role == "ENAMEL")
+    x, _y, z = enamel.dimensions
+    assert z / x == pytest.approx(3.0, rel=0.02)
 
 
 def test_teeth_added_while_a_linked_collection_is_active_go_into_the_scene(addon_module, capture_dir, tmp_path):
