@@ -58,6 +58,11 @@ def tooth_from_enamel_surface(vertices_mm: np.ndarray, faces: np.ndarray, corner
     if enamel.volume() < 0:
         f, corner_uv = f[:, [0, 2, 1]], corner_uv[:, [0, 2, 1]]
         enamel = TriMesh(v, f, corner_uv)
+    thinnest = float(np.ptp(v, axis=0).min())
+    if thinnest < 2.0 * enamel_side_mm:  # the dentin (the surface moved inwards by the enamel) would turn inside out
+        raise UserError(f"'{name}' is {thinnest:.2g} mm across at its thinnest, less than twice the enamel "
+                        f"({2.0 * enamel_side_mm:.2g} mm): flat or collapsed, or not at a tooth's size (a tooth is "
+                        "5-12 mm across; check the scene's unit scale)")
     z = v[:, 2]
     h = np.clip((z - z.min()) / max(np.ptp(z), 1e-9), 0.0, 1.0)
     thickness = enamel_side_mm + (enamel_occlusal_mm - enamel_side_mm) * h ** 4

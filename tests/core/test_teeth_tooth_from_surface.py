@@ -51,3 +51,15 @@ def test_an_open_surface_is_one_line():
     v, f = _sphere(5.0)
     with pytest.raises(UserError, match=r"^'scan' is not a closed \(watertight\) triangle mesh$"):
         tooth_from_enamel_surface(v, f[1:], name="scan")
+
+
+@pytest.mark.parametrize(("squash", "said"), [((1.0, 1.0, 0.0), "0 mm"), ((1.0, 1.0, 1e-3), "0.01 mm"),
+                                              ((0.0, 0.0, 0.0), "0 mm"), ((0.2, 0.2, 0.2), "2 mm")])
+def test_a_flat_collapsed_or_tiny_surface_is_one_line(squash, said):
+    """A closed surface thinner than twice the enamel (flat, collapsed to a point, or modelled at the wrong unit
+    scale) gave a tooth whose dentin, the surface moved inwards by the enamel thickness, turned inside out: a
+    flat disc became a tooth 2.2 mm tall."""
+    v, f = _sphere(5.0)  # 10 mm across
+    with pytest.raises(UserError, match=rf"^'scan' is {said} across at its thinnest, less than twice the enamel"):
+        tooth_from_enamel_surface(v * np.asarray(squash), f, name="scan")
+    tooth_from_enamel_surface(v * 0.25, f, name="scan")  # 2.5 mm across: thin but a tooth
