@@ -392,8 +392,13 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             self.report({"ERROR"}, f"cannot read the capture's teeth: {exc}")
             return None
         fill_tooth_map(context.scene, names)
-        if not fit_targets(names, context.scene):
+        targets = fit_targets(names, context.scene)
+        if not targets:
             self.report({"ERROR"}, no_mapping_message(names))
+            return None
+        reason = next(filter(None, map(linked_tooth_reason, targets.values())), None)
+        if reason is not None:  # Apply Fit Result would refuse it at the end
+            self.report({"ERROR"}, f"Cannot fit into a linked tooth: {reason}")
             return None
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)

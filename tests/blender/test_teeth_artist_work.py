@@ -528,6 +528,12 @@ def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_m
         bpy.ops.material_structures.teeth_apply_fit_file(filepath=os.path.join(capture_dir, "scene.json"))
     assert "is linked from" in str(info.value) and "Traceback" not in str(info.value)
     assert (len(bpy.data.materials), len(bpy.data.objects)) == before
+    # Fit refuses it before the fit (it ran to its end, then applied nothing)
+    fs = bpy.context.scene.ms_teeth_fit
+    fs.capture_dir, fs.out_dir, fs.iterations = capture_dir, str(tmp_path / "fit"), 1
+    with pytest.raises(RuntimeError, match="Cannot fit into a linked tooth: .* make it local"):
+        bpy.ops.material_structures.teeth_fit()
+    assert not fs.running and not os.path.exists(tmp_path / "fit" / "fit_log.txt")
 
 
 def test_the_dentin_shape_of_a_linked_tooth_is_refused_in_one_line(addon_module, tmp_path):
