@@ -6,6 +6,8 @@ A feature (``fabric/``, ``scratch/``, ``teeth/``) imports from here, never from 
 
 from __future__ import annotations
 
+import os
+
 import bpy
 import numpy as np
 from bpy_extras.io_utils import ExportHelper, ImportHelper
@@ -590,3 +592,36 @@ def end_modal_progress(context, timer) -> None:
 
 
 CLASSES: list[type] = [MS_StrokePoint]
+
+
+# -- caches in the temporary folder -----------------------------------------------------------------------
+CACHE_UNUSED_S = 14 * 24 * 3600  # cache folders no session has used for this long are removed
+
+
+def user_cache_root(name: str) -> str:
+    """``<tempdir>/<name>-<user>``: a cache of this user's (another user's folder of the name may not be
+    writable here)."""
+    import tempfile
+
+    user = os.getuid() if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
+    return os.path.join(tempfile.gettempdir(), f"{name}-{user}")
+
+
+def prune_cache(root: str, keep: str, now: float | None = None) -> None:
+    """Remove the folders under ``root`` unused (not touched) for ``CACHE_UNUSED_S``: every HDRI ever lit with and
+    every scratch set ever rendered leaves one. ``keep`` and anything that cannot be removed stay."""
+    import shutil
+    import time
+
+    now = time.time() if now is None else now
+    try:
+        entries = list(os.scandir(root))
+    except OSError:
+        return
+    for entry in entries:
+        try:
+            if entry.path != keep and entry.is_dir(follow_symlinks=False) and \
+                    now - entry.stat(follow_symlinks=False).st_mtime > CACHE_UNUSED_S:
+                shutil.rmtree(entry.path, ignore_errors=True)
+        except OSError:
+            continue

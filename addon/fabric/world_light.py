@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 
 import numpy as np
 
 from ...core.exr_io import write_exr
 from ...core.fabric.environment_sampling import EnvironmentMapError, build_environment_table, shader_files
 from ...render import osl_flip_t
+from ..common import prune_cache, user_cache_root
 from ..lamp_sync import set_if_changed
 from ..world_environment import world_source, world_strength
 
@@ -40,40 +40,16 @@ def _write_tables(radiance: np.ndarray):
     digest = hashlib.sha1()
     for name in sorted(files):
         digest.update(np.ascontiguousarray(files[name]).tobytes())
-    user = os.getuid() if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
-    folder = os.path.join(tempfile.gettempdir(), f"{CACHE_DIR}-{user}", digest.hexdigest()[:20])
+    folder = os.path.join(user_cache_root(CACHE_DIR), digest.hexdigest()[:20])
     os.makedirs(folder, exist_ok=True)
     for name, arr in files.items():
         path = os.path.join(folder, name)
         if not os.path.exists(path):
             write_exr(path, arr)  # written under a temporary name, then renamed
-    os.utime(folder)  # in use: kept by _prune_tables of every session
-    _prune_tables(os.path.dirname(folder), keep=folder)
+    os.utime(folder)  # in use: kept by prune_cache of every session
+    prune_cache(os.path.dirname(folder), keep=folder)
     h, w = table.shape
     return folder, w, h
-
-
-PRUNE_AFTER_S = 14 * 24 * 3600  # table folders no session has used for this long are removed
-
-
-def _prune_tables(root: str, keep: str, now: float | None = None) -> None:
-    """Remove the table folders under ``root`` unused for ``PRUNE_AFTER_S`` (each HDRI ever lit with
-    leaves up to 12 MB here); ``keep`` and anything that cannot be removed stay."""
-    import shutil
-    import time
-
-    now = time.time() if now is None else now
-    try:
-        entries = list(os.scandir(root))
-    except OSError:
-        return
-    for entry in entries:
-        try:
-            if entry.path != keep and entry.is_dir(follow_symlinks=False) and \
-                    now - entry.stat(follow_symlinks=False).st_mtime > PRUNE_AFTER_S:
-                shutil.rmtree(entry.path, ignore_errors=True)
-        except OSError:
-            continue
 
 
 def world_light_inputs(scene, build: bool = True, tables: bool = True):

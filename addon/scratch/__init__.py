@@ -18,7 +18,7 @@ How it fits together
   Scratch shadows: one ``trace()`` per contributing lamp from the shading point to the lamp centre.
 * ``tables.py``: the set is stored in the .blend as packed float images (source of truth) and
   extracted, on demand and after loading a file, into a content-addressed EXR cache folder
-  ``<tempdir>/material_structures_scratch/<sha1>/`` (core ``scratch_io`` tables + two cell-major
+  ``<tempdir>/material_structures_scratch-<user>/<sha1>/`` (core ``scratch_io`` tables + two cell-major
   copies the shader walks), because OSL ``texture()`` needs a file path.
 * Footprint: J = FootprintScale (default 0.5) x (d(x_um)/dx, d(x_um)/dy) from the UV map's ray
   differentials, x_um = UV x Tiling x patch size. Cycles keeps compact (isotropic) differentials:

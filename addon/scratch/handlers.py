@@ -6,6 +6,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from .material import adopt_named_images, ensure_tables_extracted, scratch_groups, sync_scratch_lamps
+from .tables import release_table_images
 
 
 @persistent
@@ -33,6 +34,7 @@ def on_load_post(*_args) -> None:
     if scratch_groups():
         adopt_named_images()  # files from before: sets found by name -> by pointer
         ensure_tables_extracted()
+    release_table_images()  # files from before: table images with fake users
 
 
 SCRATCH_HANDLERS = [

@@ -176,6 +176,7 @@ def ensure_base_metal(group) -> None:
 
 
 def _store(group, scratch_set, name: str, images: dict | None) -> None:
+    extract_tables(scratch_set)  # first: a cache that cannot be written changes nothing
     meta, own = store_scratch_set(scratch_set, name, images)
     group[PROP] = meta
     group[IMAGES_PROP] = own
@@ -187,6 +188,7 @@ def new_scratch_group(scratch_set, set_name: str, scene=None) -> bpy.types.Shade
     """A new node group holding ``scratch_set`` under a set name no other set uses (``set_name`` made
     unique), with its own packed table images."""
     scene = scene or bpy.context.scene
+    extract_tables(scratch_set)  # first: a cache that cannot be written leaves no group behind
     name = unique_set_name(set_name)
     group = _build_group(name, scene)
     _store(group, scratch_set, name, None)

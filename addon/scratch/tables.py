@@ -16,22 +16,22 @@ that one group: a set is never found by its name, except in files from before ``
 images named after ``meta["name"]``). Before rendering (render_pre, load_post, and whenever a
 material is built) the tables are extracted with ``core.scratch.scratch_io.save_scratch_set_exr``
 (plus two derived cell-major tables, :func:`write_cell_major_tables`) into a content-addressed cache
-folder ``<tempdir>/material_structures_scratch/<sha1>/``: identical content -> identical path, so
+folder ``<tempdir>/material_structures_scratch-<user>/<sha1>/``: identical content -> identical path, so
 OpenImageIO's texture cache can never serve stale tables, and a reopened file re-extracts what it
-needs. The shader reads the folder from its ``TableDir`` input.
+needs (folders unused for two weeks are removed). The shader reads the folder from its ``TableDir`` input.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 
 import numpy as np
 
+from ...core.errors import UserError
 from ...core.scratch.scratch_io import save_scratch_set_exr, scratch_set_tables, wrap_table
 from ...core.scratch.scratch_set import ScratchSet, validate_scratch_set
-from ..common import array_to_image, image_to_array, mark_written
+from ..common import array_to_image, image_to_array, mark_written, prune_cache, user_cache_root
 
 IMAGE_PREFIX = "MS Scratch"
 TABLES = {"segments": 4, "params": 4, "grid": 2, "cells": 1}
@@ -52,6 +52,21 @@ def set_meta(s: ScratchSet, name: str) -> dict:
         "grid_nx": int(nx),
         "grid_ny": int(ny),
     }
+
+
+def release_table_images() -> int:
+    """Files from before kept every table image with a fake user, also after its material and group were gone
+    (12 MB for a 3 000-scratch set, in every save): their group keeps them now, and a purge or a save removes those
+    of a deleted set. Returns how many it released."""
+    import bpy
+
+    n = 0
+    for img in bpy.data.images:
+        if (img.library is None and img.use_fake_user and img.packed_file is not None
+                and img.name.startswith(IMAGE_PREFIX + " ")):
+            img.use_fake_user = False
+            n += 1
+    return n
 
 
 def image_name(name: str, table: str) -> str:
@@ -87,7 +102,7 @@ def store_scratch_set(s: ScratchSet, name: str, images: dict | None = None) -> t
             if img is not None:
                 bpy.data.images.remove(img)  # this set's own old table, another size
             img = array_to_image(arr, image_name(name, table), pack=True, replace=False)
-        img.use_fake_user = True  # kept in the file even when no node uses it
+        img.use_fake_user = False  # kept by its group (IMAGES_PROP), and gone with it
         out[table] = img
     return set_meta(s, name), out
 
@@ -154,22 +169,32 @@ def content_hash(s: ScratchSet) -> str:
 
 
 def cache_root() -> str:
-    return os.path.join(tempfile.gettempdir(), "material_structures_scratch")
+    return user_cache_root("material_structures_scratch")
 
 
 def extract_tables(s: ScratchSet) -> str:
-    """Write the EXR tables of ``s`` to its content-addressed cache folder (once); returns the folder."""
+    """Write the EXR tables of ``s`` to its content-addressed cache folder (once); returns the folder. A cache that
+    cannot be written (a full or read-only temporary folder) is a ``UserError`` naming it, with nothing left
+    half-written."""
+    import shutil
+
     folder = os.path.join(cache_root(), content_hash(s))
     if not os.path.isfile(os.path.join(folder, "cell_params.exr")):
         tmp = folder + f".tmp-{os.getpid()}"
-        save_scratch_set_exr(tmp, s)
-        write_cell_major_tables(tmp, s)
+        try:
+            save_scratch_set_exr(tmp, s)
+            write_cell_major_tables(tmp, s)
+        except OSError as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise UserError(f"cannot write the scratch tables to {cache_root()}: {exc.strerror or exc}; free space "
+                            "there or point TMPDIR at a writable folder") from exc
         try:
             os.replace(tmp, folder)
         except OSError:  # another process extracted it first
-            import shutil
-
             shutil.rmtree(tmp, ignore_errors=True)
+        prune_cache(cache_root(), keep=folder)
+    else:
+        os.utime(folder)  # in use: kept by prune_cache of every session
     return folder
 
 

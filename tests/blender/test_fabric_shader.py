@@ -360,7 +360,8 @@ def test_world_tables_of_two_files_packed_images_of_one_name_and_size(addon_modu
 
 
 def test_world_table_folders_unused_for_two_weeks_are_removed(addon_module, tmp_path):
-    from material_structures.addon.fabric.world_light import PRUNE_AFTER_S, _prune_tables
+    from material_structures.addon.common import CACHE_UNUSED_S as PRUNE_AFTER_S
+    from material_structures.addon.common import prune_cache as _prune_tables
 
     for name, age in (("old", PRUNE_AFTER_S + 60), ("recent", PRUNE_AFTER_S - 60), ("in-use", 10 * PRUNE_AFTER_S)):
         (tmp_path / name).mkdir()

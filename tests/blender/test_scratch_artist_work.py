@@ -212,6 +212,8 @@ def test_file_with_the_old_naming_loads_renders_and_keeps_its_set(scene, tmp_pat
     assert group.name == "Scratched Metal (plate)"
     for key in [k for k in group.keys() if k not in ("ms_scratch_set", "material_structures_scratch")]:
         del group[key]  # as written before: the marker and the metadata; images found by their names
+    for image in bpy.data.images:
+        image.use_fake_user = image.name.startswith("MS Scratch plate ")  # ... and kept by fake users
     assert sorted(i.name for i in bpy.data.images if i.name.startswith("MS Scratch plate ")) == [
         f"MS Scratch plate {t}" for t in ("cells", "grid", "params", "segments")]
     R.add_textured_plane(scene, 1.0, mat, name="A")
@@ -575,3 +577,59 @@ def test_draw_on_a_material_linked_from_another_file_says_make_it_local(scene, t
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
     assert _set_of(bpy.data.objects["A"]).n_scratches == n == 21
+
+
+def test_a_scratch_cache_that_cannot_be_written_is_one_line_and_changes_nothing(scene, tmp_path, monkeypatch):
+    """A full or read-only temporary folder (here a file where the cache folder goes): Generate raised
+    NotADirectoryError as a traceback, with the new set stored in the file while the shader kept reading the old
+    tables (a new material left four packed images behind). Now one line, nothing changed."""
+    import importlib
+    import shutil
+    import tempfile
+
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    cache_root = importlib.import_module("material_structures.addon.scratch.tables").cache_root
+    open(cache_root(), "w").close()
+    obj = _plane(scene, "A")
+    before = (len(bpy.data.images), len(bpy.data.node_groups), len(bpy.data.materials))
+    with pytest.raises(RuntimeError, match="cannot write the scratch tables to .*point TMPDIR") as info:
+        bpy.ops.material_structures.scratch_generate(count=50)
+    assert "Traceback" not in str(info.value)
+    assert (len(bpy.data.images), len(bpy.data.node_groups), len(bpy.data.materials)) == before
+    assert not obj.material_slots or obj.active_material is None
+    os.remove(cache_root())
+    assert bpy.ops.material_structures.scratch_generate(count=50, seed=1) == {"FINISHED"}
+    mat = obj.active_material
+    before = _digest(_set_of(obj))
+    shutil.rmtree(cache_root())
+    open(cache_root(), "w").close()  # the temporary folder full again
+    with pytest.raises(RuntimeError, match="cannot write the scratch tables"):
+        bpy.ops.material_structures.scratch_generate(count=50, seed=2)
+    assert obj.active_material == mat and _digest(_set_of(obj)) == before  # the old set, as stored
+
+
+def test_scratch_caches_unused_for_two_weeks_are_removed_and_tables_go_with_their_set(scene, tmp_path, monkeypatch):
+    """Every scratch set ever rendered left a cache folder (78 MB for 10 000 scratches) for good, and its table
+    images stayed in the file with fake users after the material was deleted, through a purge. Folders unused for
+    two weeks are now removed; the images go with their set."""
+    import importlib
+    import tempfile
+    import time
+
+    from material_structures.addon.common import CACHE_UNUSED_S
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    cache_root = importlib.import_module("material_structures.addon.scratch.tables").cache_root
+    old = os.path.join(cache_root(), "0123456789abcdef")
+    os.makedirs(old)
+    past = time.time() - CACHE_UNUSED_S - 60
+    os.utime(old, (past, past))
+    obj = _plane(scene, "A")
+    assert bpy.ops.material_structures.scratch_generate(count=50) == {"FINISHED"}
+    assert not os.path.exists(old) and len(os.listdir(cache_root())) == 1
+    assert not any(i.use_fake_user for i in bpy.data.images if i.name.startswith("MS Scratch"))
+    obj.data.materials.clear()  # the scratched material taken off
+    bpy.data.orphans_purge(do_local_ids=True, do_linked_ids=False, do_recursive=True)  # File > Clean Up > Purge
+    assert [i.name for i in bpy.data.images if i.name.startswith("MS Scratch")] == []
