@@ -11,9 +11,11 @@ children.
 
 from __future__ import annotations
 
+import atexit
+
 import bpy
 
-from . import common, handlers, nodes, operators, panels, preferences, properties
+from . import background_job, common, handlers, nodes, operators, panels, preferences, properties
 from .fabric import operators as fabric_operators
 from .fabric import panels as fabric_panels
 from .fabric import properties as fabric_properties
@@ -51,9 +53,12 @@ def register() -> None:
     teeth_properties.register_pointers()
     nodes.register_menus()
     handlers.register_handlers()
+    atexit.register(background_job.stop_at_exit)  # a fit running when Blender quits stops with it
 
 
 def unregister() -> None:
+    background_job.stop_all()  # running fits, and the timers that would apply their results, go with the buttons
+    atexit.unregister(background_job.stop_at_exit)
     handlers.unregister_handlers()
     nodes.unregister_menus()
     teeth_properties.unregister_pointers()

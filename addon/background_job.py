@@ -112,6 +112,45 @@ def job_running(kind: str) -> bool:
     return job is not None and job.is_alive()
 
 
+_WATCHES: list = []  # timers that follow a job (bpy.app.timers functions)
+
+
+def watch(tick, first_interval: float = 0.5) -> None:
+    """Register ``tick`` as a timer that follows a job (removed again by :func:`stop_all`)."""
+    import bpy
+
+    _WATCHES[:] = [t for t in _WATCHES if bpy.app.timers.is_registered(t)]
+    _WATCHES.append(tick)
+    bpy.app.timers.register(tick, first_interval=first_interval)
+
+
+def stop_all(wait: bool = True) -> None:
+    """Stop every running job of this session and the timers that follow them: the extension is disabled (its
+    Cancel buttons go with it) or Blender quits (a fit would otherwise run on, orphaned, for its next output
+    line). ``wait``: wait for each to end (else the signal alone, at exit)."""
+    import bpy
+
+    for tick in _WATCHES:
+        if bpy.app.timers.is_registered(tick):
+            bpy.app.timers.unregister(tick)
+    _WATCHES.clear()
+    for job in _JOBS.values():
+        if job is not None and job.is_alive():
+            if wait:
+                job.cancel()
+            else:
+                job.cancelled = True
+                job._signal("SIGTERM")
+
+
+def stop_at_exit() -> None:
+    """For ``atexit`` (registered while the extension is): Blender quits, its jobs get the signal to stop."""
+    try:
+        stop_all(wait=False)
+    except Exception:  # noqa: BLE001  (Blender is going away; nothing to report to)
+        pass
+
+
 def usable_cores() -> int:
     """Cores this process may run on (CPU affinity / container limits where the OS reports them)."""
     try:

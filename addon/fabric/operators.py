@@ -17,7 +17,7 @@ import bpy
 
 from ...core.fabric.closure_fit import save_closure_maps
 from ...core.fabric.parameter_maps import save_params
-from ..background_job import usable_cores
+from ..background_job import usable_cores, watch
 from ..common import (
     BLEND_RELATIVE,
     AddGroupNode,
@@ -238,7 +238,7 @@ class MS_OT_fabric_fit_btf(FolderPicker, bpy.types.Operator):
             self.report({level}, message)
             return {"FINISHED"} if level == "INFO" else {"CANCELLED"}
         # from the file browser: the fit runs beside Blender; the panel shows its progress and Cancel
-        bpy.app.timers.register(_watch(job, context.scene.name, obj.name if obj else None), first_interval=0.5)
+        watch(_watch(job, context.scene.name, obj.name if obj else None))
         self.report({"INFO"}, f"Fabric fit started: {job.log_path}")
         return {"FINISHED"}
 

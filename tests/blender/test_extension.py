@@ -114,6 +114,45 @@ def test_enabling_with_a_file_open_does_what_opening_it_does(addon_module, tmp_p
     root.register()
 
 
+def test_disabling_stops_running_fits_and_their_timers(addon_module, tmp_path, monkeypatch):
+    """A fit running when the extension was disabled ran on (a core busy, its Cancel button gone) and its timer
+    then built the fitted material with the extension off; at Blender's quit the fit ran on, orphaned, until its
+    next output line. Disabling now stops both; quitting signals the fit."""
+    import atexit
+    import importlib
+    import time
+
+    root = sys.modules[addon_module]
+    background_job = importlib.import_module(f"{addon_module}.addon.background_job")
+    job = background_job.BackgroundJob([sys.executable, "-c", "import time; time.sleep(120)"], str(tmp_path)).start()
+    background_job.set_current_job("test", job)
+    ticks = []
+    background_job.watch(lambda: ticks.append(1) or 0.5, first_interval=60.0)
+    (tick,) = background_job._WATCHES
+    t0 = time.perf_counter()
+    root.unregister()
+    try:
+        assert not job.is_alive() and job.cancelled and time.perf_counter() - t0 < 12.0
+        assert not bpy.app.timers.is_registered(tick) and ticks == []
+    finally:
+        at_exit = []
+        monkeypatch.setattr(atexit, "register", at_exit.append)
+        root.register()
+        monkeypatch.undo()
+        atexit.register(background_job.stop_at_exit)
+        background_job.set_current_job("test", None)
+    assert at_exit == [background_job.stop_at_exit]  # what Blender's quit runs
+    job = background_job.BackgroundJob([sys.executable, "-c", "import time; time.sleep(120)"], str(tmp_path)).start()
+    background_job.set_current_job("test", job)
+    try:
+        background_job.stop_at_exit()
+        job.proc.wait(timeout=10)
+        assert not job.is_alive()
+    finally:
+        job.cancel()
+        background_job.set_current_job("test", None)
+
+
 def test_operator_ids_are_namespaced(addon_module):
     ops = [c for c in _classes(addon_module) if issubclass(c, bpy.types.Operator)]
     assert ops
