@@ -63,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {args.out!r}: give a .exr (linear) or .png (sRGB) file name")
     if not (args.list or args.blend or args.scene):
         raise UsageError("give a scene name, --blend FILE or --list")
+    if args.blend and args.scene:
+        raise UsageError(f"give a scene name ({args.scene}) or --blend FILE, not both")
     from ..render.session import prepare_user_resources
 
     prepare_user_resources()

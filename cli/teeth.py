@@ -516,6 +516,10 @@ def run_fit(args: argparse.Namespace) -> int:
     scene = load_scene(scene_path)
     if len(cap.cameras) == 0 or len(cap.lights) == 0:
         raise UserError("the capture has no cameras or lights")
+    lacks = [field for field, have in (("images", cap.images), ("masks", cap.masks)) if have is None]
+    if lacks:  # before --out is made (a rig without photographs renders, it does not fit)
+        raise UserError(f"{os.path.join(args.capture, 'capture.json')}: a fit needs the capture's images and masks; "
+                        f"it has no {' and no '.join(lacks)}")
     fs = fit_settings(args)
     if args.free is not None:
         _check_free_patterns(fs.free, scene, scene_path)

@@ -41,12 +41,15 @@ def test_an_output_over_an_input_is_refused(inputs, capsys, argv, victim):
 
 
 def test_render_refuses_other_formats_and_absurd_sizes(tmp_path, capsys):
+    (tmp_path / "a.blend").write_bytes(b"")
     for argv, said in ((["--out", str(tmp_path / "r.jpg")], "give a .exr (linear) or .png"),
-                       (["--resolution", "200000x200000", "--out", str(tmp_path / "r.exr")], "larger than 16384")):
+                       (["--resolution", "200000x200000", "--out", str(tmp_path / "r.exr")], "larger than 16384"),
+                       (["--blend", str(tmp_path / "a.blend"), "--out", str(tmp_path / "r.exr")],  # rendered the file
+                        "give a scene name (fabric-velvet) or --blend FILE, not both")):
         assert main(["render", "fabric-velvet", *argv]) == 2
         err = capsys.readouterr().err
         assert said in err and err.count("\n") == 1, err
-    assert list(tmp_path.iterdir()) == []
+    assert [p.name for p in tmp_path.iterdir()] == ["a.blend"]
 
 
 def test_blender_backed_commands_leave_no_temp_dirs(tmp_path):

@@ -365,3 +365,9 @@ def test_a_curves_file_the_schema_refuses_is_one_line(tmp_path, capsys):
                  str(tmp_path / "s.npz")]))
     _one_line(capsys, f"{path}: [1][1]: expected 2 numbers, got 1")
     assert not (tmp_path / "s.npz").exists()
+    # a curve of one point: the schema's words, naming the file (it was the generator's, naming neither)
+    path.write_text(json.dumps([[[0.1, 0.1], [0.9, 0.5]], [[0.5, 0.5]]]))
+    assert _refused(main(["scratch", "generate", "--kind", "curves", "--curves", str(path), "--out",
+                 str(tmp_path / "s.npz")]))
+    assert f"{path}: [1]: " in capsys.readouterr().err
+    assert not (tmp_path / "s.npz").exists()

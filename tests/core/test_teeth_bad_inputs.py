@@ -89,6 +89,20 @@ def test_malformed_capture_is_refused_by_name(capture_dir, tmp_path, capsys, edi
     assert _digest(cap) == before
 
 
+@pytest.mark.parametrize("fields", [("images",), ("masks",), ("images", "masks")])
+def test_a_capture_without_images_or_masks_is_refused_before_the_fit_writes(capture_dir, tmp_path, capsys, fields):
+    """A rig without photographs loads (``teeth render`` renders it) but cannot be fitted: the fit said so only
+    after making --out, in words that named neither the file nor the field."""
+    cap = _copy(capture_dir, tmp_path)
+    _edit_json(cap, lambda m: [m.pop(f) for f in fields])
+    out = tmp_path / "fit"
+    assert main(["teeth", "fit", str(cap), "--out", str(out), "--iterations", "1", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    assert f"capture.json: a fit needs the capture's images and masks; it has no {' and no '.join(fields)}" in err
+    assert not out.exists()
+
+
 def test_not_json_negative_pixels_and_wrong_sizes_are_refused(capture_dir, tmp_path):
     cap = _copy(capture_dir, tmp_path)
     (cap / "capture.json").write_text("")
