@@ -13,6 +13,9 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
+
+import numpy as np
 
 from ..core.fabric import btf_fitter
 from ..core.fabric.tile_fit import FitOptions
@@ -60,21 +63,26 @@ def fit_btf_dask(
         btf_fitter.check_tiles(cache, tiles)
         todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
         init_args = (os.path.join(cache, "ndf_operator.npz"), hdr.wi, hdr.wo, _asdict(options))
+        iterations: list[int] = []
+        workers = 0
+        t_fit = time.perf_counter()
         if todo:
             # workers of a cluster this call did not start may be on other machines: the bands go to storage
             if client is not None:
-                _run_tiles(client, values, hdr, todo, cache, init_args, progress, len(tiles), durable=True)
+                workers = _run_tiles(client, values, hdr, todo, cache, init_args, progress, len(tiles), iterations,
+                                     durable=True)
             else:
                 with dask_client(scheduler, n_workers) as own:
-                    _run_tiles(own, values, hdr, todo, cache, init_args, progress, len(tiles),
-                               durable=scheduler is not None)
-    # Every tile is checkpointed now: the local fitter only assembles and post-processes.
-    maps, stats = btf_fitter.fit_btf(
-        btf_path, out_dir, tile=tile, workers=1, options=options, progress=False, keep_cache=keep_cache
-    )
-    stats["tiles_fitted_this_run"] = len(todo)
-    stats["scheduler"] = scheduler or ("client" if client is not None else "local")
-    return maps, stats
+                    workers = _run_tiles(own, values, hdr, todo, cache, init_args, progress, len(tiles), iterations,
+                                         durable=scheduler is not None)
+        t_fit = time.perf_counter() - t_fit
+    # Every tile is checkpointed now: the local fitter only assembles and post-processes; the fit's figures in
+    # params.json are the cluster's (the assembly would give its own: 1 worker, 0 tiles, no time)
+    run_stats = {"workers": workers, "tiles_fitted_this_run": len(todo), "seconds_fit": round(t_fit, 3),
+                 "mean_lm_iterations_per_tile": float(np.mean(iterations)) if iterations else None,
+                 "scheduler": scheduler or ("client" if client is not None else "local")}
+    return btf_fitter.fit_btf(btf_path, out_dir, tile=tile, workers=1, options=options, progress=False,
+                              keep_cache=keep_cache, run_stats=run_stats)
 
 
 def _asdict(options: FitOptions) -> dict:
@@ -106,7 +114,9 @@ class _DaskRunner:
         return handle.result()  # raises the task's error, if any
 
 
-def _run_tiles(client, values, hdr, todo, cache, init_args, progress, total, durable: bool) -> None:
+def _run_tiles(client, values, hdr, todo, cache, init_args, progress, total, iterations: list, durable: bool) -> int:
+    """Fit the tiles ``todo`` as tasks of ``client``'s cluster (each tile's LM iterations appended to
+    ``iterations``); returns how many workers the cluster had."""
     # sent once, not per task; hash=False: no key shared with an earlier fit (dask/distributed#3703)
     [shared] = client.scatter([init_args], broadcast=True, hash=False)
     runner = _DaskRunner(client, cache, shared)
@@ -115,12 +125,18 @@ def _run_tiles(client, values, hdr, todo, cache, init_args, progress, total, dur
         from tqdm import tqdm
 
         bar = tqdm(total=total, initial=total - len(todo), desc="fit tiles (dask)", unit="tile", file=sys.stderr)
+
+    def done(result: tuple) -> None:
+        iterations.append(int(result[2]))
+        if bar:
+            bar.update(1)
+
     try:
-        btf_fitter.fit_all_bands(values, hdr, cache, todo, runner, lambda _: bar.update(1) if bar else None,
-                                 durable)
+        btf_fitter.fit_all_bands(values, hdr, cache, todo, runner, done, durable)
     except BaseException:  # Ctrl-C, SIGTERM or a failed tile: the finished tiles stay checkpointed, the others
         client.cancel(runner.submitted)  # are dropped from the cluster instead of running on
         raise
     finally:
         if bar:
             bar.close()
+    return len(client.scheduler_info().get("workers", {}))

@@ -284,24 +284,25 @@ def fit_all_bands(values: ArrayInFile, hdr, cache: str, todo: list, runner, done
 def fit_btf(btf_path: str | os.PathLike, out_dir: str | os.PathLike, tile: int = 20,
             workers: int | None = None, options: FitOptions | None = None,
             progress: bool | Callable[[int, int], None] = True, preferred=(1.0, 0.0, 0.0),
-            keep_cache: bool = True) -> tuple[FabricMaps, dict]:
+            keep_cache: bool = True, run_stats: dict | None = None) -> tuple[FabricMaps, dict]:
     """Fit eq. 3.9 to every texel of a BTF and write the parameter folder ``out_dir``.
 
     ``workers`` processes (default: CPU count) fit ``tile x tile`` texel tiles (``progress``: a tqdm bar,
     or a callable ``(tiles done, tiles)``); finished tiles are checkpointed, so calling again after an
     interruption only fits the missing tiles. Returns the post-processed maps and a stats dict (also stored
-    in ``params.json`` under ``"fit"``).
+    in ``params.json`` under ``"fit"``); ``run_stats`` replaces its entries of the run (a caller that fitted the
+    tiles elsewhere, e.g. on Dask, and only assembles them here).
     """
     btf_path, out_dir = os.fspath(btf_path), os.fspath(out_dir)
     checked = check_btf(btf_path)
     os.makedirs(out_dir, exist_ok=True)
     with FolderLock(out_dir):  # a second fit into the folder would mix its tiles with this one's
         return _fit_btf(btf_path, out_dir, tile, workers, options or FitOptions(), progress, preferred, keep_cache,
-                        checked)
+                        checked, run_stats or {})
 
 
 def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, options: FitOptions, progress: bool,
-             preferred, keep_cache: bool, checked: tuple) -> tuple[FabricMaps, dict]:
+             preferred, keep_cache: bool, checked: tuple, run_stats: dict) -> tuple[FabricMaps, dict]:
     workers = workers or os.cpu_count() or 1
     t_start = time.perf_counter()
     hdr, cache, values = _prepare_cache(btf_path, out_dir, tile, options, progress is True, checked)
@@ -359,7 +360,7 @@ def _fit_btf(btf_path: str, out_dir: str, tile: int, workers: int | None, option
         "seconds_load": round(t_loaded - t_start, 3), "seconds_fit": round(t_fit - t_loaded, 3),
         "mean_lm_iterations_per_tile": float(np.mean(iters)) if iters else None,  # all stages
         "median_cost": float(np.median(cost)), "flip_regions": int(labels.max()),
-    }
+    } | run_stats
     save_params(out_dir, maps, extra={"fit": stats})
     # The closure mix world and indirect light see in Cycles, beside the maps (issue 38): an import
     # then reads it instead of fitting it. A fitted map's geometry varies per texel: beyond

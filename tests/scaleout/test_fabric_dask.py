@@ -3,6 +3,7 @@ also when a worker is killed during the fit; finished tiles are not recomputed."
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import threading
@@ -49,6 +50,11 @@ def test_distributed_equals_local(btf, client, tmp_path):
     assert stats["tiles_fitted_this_run"] == 9
     _assert_identical(maps, local)
     _assert_identical(load_params(tmp_path / "dask"), local)
+    # params.json holds the cluster's figures (it held the assembly's: 1 worker, 0 tiles, 0.002 s, no iterations)
+    stored = json.loads((tmp_path / "dask" / "params.json").read_text())["fit"]
+    assert stored == stats
+    assert stored["workers"] == 2 and stored["tiles_fitted_this_run"] == 9 and stored["scheduler"] == "client"
+    assert stored["mean_lm_iterations_per_tile"] >= 1 and stored["seconds_fit"] > 0.01
     # a rerun finds every tile checkpointed and recomputes none
     _, again = fit_btf_dask(path, tmp_path / "dask", client=client, tile=4, progress=False)
     assert again["tiles_fitted_this_run"] == 0
