@@ -40,6 +40,8 @@ def on_render_forget_edits(*_args) -> None:
 @persistent
 def on_load_post(*_args) -> None:
     """Shaders are embedded in the file; bring files from older versions (or an older extension) up to date."""
+    global _loaded_since_register
+    _loaded_since_register = True
     refresh_embedded_scripts()  # compiles under Cycles + OSL lent to the scene, its own engine restored
     for group in bpy.data.node_groups:  # groups of older files: the closures that render without OSL
         if group.library is None and group.get(FABRIC_MARKER):
@@ -74,7 +76,10 @@ def after_enable() -> None:
     """The extension enabled with a file open (installed, enabled or updated during a session): the file gets the
     work opening it would have done (its shaders brought up to date, the scratch tables and world tables
     extracted, the teeth's layouts upgraded). Run once by a timer: while an extension registers, Blender keeps
-    ``bpy.data`` from it."""
+    ``bpy.data`` from it. Not where a file was opened since (Blender's start: the extensions register, then the
+    startup file loads)."""
+    if _loaded_since_register:
+        return
     for handler_list, fn in HANDLERS:
         if handler_list is bpy.app.handlers.load_post:
             fn()
@@ -84,7 +89,12 @@ def after_enable() -> None:
         bpy.ops.ed.undo_push(message="Material Structures: file brought up to date")
 
 
+_loaded_since_register = False
+
+
 def register_handlers() -> None:
+    global _loaded_since_register
+    _loaded_since_register = False
     for handler_list, fn in HANDLERS:
         if fn not in handler_list:
             handler_list.append(fn)

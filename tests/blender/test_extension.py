@@ -112,6 +112,13 @@ def test_enabling_with_a_file_open_does_what_opening_it_does(addon_module, tmp_p
     root.unregister()
     assert not bpy.app.timers.is_registered(handlers.after_enable)
     root.register()
+    # Blender's start: the extension registers, then the startup file loads (its handlers run): the timer then
+    # does nothing again
+    ran = []
+    monkeypatch.setattr(handlers, "HANDLERS", [(bpy.app.handlers.load_post, lambda: ran.append(1))])
+    bpy.ops.wm.read_homefile(use_empty=True)
+    handlers.after_enable()
+    assert ran == []
 
 
 def test_disabling_stops_running_fits_and_their_timers(addon_module, tmp_path, monkeypatch):

@@ -369,5 +369,5 @@ def test_a_curves_file_the_schema_refuses_is_one_line(tmp_path, capsys):
     path.write_text(json.dumps([[[0.1, 0.1], [0.9, 0.5]], [[0.5, 0.5]]]))
     assert _refused(main(["scratch", "generate", "--kind", "curves", "--curves", str(path), "--out",
                  str(tmp_path / "s.npz")]))
-    assert f"{path}: [1]: " in capsys.readouterr().err
+    assert f"{path}: [1]: expected at least 2 items, got 1" in capsys.readouterr().err
     assert not (tmp_path / "s.npz").exists()

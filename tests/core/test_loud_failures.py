@@ -238,7 +238,8 @@ def test_whole_number_floats_still_load_as_integers(tmp_path, capsys):
     ('[[[0, 0], [1]]]', "c.json: [0][1]: expected 2 numbers, got 1"),
     ('["ab"]', 'c.json: [0]: expected a curve (a list of [u, v] points), got "ab"'),
     ("[]", "c.json: expected a non-empty list, got 0"),
-    ('[[[0, 1e999]]]', "c.json: curve 0 holds non-finite coordinates"),
+    ('[[[0.5, 0.5]]]', "c.json: [0]: expected at least 2 items, got 1"),  # a curve of one point
+    ('[[[0, 1e999], [0.5, 0.5]]]', "c.json: curve 0 holds non-finite coordinates"),
 ])
 def test_curves_files_of_the_wrong_shape_are_one_line(tmp_path, capsys, curves, said):
     (tmp_path / "c.json").write_text(curves)
