@@ -55,10 +55,12 @@ def fit_btf_dask(
 
     btf_path, out_dir = os.path.abspath(os.fspath(btf_path)), os.path.abspath(os.fspath(out_dir))
     options = options or FitOptions()
+    t_start = time.perf_counter()
     checked = btf_fitter.check_btf(btf_path)
     os.makedirs(out_dir, exist_ok=True)
     with FolderLock(out_dir):  # the tiles; fit_btf below takes the lock again for the assembly
         hdr, cache, values = btf_fitter._prepare_cache(btf_path, out_dir, tile, options, progress, checked)
+        t_load = time.perf_counter() - t_start
         tiles = btf_fitter._tiles(hdr.height, hdr.width, tile)
         btf_fitter.check_tiles(cache, tiles)
         todo = [t for t in tiles if not os.path.isfile(btf_fitter._tile_path(cache, t))]
@@ -78,7 +80,8 @@ def fit_btf_dask(
         t_fit = time.perf_counter() - t_fit
     # Every tile is checkpointed now: the local fitter only assembles and post-processes; the fit's figures in
     # params.json are the cluster's (the assembly would give its own: 1 worker, 0 tiles, no time)
-    run_stats = {"workers": workers, "tiles_fitted_this_run": len(todo), "seconds_fit": round(t_fit, 3),
+    run_stats = {"workers": workers, "tiles_fitted_this_run": len(todo), "seconds_load": round(t_load, 3),
+                 "seconds_fit": round(t_fit, 3),
                  "mean_lm_iterations_per_tile": float(np.mean(iterations)) if iterations else None,
                  "scheduler": scheduler or ("client" if client is not None else "local")}
     return btf_fitter.fit_btf(btf_path, out_dir, tile=tile, workers=1, options=options, progress=False,

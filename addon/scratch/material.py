@@ -19,6 +19,7 @@ lamps (one-sided) have radiance P/(pi A), disks/ellipses as equal-area 16-gons.
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 import bpy
@@ -299,13 +300,18 @@ def scratch_groups():
 
 
 def ensure_tables_extracted() -> int:
-    """Re-extract every scratch set whose cache folder is missing (after loading a file); count."""
+    """Re-extract every scratch set whose cache folder is missing (after loading a file, before a render); count.
+    A folder that is there is marked as in use (kept by the cache's pruning, ``tables.extract_tables``)."""
     n = 0
     for g in scratch_groups():
         node = script_node(g)
         if node is None:
             continue
-        if not os.path.isfile(os.path.join(node.inputs["TableDir"].default_value, "cell_params.exr")):
+        folder = node.inputs["TableDir"].default_value
+        if os.path.isfile(os.path.join(folder, "cell_params.exr")):
+            with contextlib.suppress(OSError):  # another user's folder of an older version
+                os.utime(folder)
+        else:
             try:
                 sync_group_tables(g)
             except ValueError as exc:  # a set whose images are gone: say so, extract the others

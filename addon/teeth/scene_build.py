@@ -253,14 +253,20 @@ def own_material(obj, copies: list | None = None):
 
 
 def linked_tooth_reason(enamel) -> str | None:
-    """Why the tooth of ``enamel`` cannot take new values here (its enamel or dentin object, or the dentin's mesh
-    that holds the shape keys, is linked from a library file, read-only in this one), or None."""
+    """Why the tooth of ``enamel`` cannot take new values here, or None: its enamel or dentin object is linked from a
+    library file (read-only in this one) or a library override (its tooth settings are not kept at a save), or the
+    dentin's mesh, which holds the shape keys, is linked."""
+    make_local = "make it local (Object > Relations > Make Local > Selected Objects and Data)"
     for obj in (enamel, enamel.ms_tooth.partner if enamel is not None else None):
         if obj is None:
             continue
-        lib = obj.library or (obj.data.library if obj is not enamel and obj.data is not None else None)
-        if lib is not None:
-            return (f"'{obj.name}' is linked from {lib.filepath}; make it local (Object > Relations > Make Local)")
+        if obj.library is not None:
+            return f"'{obj.name}' is linked from {obj.library.filepath}; {make_local}"
+        if obj.override_library is not None:
+            return f"'{obj.name}' is a library override, whose tooth settings a save does not keep; {make_local}"
+        mesh = obj.data if obj is not enamel else None
+        if mesh is not None and mesh.library is not None:
+            return f"the dentin mesh '{mesh.name}' of '{obj.name}' is linked from {mesh.library.filepath}; {make_local}"
     return None
 
 
@@ -277,7 +283,7 @@ def own_dentin_mesh(dentin, copies: list | None = None) -> None:
     """Give ``dentin`` a mesh (with its shape keys) of its own where another object shares it (an Alt+D copy of a
     tooth): a tooth's fitted dentin shape is its own, not also its copy's. The copy's name is appended to
     ``copies``."""
-    if dentin is None or dentin.data is None or dentin.data.users <= 1:
+    if dentin is None or dentin.data is None or dentin.data.users - dentin.data.use_fake_user <= 1:
         return
     base = re.sub(r" \([^()]*\)$", "", re.sub(r"\.\d{3}$", "", dentin.data.name))
     dentin.data = dentin.data.copy()

@@ -629,6 +629,12 @@ def test_scratch_caches_unused_for_two_weeks_are_removed_and_tables_go_with_thei
     obj = _plane(scene, "A")
     assert bpy.ops.material_structures.scratch_generate(count=50) == {"FINISHED"}
     assert not os.path.exists(old) and len(os.listdir(cache_root())) == 1
+    # a folder in use (an open file's, rendered) is marked so, though nothing is extracted (before: pruned under
+    # the open file two weeks after its extraction)
+    (folder,) = [os.path.join(cache_root(), n) for n in os.listdir(cache_root())]
+    os.utime(folder, (past, past))
+    importlib.import_module("material_structures.addon.scratch.material").ensure_tables_extracted()
+    assert time.time() - os.stat(folder).st_mtime < 60
     assert not any(i.use_fake_user for i in bpy.data.images if i.name.startswith("MS Scratch"))
     obj.data.materials.clear()  # the scratched material taken off
     bpy.data.orphans_purge(do_local_ids=True, do_linked_ids=False, do_recursive=True)  # File > Clean Up > Purge

@@ -318,6 +318,13 @@ def test_a_fit_applied_to_a_tooth_and_its_copy_gives_each_its_own_values(addon_m
         assert linked_materials(blend_object(obj).active_material) == (obj.active_material, dentin.active_material)
         keys = dentin.data.shape_keys.key_blocks
         np.testing.assert_allclose([keys[n].value for n in MODE_NAMES], c, atol=1e-6)
+        assert dentin.data.users == 1 and not dentin.data.use_fake_user
+    # a dentin mesh of one tooth with a fake user (an artist's F) is its own: not copied again
+    dentin = a.ms_tooth.partner
+    dentin.data.use_fake_user = True
+    mesh = dentin.data
+    assert bpy.ops.material_structures.teeth_apply_fit_file(filepath=str(path)) == {"FINISHED"}
+    assert dentin.data == mesh
     assert a.active_material != b.active_material and a.ms_tooth.partner.active_material != \
         b.ms_tooth.partner.active_material
     assert shared.name in {a.active_material.name, b.active_material.name}  # one tooth keeps it, one has a copy
@@ -561,6 +568,40 @@ def test_the_dentin_shape_of_a_linked_tooth_is_refused_in_one_line(addon_module,
         assert "is linked from" in str(info.value) and "Traceback" not in str(info.value)
     keys = enamel.ms_tooth.partner.data.shape_keys.key_blocks
     assert [keys[n].value for n in MODE_NAMES] == [0.0, 0.0, 0.0]
+    # made local as objects, the dentin's mesh (its shape keys) still linked: the refusal names the mesh
+    from material_structures.addon.teeth.scene_build import linked_tooth_reason
+
+    local = {o.name: o.make_local() for o in list(dst.objects)}
+    enamel = local["Incisor Enamel"]
+    assert enamel.ms_tooth.partner.data.library is not None
+    assert linked_tooth_reason(enamel).startswith("the dentin mesh 'Incisor Dentin' of 'Incisor Dentin' is linked")
+
+
+def test_a_library_override_of_a_tooth_is_refused_its_settings_would_not_be_saved(addon_module, tmp_path):
+    """An overridden tooth (a linked character's teeth made editable) took a fit and the panel showed it, and the
+    tooth's settings (its coefficients, fitted values, dentin partner) were gone at the next open: an override
+    keeps only what it overrides. Fits and the dentin sliders refuse it, in one line."""
+    from material_structures.addon.teeth.scene_build import linked_tooth_reason
+
+    _add_incisor()
+    teeth = bpy.data.collections.new("Teeth")
+    bpy.context.scene.collection.children.link(teeth)
+    for obj in list(bpy.context.scene.collection.objects):
+        teeth.objects.link(obj)
+        bpy.context.scene.collection.objects.unlink(obj)
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.collections = ["Teeth"]
+    scene = bpy.context.scene
+    scene.collection.children.link(dst.collections[0])
+    dst.collections[0].override_hierarchy_create(scene, bpy.context.view_layer, do_fully_editable=True)
+    enamel = next(o for o in scene.objects if o.name.startswith("Incisor Enamel") and o.override_library)
+    assert "is a library override, whose tooth settings a save does not keep" in linked_tooth_reason(enamel)
+    bpy.context.view_layer.objects.active = enamel
+    with pytest.raises(RuntimeError, match="library override"):
+        bpy.ops.material_structures.teeth_set_dentin(coefficients=(0.5, 0.4, 0.3))
 
 
 def test_a_tooth_from_a_mesh_in_edit_mode_is_the_mesh_as_edited(addon_module):

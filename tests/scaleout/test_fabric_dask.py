@@ -54,7 +54,7 @@ def test_distributed_equals_local(btf, client, tmp_path):
     stored = json.loads((tmp_path / "dask" / "params.json").read_text())["fit"]
     assert stored == stats
     assert stored["workers"] == 2 and stored["tiles_fitted_this_run"] == 9 and stored["scheduler"] == "client"
-    assert stored["mean_lm_iterations_per_tile"] >= 1 and stored["seconds_fit"] > 0.01
+    assert stored["mean_lm_iterations_per_tile"] >= 1 and stored["seconds_fit"] > 0.01 and stored["seconds_load"] > 0
     # a rerun finds every tile checkpointed and recomputes none
     _, again = fit_btf_dask(path, tmp_path / "dask", client=client, tile=4, progress=False)
     assert again["tiles_fitted_this_run"] == 0
