@@ -465,9 +465,12 @@ def test_a_blend_volume_goes_where_its_tooth_goes_and_with_it(addon_module):
     assert len([m for m in bpy.data.materials if m.name.startswith("Blend ")]) == 1
 
 
-def _link_an_incisor(tmp_path) -> None:
-    """A new file that links the Enamel and Dentin of an incisor saved in another (not its hidden Blend Volume)."""
-    _add_incisor()
+def _link_an_incisor(tmp_path, prepare=None) -> list:
+    """A new file that links the Enamel and Dentin of an incisor saved in another (not its hidden Blend Volume;
+    ``prepare(enamel)`` first, in the other file). Returns the linked objects."""
+    enamel = _add_incisor()
+    if prepare is not None:
+        prepare(enamel)
     path = str(tmp_path / "lib.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -475,6 +478,21 @@ def _link_an_incisor(tmp_path) -> None:
         dst.objects = ["Incisor Enamel", "Incisor Dentin"]
     for obj in dst.objects:
         bpy.context.scene.collection.objects.link(obj)
+    return list(dst.objects)
+
+
+def _save_an_incisor_in_a_collection(tmp_path, name: str) -> str:
+    """The path of a file holding an incisor in the collection ``name``; an empty file open."""
+    _add_incisor()
+    collection = bpy.data.collections.new(name)
+    bpy.context.scene.collection.children.link(collection)
+    for obj in list(bpy.context.scene.collection.objects):
+        collection.objects.link(obj)
+        bpy.context.scene.collection.objects.unlink(obj)
+    path = str(tmp_path / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    return path
 
 
 def test_a_tooth_linked_from_another_file_without_its_blend_volume_gets_one(addon_module, tmp_path):
@@ -495,15 +513,7 @@ def test_the_light_paths_warning_sees_a_tooth_linked_as_a_collection_instance(ad
     from material_structures.addon.teeth.scene_build import short_light_paths
 
     scene_has_teeth = import_module(f"{addon_module}.addon.teeth.panels").scene_has_teeth
-    _add_incisor()
-    tooth = bpy.data.collections.new("Tooth")
-    bpy.context.scene.collection.children.link(tooth)
-    for obj in list(bpy.context.scene.collection.objects):
-        tooth.objects.link(obj)
-        bpy.context.scene.collection.objects.unlink(obj)
-    path = str(tmp_path / "lib.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    bpy.ops.wm.read_homefile(use_empty=True)
+    path = _save_an_incisor_in_a_collection(tmp_path, "Tooth")
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     assert short_light_paths(scene) and not scene_has_teeth(scene)
@@ -549,16 +559,11 @@ def test_the_dentin_shape_of_a_linked_tooth_is_refused_in_one_line(addon_module,
     why, as Apply Fit Result does, and change nothing."""
     from material_structures.core.teeth.dentin_blend_shapes import MODE_NAMES
 
-    enamel = _add_incisor()
-    enamel.ms_tooth.fitted = (0.2, -0.15, 0.1)
-    enamel.ms_tooth.has_fit = True
-    path = str(tmp_path / "lib.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    bpy.ops.wm.read_homefile(use_empty=True)
-    with bpy.data.libraries.load(path, link=True) as (_src, dst):
-        dst.objects = ["Incisor Enamel", "Incisor Dentin"]
-    for obj in dst.objects:
-        bpy.context.scene.collection.objects.link(obj)
+    def fitted(enamel):
+        enamel.ms_tooth.fitted = (0.2, -0.15, 0.1)
+        enamel.ms_tooth.has_fit = True
+
+    linked = _link_an_incisor(tmp_path, fitted)
     enamel = bpy.data.objects["Incisor Enamel"]
     bpy.context.view_layer.objects.active = enamel
     for op, kwargs in ((bpy.ops.material_structures.teeth_set_dentin, {"coefficients": (0.5, 0.4, 0.3)}),
@@ -571,7 +576,7 @@ def test_the_dentin_shape_of_a_linked_tooth_is_refused_in_one_line(addon_module,
     # made local as objects, the dentin's mesh (its shape keys) still linked: the refusal names the mesh
     from material_structures.addon.teeth.scene_build import linked_tooth_reason
 
-    local = {o.name: o.make_local() for o in list(dst.objects)}
+    local = {o.name: o.make_local() for o in linked}
     enamel = local["Incisor Enamel"]
     assert enamel.ms_tooth.partner.data.library is not None
     assert linked_tooth_reason(enamel).startswith("the dentin mesh 'Incisor Dentin' of 'Incisor Dentin' is linked")
@@ -583,15 +588,7 @@ def test_a_library_override_of_a_tooth_is_refused_its_settings_would_not_be_save
     keeps only what it overrides. Fits and the dentin sliders refuse it, in one line."""
     from material_structures.addon.teeth.scene_build import linked_tooth_reason
 
-    _add_incisor()
-    teeth = bpy.data.collections.new("Teeth")
-    bpy.context.scene.collection.children.link(teeth)
-    for obj in list(bpy.context.scene.collection.objects):
-        teeth.objects.link(obj)
-        bpy.context.scene.collection.objects.unlink(obj)
-    path = str(tmp_path / "lib.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    bpy.ops.wm.read_homefile(use_empty=True)
+    path = _save_an_incisor_in_a_collection(tmp_path, "Teeth")
     with bpy.data.libraries.load(path, link=True) as (_src, dst):
         dst.collections = ["Teeth"]
     scene = bpy.context.scene
