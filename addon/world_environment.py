@@ -138,8 +138,9 @@ def file_version(image) -> tuple:
         return ("packed", image.packed_file.size, digest)
     import bpy
 
-    path = bpy.path.abspath(image.filepath, library=image.library)
+    path = image.filepath
     try:
+        path = bpy.path.abspath(path, library=image.library)
         st = os.stat(path)
     except (OSError, ValueError):
         return (path,)

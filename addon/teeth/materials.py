@@ -398,7 +398,7 @@ def ensure_group(kind: str, scene=None) -> bpy.types.ShaderNodeTree:
         script.location, attr.location, switch.location = (200, 200), (-300, 250), (900, 200)
     links.new(_volume_subgraph(group, gin), gout.inputs["Volume"])
     if kind in SURFACE_GROUPS:
-        links.new(_stand_in_subgraph(group, gin, kind), gout.inputs[EEVEE_OUTPUT])
+        links.new(_stand_in_subgraph(group, gin), gout.inputs[EEVEE_OUTPUT])
     describe_teeth_sockets(group)
     return group
 
@@ -424,7 +424,7 @@ EEVEE_OUTPUT = "EEVEE Surface"  # the surface group's output for EEVEE and Mater
 STAND_IN_NODE = "EEVEE Stand-in"
 
 
-def _stand_in_subgraph(group, gin, kind: str):
+def _stand_in_subgraph(group, gin):
     """EEVEE / Material Preview stand-in (the OSL boundary and the volumes are Cycles-only): a Principled BSDF with
     random-walk subsurface scattering, colour = Albedo, radius = 1 / Sigma_t in mm (scaled by 1 / mm per Unit),
     IOR = Eta. Inside the group, so it follows every edit of the material's sliders (returns the shader socket)."""
@@ -469,7 +469,7 @@ def ensure_stand_in(group) -> bool:
     changed = False
     if EEVEE_OUTPUT not in gout.inputs:
         group.interface.new_socket(EEVEE_OUTPUT, in_out="OUTPUT", socket_type="NodeSocketShader")
-        group.links.new(_stand_in_subgraph(group, gin, kind), gout.inputs[EEVEE_OUTPUT])
+        group.links.new(_stand_in_subgraph(group, gin), gout.inputs[EEVEE_OUTPUT])
         changed = True
     for mat in bpy.data.materials:
         tree = mat.node_tree

@@ -398,7 +398,7 @@ class MS_OT_teeth_fit(bpy.types.Operator):
             return None
         reason = next(filter(None, map(linked_tooth_reason, targets.values())), None)
         if reason is not None:  # Apply Fit Result would refuse it at the end
-            self.report({"ERROR"}, f"Cannot fit into a linked tooth: {reason}")
+            self.report({"ERROR"}, f"Cannot fit into this tooth: {reason}")
             return None
         try:
             # the fit's renders use every core (forked per render; cancel stops them too)

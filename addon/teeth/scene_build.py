@@ -228,6 +228,11 @@ def no_mapping_message(names: list[str]) -> str:
             "choose them under Fit to capture in the Teeth panel")
 
 
+def _copy_name(name: str, obj) -> str:
+    """The name of a tooth's own copy of ``name``: "Enamel X (Y).001" -> "Enamel X (obj)"."""
+    return f"{re.sub(r' [(][^()]*[)]$', '', re.sub(r'[.][0-9]{3}$', '', name))} ({obj.name})"
+
+
 def own_material(obj, copies: list | None = None):
     """``obj``'s active material, made its own first where a fit written into it would reach other objects: one
     that another object wears too (a tooth copied with Shift+D keeps its original's materials) or one linked from a
@@ -241,8 +246,7 @@ def own_material(obj, copies: list | None = None):
     if mat.library is None and not shared:
         return mat
     own = mat.copy()
-    base = re.sub(r" \([^()]*\)$", "", re.sub(r"\.\d{3}$", "", mat.name))  # "Enamel X (Y).001" -> "Enamel X"
-    own.name = f"{base} ({obj.name})"
+    own.name = _copy_name(mat.name, obj)
     slot = obj.material_slots[obj.active_material_index]
     if slot.link == "DATA" and (obj.data.users > 1 or obj.data.library is not None):
         slot.link = "OBJECT"
@@ -285,9 +289,8 @@ def own_dentin_mesh(dentin, copies: list | None = None) -> None:
     ``copies``."""
     if dentin is None or dentin.data is None or dentin.data.users - dentin.data.use_fake_user <= 1:
         return
-    base = re.sub(r" \([^()]*\)$", "", re.sub(r"\.\d{3}$", "", dentin.data.name))
     dentin.data = dentin.data.copy()
-    dentin.data.name = f"{base} ({dentin.name})"
+    dentin.data.name = _copy_name(dentin.data.name, dentin)
     if copies is not None:
         copies.append(dentin.data.name)
 

@@ -548,7 +548,7 @@ def test_a_fit_applied_to_a_linked_tooth_is_one_line_and_changes_nothing(addon_m
     # Fit refuses it before the fit (it ran to its end, then applied nothing)
     fs = bpy.context.scene.ms_teeth_fit
     fs.capture_dir, fs.out_dir, fs.iterations = capture_dir, str(tmp_path / "fit"), 1
-    with pytest.raises(RuntimeError, match="Cannot fit into a linked tooth: .* make it local"):
+    with pytest.raises(RuntimeError, match="Cannot fit into this tooth: .* make it local"):
         bpy.ops.material_structures.teeth_fit()
     assert not fs.running and not os.path.exists(tmp_path / "fit" / "fit_log.txt")
 
