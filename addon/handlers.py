@@ -75,9 +75,9 @@ HANDLERS = [*WORLD_HANDLERS, *FABRIC_HANDLERS, (bpy.app.handlers.load_post, on_l
 def after_enable() -> None:
     """The extension enabled with a file open (installed, enabled or updated during a session): the file gets the
     work opening it would have done (its shaders brought up to date, the scratch tables and world tables
-    extracted, the teeth's layouts upgraded). Run once by a timer: while an extension registers, Blender keeps
-    ``bpy.data`` from it. Not where a file was opened since (Blender's start: the extensions register, then the
-    startup file loads)."""
+    extracted, the teeth's layouts upgraded). Run once by a timer (with a window; scripts enable the extension
+    before they open files): while an extension registers, Blender keeps ``bpy.data`` from it. Not where a file
+    was opened since (Blender's start: the extensions register, then the startup file loads)."""
     if _loaded_since_register:
         return
     for handler_list, fn in HANDLERS:
@@ -98,7 +98,9 @@ def register_handlers() -> None:
     for handler_list, fn in HANDLERS:
         if fn not in handler_list:
             handler_list.append(fn)
-    if not bpy.app.timers.is_registered(after_enable):
+    # not without a window: no event loop runs the timer there, and a timer left registered keeps the bpy module
+    # alive through Python's teardown, where bpy 4.5's exit then hangs (its delayed-close thread)
+    if not bpy.app.background and not bpy.app.timers.is_registered(after_enable):
         bpy.app.timers.register(after_enable, first_interval=0.0)
 
 
