@@ -45,9 +45,7 @@ def run_fresh(snippet: str, blend: str | None = None, repo_dir: str | None = Non
     ``env``: variables to set in the child (e.g. ``TMPDIR``: another machine's temporary folder)."""
     repo_dir = repo_dir or tempfile.mkdtemp(prefix="ms-fresh-repo-")
     code = _PRELUDE.format(repo_dir=repo_dir, root=ROOT, enable=enable, blend=blend or "")
-    # the result printed, the child ends without Python's finalisation: bpy 4.5's own exit can hang (a race in
-    # its delayed file-close thread, seen in test-compat), and there is nothing left to do
-    code += textwrap.dedent(snippet) + f"\nprint({_MARK!r} + json.dumps(RESULT), flush=True)\nos._exit(0)\n"
+    code += textwrap.dedent(snippet) + f"\nprint({_MARK!r} + json.dumps(RESULT))\n"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout,
                           env={**os.environ, **(env or {})})
     for line in proc.stdout.splitlines():
