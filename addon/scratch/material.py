@@ -176,23 +176,24 @@ def ensure_base_metal(group) -> None:
         relink_osl_switch(group, script)
 
 
-def _store(group, scratch_set, name: str, images: dict | None) -> None:
-    extract_tables(scratch_set)  # first: a cache that cannot be written changes nothing
+def _store(group, scratch_set, name: str, images: dict | None, folder: str | None = None) -> None:
+    """Store ``scratch_set`` in ``group`` (its tables in ``folder`` where the caller extracted them)."""
+    folder = folder or extract_tables(scratch_set)  # first: a cache that cannot be written changes nothing
     meta, own = store_scratch_set(scratch_set, name, images)
     group[PROP] = meta
     group[IMAGES_PROP] = own
     group.interface.items_tree["Coherence"].default_value = meta["sigma_um"]
-    sync_group_tables(group, scratch_set)
+    sync_group_tables(group, scratch_set, folder)
 
 
 def new_scratch_group(scratch_set, set_name: str, scene=None) -> bpy.types.ShaderNodeTree:
     """A new node group holding ``scratch_set`` under a set name no other set uses (``set_name`` made
     unique), with its own packed table images."""
     scene = scene or bpy.context.scene
-    extract_tables(scratch_set)  # first: a cache that cannot be written leaves no group behind
+    folder = extract_tables(scratch_set)  # first: a cache that cannot be written leaves no group behind
     name = unique_set_name(set_name)
     group = _build_group(name, scene)
-    _store(group, scratch_set, name, None)
+    _store(group, scratch_set, name, None, folder)
     return group
 
 
@@ -269,11 +270,12 @@ def script_node(group):
     return next((n for n in group.nodes if n.type == "SCRIPT" and "TableDir" in n.inputs), None)
 
 
-def sync_group_tables(group, scratch_set=None) -> str:
-    """Extract the group's set to the EXR cache if needed and point the shader at it."""
+def sync_group_tables(group, scratch_set=None, folder: str | None = None) -> str:
+    """Extract the group's set to the EXR cache if needed (``folder``: where the caller extracted it) and point the
+    shader at it."""
     meta = group[PROP]
-    s = scratch_set if scratch_set is not None else load_group_set(group)
-    folder = extract_tables(s)
+    if folder is None:
+        folder = extract_tables(scratch_set if scratch_set is not None else load_group_set(group))
     node = _require_script_node(group)
     vals = {
         "TableDir": folder,
